@@ -1,0 +1,19 @@
+//! Known physics: the [`Plant`] trait and everything that implements it.
+//!
+//! A plant is a deterministic discrete-time system `x_{t+1} = f(x_t, u_t)` with a control period
+//! [`Plant::dt`]. Idealized and true systems of the papers are two parameter sets of one plant, so
+//! a learned model can be trained on the difference between them.
+//!
+//! This crate owns
+//! - the [`Plant`] trait and its finite-difference [`Plant::linearize`] default,
+//! - [`integrate`]: fixed-step integrators (explicit Euler, RK4) for continuous-time dynamics,
+//! - classic plants (cart-pole, gymnasium pendulum, the DC-motor pendulum of paper p0),
+//! - rigid bodies from URDF (kinematics, RNEA, CRBA, ABA, derivatives), actuators and contact.
+//!
+//! Dependencies: `nalgebra` (states, small matrices and spatial algebra), `serde` (plant
+//! parameters are readable from configs), `thiserror` (error types).
+
+pub mod integrate;
+mod plant;
+
+pub use plant::{check_dims, Plant, PlantError};

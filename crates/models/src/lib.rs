@@ -1,0 +1,12 @@
+//! Learned dynamics models: the [`DynamicsModel`] trait, transition datasets and fit reports, and
+//! the models the papers use (MLP, residual over a known plant, incremental, probabilistic
+//! ensemble, time-varying linear-Gaussian fit).
+//!
+//! Dependencies: `tandem-dynamics` (the plants residual models wrap), `tandem-nn` (networks),
+//! `ndarray` (batched data), `nalgebra` (plant states), `rand`, `serde`, `thiserror`.
+
+mod model;
+
+pub use model::{
+    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
+};
