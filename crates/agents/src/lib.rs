@@ -4,3 +4,15 @@
 //!
 //! Dependencies: `tandem-nn` (networks and optimizers), `ndarray` (replay storage and
 //! minibatches), `rand`/`rand_distr` (seeded exploration and sampling), `serde`, `thiserror`.
+
+pub mod agent;
+pub mod config;
+pub mod error;
+pub mod noise;
+pub mod replay;
+
+pub use agent::{Agent, Batch, Episode, EpisodicAgent, Metrics, Mode, OffPolicyAgent};
+pub use config::{Baseline, DdpgConfig, DqnConfig, OffPolicySchedule, ReinforceConfig, SacConfig};
+pub use error::{AgentError, Result};
+pub use noise::{Noise, NoiseConfig};
+pub use replay::{MixedSampler, ReplayBuffer, TransitionRef};

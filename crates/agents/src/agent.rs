@@ -1,0 +1,291 @@
+//! What every agent shares: the [`Agent`] trait (acting), the two ways of learning
+//! ([`OffPolicyAgent`] from minibatches, [`EpisodicAgent`] from whole episodes), and the data they
+//! learn from ([`Batch`], [`Episode`]).
+
+use ndarray::{Array1, Array2};
+use tandem_core::Action;
+
+use crate::error::{AgentError, Result};
+
+/// How an agent acts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// With exploration: noise (DDPG), sampling (SAC, REINFORCE), ε-greedy (DQN).
+    Explore,
+    /// Deterministically: the mean action (DDPG, SAC), the most likely action (REINFORCE), the
+    /// greedy action (DQN). Used for evaluation.
+    Deterministic,
+}
+
+/// Named scalar figures an update reports (losses, entropy coefficient, ...), in a fixed order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Metrics(pub Vec<(&'static str, f64)>);
+
+impl Metrics {
+    /// The value called `name`, if reported.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        self.0.iter().find(|(n, _)| *n == name).map(|(_, v)| *v)
+    }
+
+    /// Adds a figure.
+    pub fn push(&mut self, name: &'static str, value: f64) {
+        self.0.push((name, value));
+    }
+}
+
+/// An agent that acts in an environment.
+pub trait Agent {
+    /// Short name of the algorithm, e.g. `"sac"`.
+    fn name(&self) -> &'static str;
+
+    /// The action for observation `obs`. Errors on a wrong length or a non-finite observation.
+    fn act(&mut self, obs: &[f64], mode: Mode) -> Result<Action>;
+
+    /// Called at the start of every episode (resets temporally correlated noise).
+    fn reset_episode(&mut self) {}
+}
+
+/// An agent that learns from minibatches of transitions, whatever produced them (real data, model
+/// data, or a mix).
+pub trait OffPolicyAgent: Agent {
+    /// One gradient step on `batch`.
+    fn update(&mut self, batch: &Batch) -> Result<Metrics>;
+}
+
+/// An agent that learns from complete episodes.
+pub trait EpisodicAgent: Agent {
+    /// One policy-gradient step on `episodes`.
+    fn update(&mut self, episodes: &[Episode]) -> Result<Metrics>;
+}
+
+/// A minibatch of transitions, one row per transition, in `f32` (the networks' precision).
+///
+/// A discrete action is stored as its index in a single column.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Batch {
+    /// Observations `s`, `n x obs_dim`.
+    pub obs: Array2<f32>,
+    /// Actions `a`, `n x act_dim`.
+    pub actions: Array2<f32>,
+    /// The action taken one step before `a` (zeros at an episode's start), `n x act_dim` (p1).
+    pub prev_actions: Array2<f32>,
+    /// Rewards `r`, length `n`.
+    pub rewards: Array1<f32>,
+    /// Next observations `s'`, `n x obs_dim`.
+    pub next_obs: Array2<f32>,
+    /// `1.0` where `s'` is terminal (do not bootstrap), else `0.0`. Truncation is not terminal.
+    pub terminated: Array1<f32>,
+}
+
+impl Batch {
+    /// An all-zero batch of `n` rows.
+    pub fn zeros(n: usize, obs_dim: usize, act_dim: usize) -> Self {
+        Self {
+            obs: Array2::zeros((n, obs_dim)),
+            actions: Array2::zeros((n, act_dim)),
+            prev_actions: Array2::zeros((n, act_dim)),
+            rewards: Array1::zeros(n),
+            next_obs: Array2::zeros((n, obs_dim)),
+            terminated: Array1::zeros(n),
+        }
+    }
+
+    /// Number of transitions.
+    pub fn len(&self) -> usize {
+        self.rewards.len()
+    }
+
+    /// `true` if the batch holds no transition.
+    pub fn is_empty(&self) -> bool {
+        self.rewards.is_empty()
+    }
+
+    /// Observation dimension.
+    pub fn obs_dim(&self) -> usize {
+        self.obs.ncols()
+    }
+
+    /// Action dimension (1 for a discrete action).
+    pub fn act_dim(&self) -> usize {
+        self.actions.ncols()
+    }
+
+    /// Checks that the columns agree in length, the widths match `obs_dim` and `act_dim`, and
+    /// every number is finite.
+    pub fn check(&self, obs_dim: usize, act_dim: usize) -> Result<()> {
+        let n = self.len();
+        if n == 0 {
+            return Err(AgentError::Empty("batch"));
+        }
+        let shapes = [
+            ("batch observations", self.obs.dim(), (n, obs_dim)),
+            ("batch next observations", self.next_obs.dim(), (n, obs_dim)),
+            ("batch actions", self.actions.dim(), (n, act_dim)),
+            (
+                "batch previous actions",
+                self.prev_actions.dim(),
+                (n, act_dim),
+            ),
+        ];
+        for (what, got, want) in shapes {
+            if got.1 != want.1 {
+                return Err(AgentError::Dim {
+                    what,
+                    expected: want.1,
+                    got: got.1,
+                });
+            }
+            if got.0 != want.0 {
+                return Err(AgentError::Dim {
+                    what,
+                    expected: want.0,
+                    got: got.0,
+                });
+            }
+        }
+        if self.terminated.len() != n {
+            return Err(AgentError::Dim {
+                what: "batch terminal flags",
+                expected: n,
+                got: self.terminated.len(),
+            });
+        }
+        let bad = |what: &'static str, mut it: ndarray::iter::Iter<'_, f32, _>| -> Result<()> {
+            match it.find(|v| !v.is_finite()) {
+                Some(v) => Err(AgentError::NonFinite {
+                    what,
+                    value: f64::from(*v),
+                }),
+                None => Ok(()),
+            }
+        };
+        bad("batch observation", self.obs.iter())?;
+        bad("batch next observation", self.next_obs.iter())?;
+        bad("batch action", self.actions.iter())?;
+        if let Some(v) = self.rewards.iter().find(|v| !v.is_finite()) {
+            return Err(AgentError::NonFinite {
+                what: "batch reward",
+                value: f64::from(*v),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// One complete episode (or the part of it an episodic learner sees), in `f64` as the environment
+/// produced it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Episode {
+    /// Observations `s_0 .. s_{T-1}`.
+    pub observations: Vec<Vec<f64>>,
+    /// Actions `a_0 .. a_{T-1}`.
+    pub actions: Vec<Action>,
+    /// Rewards `r_0 .. r_{T-1}`.
+    pub rewards: Vec<f64>,
+    /// The episode ended in a terminal state (rather than being cut short).
+    pub terminated: bool,
+}
+
+impl Episode {
+    /// Number of steps.
+    pub fn len(&self) -> usize {
+        self.rewards.len()
+    }
+
+    /// `true` for an episode without steps.
+    pub fn is_empty(&self) -> bool {
+        self.rewards.is_empty()
+    }
+
+    /// Sum of rewards.
+    pub fn total_reward(&self) -> f64 {
+        self.rewards.iter().sum()
+    }
+
+    /// Appends one step.
+    pub fn push(&mut self, obs: Vec<f64>, action: Action, reward: f64) {
+        self.observations.push(obs);
+        self.actions.push(action);
+        self.rewards.push(reward);
+    }
+
+    /// Discounted returns-to-go `G_t = sum_{k >= t} gamma^(k-t) r_k` (Williams 1992; p2).
+    pub fn returns_to_go(&self, gamma: f64) -> Vec<f64> {
+        let mut g = 0.0;
+        let mut out = vec![0.0; self.rewards.len()];
+        for t in (0..self.rewards.len()).rev() {
+            g = self.rewards[t] + gamma * g;
+            out[t] = g;
+        }
+        out
+    }
+}
+
+/// Converts an [`Action`] into the row stored in a [`Batch`] (`f32` values; the index for a
+/// discrete action).
+pub fn action_row(action: &Action, out: &mut [f32]) {
+    match action {
+        Action::Continuous(v) => {
+            for (o, x) in out.iter_mut().zip(v) {
+                *o = *x as f32;
+            }
+        }
+        Action::Discrete(k) => out[0] = *k as f32,
+    }
+}
+
+/// Checks an observation's length and finiteness.
+#[allow(dead_code)] // used by the agents
+pub(crate) fn check_obs(obs: &[f64], dim: usize) -> Result<()> {
+    if obs.len() != dim {
+        return Err(AgentError::Dim {
+            what: "observation",
+            expected: dim,
+            got: obs.len(),
+        });
+    }
+    if let Some(v) = obs.iter().find(|v| !v.is_finite()) {
+        return Err(AgentError::NonFinite {
+            what: "observation",
+            value: *v,
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn returns_to_go_match_hand_computation() {
+        let mut e = Episode::default();
+        for r in [1.0, 2.0, 3.0] {
+            e.push(vec![0.0], Action::Discrete(0), r);
+        }
+        let g = e.returns_to_go(0.5);
+        // G2 = 3, G1 = 2 + 0.5*3 = 3.5, G0 = 1 + 0.5*3.5 = 2.75
+        assert_eq!(g, vec![2.75, 3.5, 3.0]);
+        assert_eq!(e.total_reward(), 6.0);
+    }
+
+    #[test]
+    fn batch_check_finds_bad_widths_and_nan() {
+        let mut b = Batch::zeros(4, 3, 1);
+        assert!(b.check(3, 1).is_ok());
+        assert!(matches!(
+            b.check(2, 1),
+            Err(AgentError::Dim {
+                expected: 2,
+                got: 3,
+                ..
+            })
+        ));
+        b.rewards[2] = f32::NAN;
+        assert!(matches!(b.check(3, 1), Err(AgentError::NonFinite { .. })));
+        assert!(matches!(
+            Batch::zeros(0, 3, 1).check(3, 1),
+            Err(AgentError::Empty(_))
+        ));
+    }
+}
