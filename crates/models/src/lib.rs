@@ -5,8 +5,12 @@
 //! Dependencies: `tandem-dynamics` (the plants residual models wrap), `tandem-nn` (networks),
 //! `ndarray` (batched data), `nalgebra` (plant states), `rand`, `serde`, `thiserror`.
 
+mod data;
 mod model;
+mod plant_model;
 
+pub use data::{holdout_indices, TransitionsBuilder};
 pub use model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
+pub use plant_model::PlantModel;

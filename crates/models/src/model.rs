@@ -35,6 +35,9 @@ pub enum ModelError {
         /// Optimizer step within the epoch.
         step: usize,
     },
+    /// An input the model needs was not given (the incremental model needs previous actions).
+    #[error("missing input: {0}")]
+    MissingInput(String),
     /// Anything else, with a message.
     #[error("{0}")]
     Other(String),
