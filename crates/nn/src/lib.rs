@@ -1,10 +1,69 @@
-//! Neural-network building blocks shared by models and agents, on candle: MLPs with seeded
-//! initialization, optimizers (Adam, AdaGrad, SGD), Gaussian and tanh-Gaussian heads, polyak
-//! target updates, running normalizers, and safetensors checkpoints.
+//! Neural-network building blocks shared by `tandem-models` and `tandem-agents`.
+//!
+//! What this crate owns:
+//! * [`Mlp`]: fully connected networks with flat `f32` parameters, seeded initialization
+//!   ([`Init`]: PyTorch default, Xavier, orthogonal, uniform), hidden-layer dropout, and a
+//!   hand-derived, allocation-free forward/backward over the `gemm` kernels
+//!   ([`Mlp::forward`], [`Mlp::forward_train`], [`Mlp::backward`] with optional `dL/dinput`).
+//! * Optimizers updating flat buffers in place ([`Adam`], [`AdaGrad`], [`Sgd`] behind
+//!   [`Optimizer`]), [`clip_grad_norm`], [`polyak_update`].
+//! * Checkpoints ([`Checkpoint`], [`Checkpointable`]) in the safetensors format, bit-exact.
+//! * Errors: one enum, [`NnError`]; shape mismatches and non-finite numbers are errors.
+//!
+//! Why a hand-derived MLP rather than candle modules: on the 2-core CPUs this project runs on,
+//! candle's per-op allocation and dispatch dominate RL-sized networks (`notes/candle-on-cpu.md`:
+//! a 23→256→256→1 critic update takes 3.9 ms in candle, about 1 ms hand-derived; PyTorch 1.27 ms).
+//! The hand-derived gradients are tested against candle's autograd. candle remains the library for
+//! what needs general autograd (convolutional nets) and is used as the gradient oracle in tests.
 //!
 //! Networks compute in `f32`; physics and planning stay in `f64` and convert at the boundary.
-//! candle's CPU generator cannot be seeded, so every random number here comes from
-//! [`tandem_core::Rng`].
+//! candle's CPU generator cannot be seeded, so every random number here (initialization, dropout,
+//! sampling noise) comes from [`tandem_core::seeding::Rng`].
 //!
-//! Dependencies: `candle-core`/`candle-nn` (tensors, autograd, safetensors), `rand`/`rand_distr`
-//! (seeded initialization and noise), `serde`, `thiserror`.
+//! # Example: fit `y = 2x - 1` with a tiny MLP
+//!
+//! ```
+//! use tandem_core::seeding::rng_from_seed;
+//! use tandem_nn::{Adam, AdamConfig, Mlp, MlpConfig, Optimizer};
+//!
+//! let mut rng = rng_from_seed(0);
+//! let mut net = Mlp::new(MlpConfig::new(&[1, 16, 1]), &mut rng).unwrap();
+//! let mut opt = Adam::new(AdamConfig::with_lr(1e-2), net.num_params()).unwrap();
+//! let mut ws = net.workspace();
+//! let mut grads = net.zero_grads();
+//!
+//! let x: Vec<f32> = (0..32).map(|i| i as f32 / 16.0 - 1.0).collect();
+//! let y: Vec<f32> = x.iter().map(|v| 2.0 * v - 1.0).collect();
+//! let mut d_out = vec![0.0; 32];
+//! for _ in 0..500 {
+//!     let pred = net.forward_train(&x, 32, &mut ws, None).unwrap();
+//!     // Mean squared error and its gradient dL/dpred.
+//!     for ((d, p), t) in d_out.iter_mut().zip(pred).zip(&y) {
+//!         *d = 2.0 * (p - t) / 32.0;
+//!     }
+//!     net.backward(&mut ws, &d_out, Some(&mut grads), None).unwrap();
+//!     opt.step(net.params_mut(), &grads).unwrap();
+//! }
+//! let pred = net.forward(&[0.5], 1, &mut ws).unwrap();
+//! assert!((pred[0] - 0.0).abs() < 0.05);
+//! ```
+//!
+//! Dependencies: `gemm` (the matrix kernels candle itself uses on CPU), `safetensors` (the
+//! checkpoint format; already a dependency of candle), `candle-core`/`candle-nn` (general
+//! autograd, gradient oracle), `rand`/`rand_distr` (seeded initialization and noise), `serde`,
+//! `serde_json` (JSON payloads inside checkpoints), `thiserror`.
+
+pub mod checkpoint;
+pub mod error;
+mod kernels;
+pub mod mlp;
+pub mod optim;
+
+pub use checkpoint::{Checkpoint, Checkpointable};
+pub use error::{check_finite, NnError, Result};
+pub use kernels::{gemm_threads, set_gemm_threads};
+pub use mlp::{sigmoid, Activation, Init, LayerShape, Mlp, MlpConfig, MlpWorkspace};
+pub use optim::{
+    clip_grad_norm, clip_grad_norm_many, grad_norm, polyak_update, AdaGrad, AdaGradConfig, Adam,
+    AdamConfig, Optimizer, Sgd, SgdConfig,
+};
