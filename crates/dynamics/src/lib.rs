@@ -13,6 +13,7 @@
 //! Dependencies: `nalgebra` (states, small matrices and spatial algebra), `serde` (plant
 //! parameters are readable from configs), `thiserror` (error types).
 
+pub mod classic;
 pub mod integrate;
 mod plant;
 
