@@ -16,5 +16,6 @@
 pub mod classic;
 pub mod integrate;
 mod plant;
+pub mod rigid;
 
 pub use plant::{check_dims, Plant, PlantError};

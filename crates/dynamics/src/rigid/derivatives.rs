@@ -1,0 +1,242 @@
+//! Analytical derivatives of inverse and forward dynamics.
+//!
+//! Inverse dynamics is differentiated exactly by propagating tangents through RNEA (one
+//! forward-mode sweep per coordinate, touching only the subtree of that joint on the way out and
+//! its ancestors on the way back): with `X_J(q)` the joint transform,
+//! `∂(X_J⁻¹ m)/∂q = -S × (X_J⁻¹ m)` and `∂(X_J f)/∂q = X_J (S ×* f)`. This is the structure of
+//! Carpentier & Mansard (RSS 2018) without its world-frame bookkeeping; it costs O(n · depth).
+//! Forward dynamics follows from `∂q̈/∂x = -M⁻¹ ∂τ/∂x|_{a = q̈}` and `∂q̈/∂τ = M⁻¹`.
+//! [`aba_derivatives_fd`] is the finite-difference twin used as the test oracle.
+
+use super::spatial::Motion;
+use super::{aba, crba, rnea, Data, Model};
+use nalgebra::{DMatrix, Vector3};
+
+/// Last index (exclusive) of the subtree rooted at joint `k`: depth-first order makes every
+/// subtree a contiguous range `k..end`.
+#[inline]
+fn subtree_end(model: &Model, k: usize) -> usize {
+    let mut e = k + 1;
+    while e < model.nv() && is_descendant(model, e, k) {
+        e += 1;
+    }
+    e
+}
+
+#[inline]
+fn is_descendant(model: &Model, mut j: usize, k: usize) -> bool {
+    while let Some(p) = model.joints[j].parent {
+        if p == k {
+            return true;
+        }
+        if p < k {
+            return false;
+        }
+        j = p;
+    }
+    false
+}
+
+/// `∂τ/∂q` and `∂τ/∂v` of `rnea(q, v, a)` into `data.dtau_dq`, `data.dtau_dv` (and `data.tau`).
+#[allow(clippy::needless_range_loop)] // indices address several per-joint arrays and the tree
+pub fn rnea_derivatives(model: &Model, data: &mut Data, q: &[f64], v: &[f64], a: &[f64]) {
+    rnea(model, data, q, v, a);
+    let n = model.nv();
+    let a0 = Motion::new(-model.gravity, Vector3::zeros());
+    for k in 0..n {
+        let end = subtree_end(model, k);
+        for wrt_q in [true, false] {
+            // Forward sweep over the subtree of k.
+            for jj in k..end {
+                let j = &model.joints[jj];
+                let s = j.subspace();
+                let sqd = s.scale(v[jj]);
+                let li = &data.li_m_i[jj];
+                let (dv, da) = if jj == k {
+                    if wrt_q {
+                        let (vp, ap) = match j.parent {
+                            Some(p) => {
+                                (li.act_inv_motion(&data.v[p]), li.act_inv_motion(&data.a[p]))
+                            }
+                            None => (Motion::zero(), li.act_inv_motion(&a0)),
+                        };
+                        let dv = s.cross(&vp).scale(-1.0);
+                        let da = s.cross(&ap).scale(-1.0) + dv.cross(&sqd);
+                        (dv, da)
+                    } else {
+                        (s, data.v[jj].cross(&s))
+                    }
+                } else {
+                    let p = j.parent.expect("subtree member below k has a parent");
+                    let dv = li.act_inv_motion(&data.dv[p]);
+                    let da = li.act_inv_motion(&data.da[p]) + dv.cross(&sqd);
+                    (dv, da)
+                };
+                let y = &j.inertia;
+                let vi = &data.v[jj];
+                data.df[jj] = y.mul_motion(&da)
+                    + dv.cross_force(&y.mul_motion(vi))
+                    + vi.cross_force(&y.mul_motion(&dv));
+                data.dv[jj] = dv;
+                data.da[jj] = da;
+            }
+            // Backward sweep: the subtree, then the chain of ancestors.
+            let out = if wrt_q {
+                &mut data.dtau_dq
+            } else {
+                &mut data.dtau_dv
+            };
+            for jj in (k..end).rev() {
+                let j = &model.joints[jj];
+                out[(jj, k)] = j.subspace().dot(&data.df[jj]);
+                if jj == k {
+                    break;
+                }
+                let p = j.parent.expect("subtree member below k has a parent");
+                let fp = data.li_m_i[jj].act_force(&data.df[jj]);
+                if p >= k {
+                    data.df[p] += fp;
+                }
+            }
+            let mut carry = data.df[k];
+            if wrt_q {
+                carry += model.joints[k].subspace().cross_force(&data.f[k]);
+            }
+            let mut jj = k;
+            while let Some(p) = model.joints[jj].parent {
+                carry = data.li_m_i[jj].act_force(&carry);
+                out[(p, k)] = model.joints[p].subspace().dot(&carry);
+                jj = p;
+            }
+            for r in 0..k {
+                if !is_ancestor(model, r, k) {
+                    out[(r, k)] = 0.0;
+                }
+            }
+            for r in end..n {
+                out[(r, k)] = 0.0;
+            }
+        }
+    }
+}
+
+#[inline]
+fn is_ancestor(model: &Model, r: usize, k: usize) -> bool {
+    let mut j = k;
+    while let Some(p) = model.joints[j].parent {
+        if p == r {
+            return true;
+        }
+        j = p;
+    }
+    false
+}
+
+/// In-place Cholesky `A = L Lᵀ` (lower triangle of `a` overwritten). Returns `false` if `a` is
+/// not positive definite.
+fn cholesky_in_place(a: &mut DMatrix<f64>) -> bool {
+    let n = a.nrows();
+    for j in 0..n {
+        let mut d = a[(j, j)];
+        for k in 0..j {
+            d -= a[(j, k)] * a[(j, k)];
+        }
+        if d <= 0.0 || !d.is_finite() {
+            return false;
+        }
+        let d = d.sqrt();
+        a[(j, j)] = d;
+        for i in j + 1..n {
+            let mut s = a[(i, j)];
+            for k in 0..j {
+                s -= a[(i, k)] * a[(j, k)];
+            }
+            a[(i, j)] = s / d;
+        }
+    }
+    true
+}
+
+/// `M(q)⁻¹` into `data.minv` (computes the mass matrix). Returns `false` if `M` is not positive
+/// definite (a model error that [`Model`] construction rules out).
+pub fn compute_minverse(model: &Model, data: &mut Data, q: &[f64]) -> bool {
+    crba(model, data, q);
+    data.chol.copy_from(&data.mass_matrix);
+    if !cholesky_in_place(&mut data.chol) {
+        return false;
+    }
+    let n = model.nv();
+    let l = &data.chol;
+    let minv = &mut data.minv;
+    minv.fill_with_identity();
+    for c in 0..n {
+        // Forward substitution L y = e_c, then back substitution Lᵀ x = y.
+        for i in 0..n {
+            let mut s = minv[(i, c)];
+            for k in 0..i {
+                s -= l[(i, k)] * minv[(k, c)];
+            }
+            minv[(i, c)] = s / l[(i, i)];
+        }
+        for i in (0..n).rev() {
+            let mut s = minv[(i, c)];
+            for k in i + 1..n {
+                s -= l[(k, i)] * minv[(k, c)];
+            }
+            minv[(i, c)] = s / l[(i, i)];
+        }
+    }
+    true
+}
+
+/// Derivatives of forward dynamics `q̈ = aba(q, v, τ)`: `data.ddq_dq`, `data.ddq_dv`,
+/// `data.minv` (= ∂q̈/∂τ), and `data.ddq`.
+pub fn aba_derivatives(model: &Model, data: &mut Data, q: &[f64], v: &[f64], tau: &[f64]) {
+    aba(model, data, q, v, tau);
+    let n = model.nv();
+    // Reuse `chol`'s storage trick: copy ddq to a stack buffer when small.
+    let mut buf = [0.0; 64];
+    let ddq_heap;
+    let ddq: &[f64] = if n <= 64 {
+        buf[..n].copy_from_slice(data.ddq.as_slice());
+        &buf[..n]
+    } else {
+        ddq_heap = data.ddq.as_slice().to_vec();
+        &ddq_heap
+    };
+    rnea_derivatives(model, data, q, v, ddq);
+    compute_minverse(model, data, q);
+    data.ddq_dq.gemm(-1.0, &data.minv, &data.dtau_dq, 0.0);
+    data.ddq_dv.gemm(-1.0, &data.minv, &data.dtau_dv, 0.0);
+    data.ddq.as_mut_slice().copy_from_slice(ddq);
+}
+
+/// Finite-difference twin of [`aba_derivatives`] (central differences, step `h`): returns
+/// `(∂q̈/∂q, ∂q̈/∂v, ∂q̈/∂τ)`. Allocates; meant for tests and checks.
+pub fn aba_derivatives_fd(
+    model: &Model,
+    data: &mut Data,
+    q: &[f64],
+    v: &[f64],
+    tau: &[f64],
+    h: f64,
+) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
+    let n = model.nv();
+    let mut out = [
+        DMatrix::zeros(n, n),
+        DMatrix::zeros(n, n),
+        DMatrix::zeros(n, n),
+    ];
+    for (which, m) in out.iter_mut().enumerate() {
+        for k in 0..n {
+            let mut x = [q.to_vec(), v.to_vec(), tau.to_vec()];
+            x[which][k] += h;
+            let fp = aba(model, data, &x[0], &x[1], &x[2]).clone();
+            x[which][k] -= 2.0 * h;
+            let fm = aba(model, data, &x[0], &x[1], &x[2]).clone();
+            m.set_column(k, &((fp - fm) / (2.0 * h)));
+        }
+    }
+    let [a, b, c] = out;
+    (a, b, c)
+}

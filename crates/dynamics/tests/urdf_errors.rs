@@ -1,0 +1,206 @@
+//! Every malformed or unsupported URDF is a clear error naming the element, never a panic.
+
+use tandem_dynamics::rigid::{Model, UrdfError};
+
+const INERTIAL: &str = r#"<inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>"#;
+
+fn link(name: &str) -> String {
+    format!(r#"<link name="{name}">{INERTIAL}</link>"#)
+}
+
+fn joint(name: &str, ty: &str, parent: &str, child: &str, extra: &str) -> String {
+    format!(
+        r#"<joint name="{name}" type="{ty}"><parent link="{parent}"/><child link="{child}"/><axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/>{extra}</joint>"#
+    )
+}
+
+fn robot(body: &str) -> String {
+    format!(r#"<?xml version="1.0"?><robot name="r"><link name="base"/>{body}</robot>"#)
+}
+
+fn err(xml: &str) -> UrdfError {
+    Model::from_urdf_str(xml).expect_err("must be rejected")
+}
+
+#[test]
+fn valid_minimal_model_parses() {
+    let xml = robot(&(link("a") + &joint("j", "revolute", "base", "a", "")));
+    let m = Model::from_urdf_str(&xml).unwrap();
+    assert_eq!(m.nv(), 1);
+}
+
+#[test]
+fn malformed_xml() {
+    let e = err(r#"<robot name="r"><link name="base"></robot>"#);
+    assert!(matches!(e, UrdfError::Malformed(_)), "{e}");
+    let e = err("not xml at all <<");
+    assert!(matches!(e, UrdfError::Malformed(_)), "{e}");
+}
+
+#[test]
+fn unknown_joint_type_names_joint() {
+    let e = err(&robot(
+        &(link("a") + &joint("elbow", "ball", "base", "a", "")),
+    ));
+    assert_eq!(
+        e,
+        UrdfError::UnknownJointType {
+            joint: "elbow".into(),
+            joint_type: "ball".into()
+        }
+    );
+    assert!(e.to_string().contains("elbow"));
+}
+
+#[test]
+fn floating_and_mimic_are_unsupported() {
+    let e = err(&robot(
+        &(link("a") + &joint("free", "floating", "base", "a", "")),
+    ));
+    assert!(
+        matches!(e, UrdfError::Unsupported { ref joint, .. } if joint == "free"),
+        "{e}"
+    );
+    let body = link("a")
+        + &link("b")
+        + &joint("j1", "revolute", "base", "a", "")
+        + &joint(
+            "j2",
+            "revolute",
+            "a",
+            "b",
+            r#"<mimic joint="j1" multiplier="2"/>"#,
+        );
+    let e = err(&robot(&body));
+    assert!(
+        matches!(e, UrdfError::Unsupported { ref joint, .. } if joint == "j2"),
+        "{e}"
+    );
+    assert!(e.to_string().contains("mimic"));
+}
+
+#[test]
+fn two_parents_names_link_and_joints() {
+    let body = link("a")
+        + &link("b")
+        + &joint("j1", "revolute", "base", "a", "")
+        + &joint("j2", "revolute", "base", "b", "")
+        + &joint("j3", "revolute", "a", "b", "");
+    let e = err(&robot(&body));
+    assert!(
+        matches!(e, UrdfError::TwoParents { ref link, .. } if link == "b"),
+        "{e}"
+    );
+}
+
+#[test]
+fn cycle_is_detected() {
+    // base is the root; a -> b -> a is a loop unreachable from it.
+    let body = link("a")
+        + &link("b")
+        + &link("c")
+        + &joint("j0", "revolute", "base", "c", "")
+        + &joint("j1", "revolute", "a", "b", "")
+        + &joint("j2", "revolute", "b", "a", "");
+    let e = err(&robot(&body));
+    assert!(matches!(e, UrdfError::Cycle { .. }), "{e}");
+}
+
+#[test]
+fn missing_inertia_names_link() {
+    let body = r#"<link name="a"><inertial><mass value="1"/></inertial></link>"#.to_string()
+        + &joint("j", "revolute", "base", "a", "");
+    let e = err(&robot(&body));
+    assert_eq!(
+        e,
+        UrdfError::MissingInertia {
+            link: "a".into(),
+            missing: "inertia"
+        }
+    );
+}
+
+#[test]
+fn non_positive_definite_inertia_names_link() {
+    let body = r#"<link name="a"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0.5" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>"#.to_string()
+        + &joint("j", "revolute", "base", "a", "");
+    let e = err(&robot(&body));
+    assert!(
+        matches!(e, UrdfError::BadInertia { ref link, .. } if link == "a"),
+        "{e}"
+    );
+    let body = r#"<link name="a"><inertial><mass value="-1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>"#.to_string()
+        + &joint("j", "revolute", "base", "a", "");
+    assert!(matches!(err(&robot(&body)), UrdfError::BadInertia { .. }));
+}
+
+#[test]
+fn massless_moving_link_is_rejected() {
+    let body = r#"<link name="a"/>"#.to_string() + &joint("j", "revolute", "base", "a", "");
+    let e = err(&robot(&body));
+    assert_eq!(e, UrdfError::MasslessJoint { joint: "j".into() });
+}
+
+#[test]
+fn unknown_link_and_duplicates() {
+    let e = err(&robot(
+        &(link("a") + &joint("j", "revolute", "base", "zz", "")),
+    ));
+    assert!(
+        matches!(e, UrdfError::UnknownLink { ref link, .. } if link == "zz"),
+        "{e}"
+    );
+    let e = err(&robot(&(link("a") + &link("a"))));
+    assert!(
+        matches!(
+            e,
+            UrdfError::Duplicate {
+                element: "link",
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let e = err(&robot(&(link("a") + &link("b"))));
+    assert!(matches!(e, UrdfError::SeveralRoots { .. }), "{e}");
+}
+
+#[test]
+fn zero_axis_is_rejected() {
+    let body = link("a")
+        + r#"<joint name="j" type="revolute"><parent link="base"/><child link="a"/><axis xyz="0 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>"#;
+    let e = err(&robot(&body));
+    assert!(
+        matches!(e, UrdfError::BadAxis { ref joint, .. } if joint == "j"),
+        "{e}"
+    );
+}
+
+#[test]
+fn missing_file_is_an_io_error() {
+    let e = Model::from_urdf_file("/nonexistent/robot.urdf").unwrap_err();
+    assert!(matches!(e, UrdfError::Io { .. }));
+}
+
+#[test]
+fn sibling_order_is_alphabetical_by_joint_name_depth_first() {
+    // Children of base: "zeta" (with a grandchild) and "alpha"; Pinocchio order is
+    // alpha, zeta, zeta_child, regardless of the order in the file.
+    let body = link("a")
+        + &link("b")
+        + &link("c")
+        + &joint("zeta", "revolute", "base", "a", "")
+        + &joint("zeta_child", "prismatic", "a", "b", "")
+        + &joint(
+            "alpha",
+            "continuous",
+            "base",
+            "c",
+            r#"<dynamics damping="0.5" friction="0.1"/>"#,
+        );
+    let m = Model::from_urdf_str(&robot(&body)).unwrap();
+    assert_eq!(m.joint_names(), ["alpha", "zeta", "zeta_child"]);
+    assert_eq!(m.joints[2].parent, Some(1));
+    assert!(m.joints[0].upper.is_infinite());
+    assert_eq!((m.joints[0].damping, m.joints[0].friction), (0.5, 0.1));
+}
