@@ -235,7 +235,6 @@ pub fn action_row(action: &Action, out: &mut [f32]) {
 }
 
 /// Checks an observation's length and finiteness.
-#[allow(dead_code)] // used by the agents
 pub(crate) fn check_obs(obs: &[f64], dim: usize) -> Result<()> {
     if obs.len() != dim {
         return Err(AgentError::Dim {

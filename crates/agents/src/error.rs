@@ -62,7 +62,9 @@ pub enum AgentError {
     /// An action that does not belong to the action space.
     #[error(transparent)]
     Space(#[from] SpaceError),
-    // NN_VARIANT
+    /// An error from the neural-network layer.
+    #[error(transparent)]
+    Nn(#[from] tandem_nn::NnError),
     /// Reading or writing a file.
     #[error("{path}: {source}")]
     Io {

@@ -5,14 +5,26 @@
 //! Dependencies: `tandem-nn` (networks and optimizers), `ndarray` (replay storage and
 //! minibatches), `rand`/`rand_distr` (seeded exploration and sampling), `serde`, `thiserror`.
 
+// Index loops over several parallel columns read closer to the equations than zipped iterators.
+#![allow(clippy::needless_range_loop)]
+
 pub mod agent;
+mod common;
 pub mod config;
+pub mod ddpg;
+pub mod dqn;
 pub mod error;
 pub mod noise;
+pub mod reinforce;
 pub mod replay;
+pub mod sac;
 
 pub use agent::{Agent, Batch, Episode, EpisodicAgent, Metrics, Mode, OffPolicyAgent};
 pub use config::{Baseline, DdpgConfig, DqnConfig, OffPolicySchedule, ReinforceConfig, SacConfig};
+pub use ddpg::{random_action, Ddpg};
+pub use dqn::Dqn;
 pub use error::{AgentError, Result};
 pub use noise::{Noise, NoiseConfig};
+pub use reinforce::Reinforce;
 pub use replay::{MixedSampler, ReplayBuffer, TransitionRef};
+pub use sac::Sac;
