@@ -28,3 +28,6 @@ pub use noise::{Noise, NoiseConfig};
 pub use reinforce::Reinforce;
 pub use replay::{MixedSampler, ReplayBuffer, TransitionRef};
 pub use sac::Sac;
+
+#[cfg(test)]
+mod tests;

@@ -178,7 +178,7 @@ impl Sac {
     /// The actor loss's gradient wrt the actor outputs (`n x 2ad`), given the clamped outputs,
     /// the noise, the squashed actions and `dQmin/da` (`n x ad`).
     #[allow(clippy::too_many_arguments)]
-    fn actor_output_grad(
+    pub(crate) fn actor_output_grad(
         out: &[f32],
         raw_log_std_in_range: impl Fn(usize) -> bool,
         eps: &[f32],

@@ -1,0 +1,368 @@
+//! Behaviour tests of the agents: each learns a one-step task whose optimum is known, errors are
+//! named, and checkpoints restore the exact numbers.
+
+use rand::Rng as _;
+use tandem_core::seeding::rng_from_seed;
+use tandem_core::{Action, Space};
+use tandem_nn::Checkpoint;
+
+use crate::agent::{Agent, Episode, EpisodicAgent, Mode, OffPolicyAgent};
+use crate::config::{Baseline, DdpgConfig, DqnConfig, ReinforceConfig, SacConfig};
+use crate::replay::{ReplayBuffer, TransitionRef};
+use crate::{AgentError, Ddpg, Dqn, NoiseConfig, Reinforce, Sac};
+
+/// One-step continuous task: observation `s ~ U(-1, 1)`, actions in `[-2, 2]`, reward
+/// `-(a - 1.5 s)²`; the optimal action is `1.5 s`.
+fn continuous_bandit_buffer(n: usize, seed: u64) -> ReplayBuffer {
+    let mut rng = rng_from_seed(seed);
+    let mut b = ReplayBuffer::new(n, 1, 1).unwrap();
+    for _ in 0..n {
+        let s: f64 = rng.random_range(-1.0..1.0);
+        let a: f64 = rng.random_range(-2.0..2.0);
+        b.push(TransitionRef {
+            obs: &[s],
+            action: &[a],
+            prev_action: &[0.0],
+            reward: -(a - 1.5 * s).powi(2),
+            next_obs: &[0.0],
+            terminated: true,
+        })
+        .unwrap();
+    }
+    b
+}
+
+fn mean_abs_error(agent: &mut dyn Agent) -> f64 {
+    let pts: Vec<f64> = (0..21).map(|i| -0.9 + 0.09 * i as f64).collect();
+    pts.iter()
+        .map(|s| {
+            let a = agent.act(&[*s], Mode::Deterministic).unwrap();
+            (a.as_continuous().unwrap()[0] - 1.5 * s).abs()
+        })
+        .sum::<f64>()
+        / pts.len() as f64
+}
+
+fn spaces() -> (Space, Space) {
+    (Space::symmetric(1, 1.0), Space::symmetric(1, 2.0))
+}
+
+#[test]
+fn ddpg_learns_the_optimal_action_of_a_one_step_task() {
+    let (os, acts) = spaces();
+    let cfg = DdpgConfig {
+        actor_hidden: vec![64, 64],
+        critic_hidden: vec![64, 64],
+        actor_lr: 1e-3,
+        critic_lr: 3e-3,
+        tau: 0.05,
+        batch_size: 64,
+        ..DdpgConfig::default()
+    };
+    let mut agent = Ddpg::new(cfg, &os, &acts, 0).unwrap();
+    let buf = continuous_bandit_buffer(4000, 1);
+    let mut rng = rng_from_seed(2);
+    let before = mean_abs_error(&mut agent);
+    for _ in 0..1500 {
+        let b = buf.sample(64, &mut rng).unwrap();
+        agent.update(&b).unwrap();
+    }
+    let after = mean_abs_error(&mut agent);
+    assert!(after < 0.15, "mean |a - a*| = {after} (before {before})");
+}
+
+#[test]
+fn sac_learns_the_optimal_action_of_a_one_step_task() {
+    let (os, acts) = spaces();
+    let cfg = SacConfig {
+        hidden: vec![64, 64],
+        learning_rate: 3e-3,
+        ..SacConfig::default()
+    };
+    let mut agent = Sac::new(cfg, &os, &acts, 0).unwrap();
+    let buf = continuous_bandit_buffer(4000, 1);
+    let mut rng = rng_from_seed(2);
+    let before = mean_abs_error(&mut agent);
+    let mut last = None;
+    for _ in 0..1500 {
+        let b = buf.sample(64, &mut rng).unwrap();
+        last = Some(agent.update(&b).unwrap());
+    }
+    let after = mean_abs_error(&mut agent);
+    assert!(after < 0.15, "mean |a - a*| = {after} (before {before})");
+    // Automatic entropy tuning moved α away from its initial 1.
+    assert!(agent.alpha() < 0.5, "alpha {}", agent.alpha());
+    assert!(last.unwrap().get("critic_loss").unwrap().is_finite());
+}
+
+/// The hand-derived actor gradient equals finite differences of the actor loss
+/// `mean_i(α log π_i - w·a_i)` (a linear critic, so `dQ/da = w`).
+#[test]
+fn sac_actor_gradient_matches_finite_differences() {
+    let (ad, n, alpha) = (2usize, 3usize, 0.7f32);
+    let w = [0.8f64, -1.3];
+    let mut rng = rng_from_seed(5);
+    let out: Vec<f32> = (0..n * 2 * ad)
+        .map(|k| {
+            if k % (2 * ad) < ad {
+                rng.random_range(-1.0..1.0)
+            } else {
+                rng.random_range(-1.5..0.5)
+            }
+        })
+        .collect();
+    let eps: Vec<f32> = (0..n * ad).map(|_| rng.random_range(-1.5..1.5)).collect();
+    let loss = |o: &[f64]| -> f64 {
+        let mut l = 0.0;
+        for i in 0..n {
+            for j in 0..ad {
+                let (m, ls, e) = (
+                    o[i * 2 * ad + j],
+                    o[i * 2 * ad + ad + j],
+                    f64::from(eps[i * ad + j]),
+                );
+                let a = (m + ls.exp() * e).tanh();
+                let lp = -0.5 * e * e
+                    - ls
+                    - 0.5 * (2.0 * std::f64::consts::PI).ln()
+                    - (1.0 - a * a + 1e-6).ln();
+                l += f64::from(alpha) * lp - w[j] * a;
+            }
+        }
+        l / n as f64
+    };
+    let act: Vec<f32> = (0..n * ad)
+        .map(|k| {
+            let (i, j) = (k / ad, k % ad);
+            (out[i * 2 * ad + j] + out[i * 2 * ad + ad + j].exp() * eps[k]).tanh()
+        })
+        .collect();
+    let dq: Vec<f32> = (0..n * ad).map(|k| w[k % ad] as f32).collect();
+    let mut g = vec![0.0f32; n * 2 * ad];
+    Sac::actor_output_grad(&out, |_| true, &eps, &act, &dq, alpha, ad, &mut g);
+    let o64: Vec<f64> = out.iter().map(|v| f64::from(*v)).collect();
+    for k in 0..o64.len() {
+        let h = 1e-5;
+        let (mut p, mut m) = (o64.clone(), o64.clone());
+        p[k] += h;
+        m[k] -= h;
+        let fd = (loss(&p) - loss(&m)) / (2.0 * h);
+        assert!(
+            (fd - f64::from(g[k])).abs() < 2e-4 * (1.0 + fd.abs()),
+            "component {k}: analytic {} vs finite difference {fd}",
+            g[k]
+        );
+    }
+}
+
+/// Two actions, reward 1 for action `1{s > 0}`: the greedy policy must be right.
+#[test]
+fn dqn_learns_a_contextual_bandit_and_double_dqn_too() {
+    for double in [false, true] {
+        let os = Space::symmetric(1, 1.0);
+        let cfg = DqnConfig {
+            hidden: vec![32, 32],
+            learning_rate: 3e-3,
+            target_update_interval: 50,
+            double_dqn: double,
+            ..DqnConfig::default()
+        };
+        let mut agent = Dqn::new(cfg, &os, &Space::discrete(2), 0).unwrap();
+        let mut rng = rng_from_seed(3);
+        let mut buf = ReplayBuffer::new(2000, 1, 1).unwrap();
+        for _ in 0..2000 {
+            let s: f64 = rng.random_range(-1.0..1.0);
+            let a = rng.random_range(0..2usize);
+            let r = if (a == 1) == (s > 0.0) { 1.0 } else { 0.0 };
+            buf.push(TransitionRef {
+                obs: &[s],
+                action: &[a as f64],
+                prev_action: &[0.0],
+                reward: r,
+                next_obs: &[0.0],
+                terminated: true,
+            })
+            .unwrap();
+        }
+        for _ in 0..800 {
+            agent.update(&buf.sample(64, &mut rng).unwrap()).unwrap();
+        }
+        let mut right = 0;
+        for i in 0..40 {
+            let s = -0.975 + 0.05 * i as f64;
+            let a = agent.act(&[s], Mode::Deterministic).unwrap();
+            if (a == Action::Discrete(1)) == (s > 0.0) {
+                right += 1;
+            }
+        }
+        assert!(
+            right >= 38,
+            "double={double}: {right}/40 greedy actions right"
+        );
+    }
+}
+
+#[test]
+fn reinforce_learns_a_contextual_bandit_with_each_baseline() {
+    for baseline in [Baseline::None, Baseline::Normalize, Baseline::Value] {
+        let cfg = ReinforceConfig {
+            hidden: vec![8],
+            learning_rate: 2e-2,
+            baseline,
+            ..ReinforceConfig::default()
+        };
+        let os = Space::symmetric(1, 1.0);
+        let mut agent = Reinforce::new(cfg, &os, &Space::discrete(2), 0).unwrap();
+        let mut rng = rng_from_seed(4);
+        for _ in 0..300 {
+            let eps: Vec<Episode> = (0..16)
+                .map(|_| {
+                    let s: f64 = rng.random_range(-1.0..1.0);
+                    let a = agent.act(&[s], Mode::Explore).unwrap();
+                    let r = if (a == Action::Discrete(1)) == (s > 0.0) {
+                        1.0
+                    } else {
+                        0.0
+                    };
+                    let mut e = Episode::default();
+                    e.push(vec![s], a, r);
+                    e.terminated = true;
+                    e
+                })
+                .collect();
+            agent.update(&eps).unwrap();
+        }
+        let p_right = (0..20)
+            .map(|i| {
+                let s = -0.95 + 0.1 * i as f64;
+                let p = agent.probabilities(&[s]).unwrap();
+                f64::from(if s > 0.0 { p[1] } else { p[0] })
+            })
+            .sum::<f64>()
+            / 20.0;
+        assert!(
+            p_right > 0.85,
+            "{baseline:?}: mean probability of the right action {p_right}"
+        );
+    }
+}
+
+#[test]
+fn wrong_action_spaces_are_named_errors() {
+    let os = Space::symmetric(3, 1.0);
+    let e = Sac::new(SacConfig::default(), &os, &Space::discrete(2), 0).unwrap_err();
+    assert!(matches!(
+        e,
+        AgentError::WrongActionSpace { agent: "sac", .. }
+    ));
+    assert!(e.to_string().contains("Discrete(2)"), "{e}");
+    let e = Ddpg::new(
+        DdpgConfig::default(),
+        &os,
+        &Space::symmetric(1, f64::INFINITY),
+        0,
+    );
+    assert!(matches!(
+        e,
+        Err(AgentError::WrongActionSpace { agent: "ddpg", .. })
+    ));
+    let e = Dqn::new(DqnConfig::default(), &os, &Space::symmetric(1, 1.0), 0);
+    assert!(matches!(
+        e,
+        Err(AgentError::WrongActionSpace { agent: "dqn", .. })
+    ));
+    let e = Reinforce::new(
+        ReinforceConfig::default(),
+        &os,
+        &Space::symmetric(1, 1.0),
+        0,
+    );
+    assert!(matches!(
+        e,
+        Err(AgentError::WrongActionSpace {
+            agent: "reinforce",
+            ..
+        })
+    ));
+    let e = Sac::new(
+        SacConfig::default(),
+        &Space::discrete(4),
+        &Space::symmetric(1, 1.0),
+        0,
+    );
+    assert!(matches!(e, Err(AgentError::WrongObservationSpace { .. })));
+    // Bad observations at act time.
+    let mut sac = Sac::new(SacConfig::default(), &os, &Space::symmetric(1, 1.0), 0).unwrap();
+    assert!(matches!(
+        sac.act(&[0.0, 0.0], Mode::Explore),
+        Err(AgentError::Dim {
+            expected: 3,
+            got: 2,
+            ..
+        })
+    ));
+    assert!(matches!(
+        sac.act(&[0.0, f64::NAN, 0.0], Mode::Explore),
+        Err(AgentError::NonFinite { .. })
+    ));
+    // Out-of-range config.
+    let bad = SacConfig {
+        gamma: 1.5,
+        ..SacConfig::default()
+    };
+    let e = Sac::new(bad, &os, &Space::symmetric(1, 1.0), 0).unwrap_err();
+    assert!(e.to_string().contains("gamma"), "{e}");
+    let bad = DdpgConfig {
+        noise: NoiseConfig::Gaussian { sigma: -0.1 },
+        ..DdpgConfig::default()
+    };
+    assert!(matches!(
+        Ddpg::new(bad, &os, &Space::symmetric(1, 1.0), 0),
+        Err(AgentError::Config { .. })
+    ));
+}
+
+#[test]
+fn checkpoints_restore_exact_numbers_and_reject_other_architectures() {
+    let (os, acts) = spaces();
+    let small = SacConfig {
+        hidden: vec![16, 16],
+        ..SacConfig::default()
+    };
+    let buf = continuous_bandit_buffer(256, 1);
+    let mut rng = rng_from_seed(9);
+    let mut a = Sac::new(small.clone(), &os, &acts, 1).unwrap();
+    for _ in 0..5 {
+        a.update(&buf.sample(32, &mut rng).unwrap()).unwrap();
+    }
+    let mut ckpt = Checkpoint::new();
+    a.save(&mut ckpt).unwrap();
+    let bytes = ckpt.to_bytes().unwrap();
+    let mut b = Sac::new(small.clone(), &os, &acts, 777).unwrap();
+    b.load(&Checkpoint::from_bytes(&bytes).unwrap()).unwrap();
+    for _ in 0..3 {
+        let batch = buf.sample(32, &mut rng).unwrap();
+        assert_eq!(a.update(&batch).unwrap(), b.update(&batch).unwrap());
+        assert_eq!(
+            a.act(&[0.3], Mode::Explore).unwrap(),
+            b.act(&[0.3], Mode::Explore).unwrap()
+        );
+    }
+    assert_eq!(a.actor_params(), b.actor_params());
+
+    // Another architecture or another algorithm: named errors.
+    let wide = SacConfig {
+        hidden: vec![32, 16],
+        ..SacConfig::default()
+    };
+    let mut c = Sac::new(wide, &os, &acts, 0).unwrap();
+    let e = c.load(&ckpt).unwrap_err();
+    assert!(matches!(e, AgentError::Checkpoint(_)), "{e}");
+    assert!(e.to_string().contains("architecture"), "{e}");
+    let mut d = Ddpg::new(DdpgConfig::default(), &os, &acts, 0).unwrap();
+    let e = d.load(&ckpt).unwrap_err();
+    assert!(e.to_string().contains("`sac`"), "{e}");
+    let mut q = Dqn::new(DqnConfig::default(), &os, &Space::discrete(3), 0).unwrap();
+    let e = q.load(&ckpt).unwrap_err();
+    assert!(matches!(e, AgentError::Checkpoint(_)), "{e}");
+}
