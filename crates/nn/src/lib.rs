@@ -55,13 +55,20 @@
 
 pub mod checkpoint;
 pub mod error;
+pub mod heads;
 mod kernels;
+pub mod loss;
 pub mod mlp;
 pub mod optim;
 
 pub use checkpoint::{Checkpoint, Checkpointable};
 pub use error::{check_finite, NnError, Result};
+pub use heads::{
+    log1m_tanh_sq, softplus, Categorical, GaussianHead, GaussianOutput, TanhGaussian,
+    TanhGaussianSample,
+};
 pub use kernels::{gemm_threads, set_gemm_threads};
+pub use loss::{bce_with_logits, gaussian_nll, huber, mse};
 pub use mlp::{sigmoid, Activation, Init, LayerShape, Mlp, MlpConfig, MlpWorkspace};
 pub use optim::{
     clip_grad_norm, clip_grad_norm_many, grad_norm, polyak_update, AdaGrad, AdaGradConfig, Adam,

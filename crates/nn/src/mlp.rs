@@ -907,6 +907,7 @@ impl Checkpointable for Mlp {
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)]
 mod tests {
     use super::*;
     use candle_core::{Device, Tensor, Var};

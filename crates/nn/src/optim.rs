@@ -520,3 +520,273 @@ pub fn polyak_update(target: &mut [f32], source: &[f32], tau: f32) -> Result<()>
     }
     Ok(())
 }
+
+#[cfg(test)]
+#[allow(clippy::needless_range_loop)]
+mod tests {
+    use super::*;
+
+    /// Adam written out in f64 from the paper's Algorithm 1 with PyTorch's ε placement.
+    fn adam_reference(p0: &[f64], grads: &[Vec<f64>], lr: f64) -> Vec<f64> {
+        let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8f64);
+        let mut p = p0.to_vec();
+        let mut m = vec![0.0; p.len()];
+        let mut v = vec![0.0; p.len()];
+        for (t, g) in grads.iter().enumerate() {
+            let t = (t + 1) as i32;
+            for i in 0..p.len() {
+                m[i] = b1 * m[i] + (1.0 - b1) * g[i];
+                v[i] = b2 * v[i] + (1.0 - b2) * g[i] * g[i];
+                let mh = m[i] / (1.0 - b1.powi(t));
+                let vh = v[i] / (1.0 - b2.powi(t));
+                p[i] -= lr * mh / (vh.sqrt() + eps);
+            }
+        }
+        p
+    }
+
+    #[test]
+    fn adam_matches_the_paper_algorithm() {
+        let p0 = [1.0f32, -2.0, 0.5];
+        let grads: Vec<Vec<f32>> = (0..6)
+            .map(|k| vec![0.5 - k as f32 * 0.2, 3.0 * (k as f32).cos(), 1e-3])
+            .collect();
+        let mut p = p0.to_vec();
+        let mut opt = Adam::new(AdamConfig::with_lr(0.01), 3).unwrap();
+        for g in &grads {
+            opt.step(&mut p, g).unwrap();
+        }
+        let g64: Vec<Vec<f64>> = grads
+            .iter()
+            .map(|g| g.iter().map(|v| f64::from(*v)).collect())
+            .collect();
+        let want = adam_reference(&[1.0, -2.0, 0.5], &g64, 0.01);
+        for (a, b) in p.iter().zip(&want) {
+            assert!((f64::from(*a) - b).abs() < 1e-6, "{a} vs {b}");
+        }
+        // First step moves every parameter by ≈ lr against the gradient's sign.
+        let mut q = p0.to_vec();
+        let mut o = Adam::new(AdamConfig::with_lr(0.01), 3).unwrap();
+        o.step(&mut q, &grads[0]).unwrap();
+        for (a, b) in q.iter().zip(&p0) {
+            assert!(((b - a).abs() - 0.01).abs() < 1e-5);
+        }
+        assert_eq!(opt.steps(), 6);
+    }
+
+    #[test]
+    fn adam_matches_candle_adamw_without_decay() {
+        use candle_core::{Device, Tensor, Var};
+        use candle_nn::optim::{AdamW, Optimizer as _, ParamsAdamW};
+        let dev = Device::Cpu;
+        let target = [0.3f32, -1.2, 2.0, 0.0];
+        let var = Var::from_tensor(&Tensor::new(&[1.0f32, 1.0, -1.0, 0.5], &dev).unwrap()).unwrap();
+        let tt = Tensor::new(&target, &dev).unwrap();
+        let mut copt = AdamW::new(
+            vec![var.clone()],
+            ParamsAdamW {
+                lr: 0.05,
+                weight_decay: 0.0,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let mut p = vec![1.0f32, 1.0, -1.0, 0.5];
+        let mut opt = Adam::new(AdamConfig::with_lr(0.05), 4).unwrap();
+        for _ in 0..20 {
+            let loss = (var.as_tensor() - &tt)
+                .unwrap()
+                .sqr()
+                .unwrap()
+                .sum_all()
+                .unwrap();
+            copt.backward_step(&loss).unwrap();
+            let g: Vec<f32> = p.iter().zip(&target).map(|(a, t)| 2.0 * (a - t)).collect();
+            opt.step(&mut p, &g).unwrap();
+        }
+        let want = var.as_tensor().to_vec1::<f32>().unwrap();
+        for (a, b) in p.iter().zip(&want) {
+            assert!((a - b).abs() < 1e-5, "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn adagrad_and_sgd_hand_computed_steps() {
+        let mut p = vec![1.0f32];
+        let mut ada = AdaGrad::new(
+            AdaGradConfig {
+                lr: 0.1,
+                ..Default::default()
+            },
+            1,
+        )
+        .unwrap();
+        ada.step(&mut p, &[2.0]).unwrap(); // G = 4: p = 1 - 0.1·2/2
+        assert!((p[0] - 0.9).abs() < 1e-7);
+        ada.step(&mut p, &[1.0]).unwrap(); // G = 5: p -= 0.1/√5
+        assert!((p[0] - (0.9 - 0.1 / 5f32.sqrt())).abs() < 1e-6);
+        // TensorFlow form: accumulator starts at 0.1, no ε.
+        let mut p = vec![0.0f32];
+        let mut tf = AdaGrad::new(
+            AdaGradConfig {
+                lr: 1.0,
+                initial_accumulator: 0.1,
+                eps: 0.0,
+                ..Default::default()
+            },
+            1,
+        )
+        .unwrap();
+        tf.step(&mut p, &[0.3]).unwrap();
+        assert!((p[0] + 0.3 / (0.1f32 + 0.09).sqrt()).abs() < 1e-6);
+
+        let mut p = vec![1.0f32];
+        let mut sgd = Sgd::new(
+            SgdConfig {
+                lr: 0.1,
+                momentum: 0.9,
+                ..Default::default()
+            },
+            1,
+        )
+        .unwrap();
+        sgd.step(&mut p, &[1.0]).unwrap(); // b = 1, p = 0.9
+        sgd.step(&mut p, &[1.0]).unwrap(); // b = 1.9, p = 0.71
+        assert!((p[0] - 0.71).abs() < 1e-6);
+        let mut p = vec![1.0f32];
+        let mut nes = Sgd::new(
+            SgdConfig {
+                lr: 0.1,
+                momentum: 0.9,
+                nesterov: true,
+                ..Default::default()
+            },
+            1,
+        )
+        .unwrap();
+        nes.step(&mut p, &[1.0]).unwrap(); // b = 1, d = 1 + 0.9 = 1.9
+        assert!((p[0] - 0.81).abs() < 1e-6);
+        let mut p = vec![1.0f32];
+        let mut plain = Sgd::new(SgdConfig::default(), 1).unwrap();
+        plain.step(&mut p, &[2.0]).unwrap();
+        assert!((p[0] - 0.98).abs() < 1e-7);
+    }
+
+    #[test]
+    fn non_finite_or_misshapen_gradients_leave_everything_unchanged() {
+        let mut p = vec![1.0f32, 2.0];
+        let mut opt = Adam::new(AdamConfig::default(), 2).unwrap();
+        let before = opt.clone();
+        let e = opt.step(&mut p, &[0.1, f32::NAN]).unwrap_err();
+        assert_eq!(
+            e,
+            NnError::NonFinite {
+                what: "gradient".into(),
+                index: 1
+            }
+        );
+        assert_eq!(p, vec![1.0, 2.0]);
+        assert_eq!(opt, before);
+        assert!(opt.step(&mut p, &[0.1]).is_err());
+        let mut ada = AdaGrad::new(AdaGradConfig::default(), 2).unwrap();
+        assert!(ada.step(&mut p, &[f32::INFINITY, 0.0]).is_err());
+        assert_eq!(ada.steps(), 0);
+        assert!(Adam::new(AdamConfig::with_lr(-1.0), 2).is_err());
+        assert!(AdaGrad::new(
+            AdaGradConfig {
+                eps: 0.0,
+                ..Default::default()
+            },
+            1
+        )
+        .is_err());
+        assert!(Sgd::new(
+            SgdConfig {
+                nesterov: true,
+                ..Default::default()
+            },
+            1
+        )
+        .is_err());
+    }
+
+    #[test]
+    fn clipping_and_polyak() {
+        let mut g = vec![3.0f32, 4.0];
+        let n = clip_grad_norm(&mut g, 1.0).unwrap();
+        assert_eq!(n, 5.0);
+        assert!((g[0] - 0.6).abs() < 1e-6 && (g[1] - 0.8).abs() < 1e-6);
+        let mut small = vec![0.3f32, 0.4];
+        clip_grad_norm(&mut small, 1.0).unwrap();
+        assert_eq!(small, vec![0.3, 0.4]);
+        assert!(clip_grad_norm(&mut [f32::NAN], 1.0).is_err());
+        let (mut a, mut b) = (vec![3.0f32], vec![4.0f32]);
+        let joint = clip_grad_norm_many(&mut [&mut a, &mut b], 1.0).unwrap();
+        assert_eq!(joint, 5.0);
+        assert!((a[0] - 0.6).abs() < 1e-6 && (b[0] - 0.8).abs() < 1e-6);
+
+        let mut t = vec![1.0f32, 0.0];
+        polyak_update(&mut t, &[3.0, 10.0], 0.25).unwrap();
+        assert_eq!(t, vec![1.5, 2.5]);
+        polyak_update(&mut t, &[3.0, 10.0], 1.0).unwrap();
+        assert_eq!(t, vec![3.0, 10.0]);
+        assert!(polyak_update(&mut t, &[1.0], 0.5).is_err());
+        assert!(polyak_update(&mut t, &[1.0, 1.0], 1.5).is_err());
+    }
+
+    #[test]
+    fn resumed_optimizer_continues_bit_identically() {
+        let grads: Vec<Vec<f32>> = (0..8)
+            .map(|k| (0..5).map(|i| ((k * 5 + i) as f32 * 0.7).sin()).collect())
+            .collect();
+        let p = vec![0.1f32; 5];
+        let mut a = Adam::new(AdamConfig::default(), 5).unwrap();
+        let mut s = Sgd::new(
+            SgdConfig {
+                momentum: 0.5,
+                ..Default::default()
+            },
+            5,
+        )
+        .unwrap();
+        let mut g2 = AdaGrad::new(AdaGradConfig::default(), 5).unwrap();
+        let (mut pa, mut ps, mut pg) = (p.clone(), p.clone(), p.clone());
+        for g in &grads[..4] {
+            a.step(&mut pa, g).unwrap();
+            s.step(&mut ps, g).unwrap();
+            g2.step(&mut pg, g).unwrap();
+        }
+        let mut ck = Checkpoint::new();
+        a.save_to("a", &mut ck).unwrap();
+        s.save_to("s", &mut ck).unwrap();
+        g2.save_to("g", &mut ck).unwrap();
+        let ck = Checkpoint::from_bytes(&ck.to_bytes().unwrap()).unwrap();
+        let mut a2 = Adam::new(AdamConfig::default(), 5).unwrap();
+        let mut s2 = Sgd::new(
+            SgdConfig {
+                momentum: 0.5,
+                ..Default::default()
+            },
+            5,
+        )
+        .unwrap();
+        let mut g3 = AdaGrad::new(AdaGradConfig::default(), 5).unwrap();
+        a2.load_from("a", &ck).unwrap();
+        s2.load_from("s", &ck).unwrap();
+        g3.load_from("g", &ck).unwrap();
+        let (mut qa, mut qs, mut qg) = (pa.clone(), ps.clone(), pg.clone());
+        for g in &grads[4..] {
+            a.step(&mut pa, g).unwrap();
+            a2.step(&mut qa, g).unwrap();
+            s.step(&mut ps, g).unwrap();
+            s2.step(&mut qs, g).unwrap();
+            g2.step(&mut pg, g).unwrap();
+            g3.step(&mut qg, g).unwrap();
+        }
+        assert_eq!(pa, qa);
+        assert_eq!(ps, qs);
+        assert_eq!(pg, qg);
+        let mut wrong = Adam::new(AdamConfig::default(), 6).unwrap();
+        assert!(wrong.load_from("a", &ck).is_err());
+    }
+}
