@@ -6,11 +6,15 @@
 //! `ndarray` (batched data), `nalgebra` (plant states), `rand`, `serde`, `thiserror`.
 
 mod data;
+mod gmm;
 mod model;
 mod plant_model;
+mod tvlg;
 
 pub use data::{holdout_indices, TransitionsBuilder};
+pub use gmm::Gmm;
 pub use model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
 pub use plant_model::PlantModel;
+pub use tvlg::{GmmPriorConfig, TvlgConfig, TvlgDynamics, TvlgFit};
