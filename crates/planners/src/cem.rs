@@ -1,0 +1,200 @@
+//! Cross-entropy method MPC (the planner of PETS, Chua et al. 2018).
+//!
+//! Each call: warm start from the previous mean shifted by one step, then `iterations` rounds of
+//! sample `N` sequences from `N(μ, σ²)`, clamp them into the bounds, roll them out through the
+//! model, refit `μ, σ` to the elites with smoothing `α` (`μ ← αμ + (1−α)μ_elite`), and keep
+//! `σ ≥ min_std`. Sample 0 of every round is the current mean itself, so the mean is always
+//! evaluated. The plan is the final mean.
+
+use ndarray::{s, Array2, Array3, Axis};
+use tandem_core::{seeding::rng_from_seed, Rng};
+use tandem_models::DynamicsModel;
+
+use crate::error::Result;
+use crate::mpc::{
+    check_problem, clamp_opt, fill_normal, fraction, lowest_k, nonzero, plan_from_actions,
+    positive, rollout_population, shift_plan, Bounds, Plan, Planner,
+};
+use crate::objective::Objective;
+
+/// Settings of [`Cem`]. Defaults are PETS's (Chua et al. 2018, §5/appendix): population 500, 50
+/// elites, 5 iterations, smoothing 0.1, horizon 30.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CemConfig {
+    /// Planning horizon `H`.
+    pub horizon: usize,
+    /// Sequences sampled per iteration `N`.
+    pub population: usize,
+    /// Fraction of the population kept as elites.
+    pub elite_fraction: f64,
+    /// Refits per plan.
+    pub iterations: usize,
+    /// Smoothing `α ∈ [0, 1)`: weight of the old mean and variance in each refit.
+    pub alpha: f64,
+    /// Initial standard deviation per action component; `None`: a quarter of the bound range
+    /// (PETS: variance `(high − low)² / 16`), or 1 where unbounded.
+    pub init_std: Option<Vec<f64>>,
+    /// Floor on the standard deviation.
+    pub min_std: f64,
+    /// Action bounds; samples are clamped into them.
+    pub bounds: Option<Bounds>,
+    /// Seed of the sampling stream.
+    pub seed: u64,
+}
+
+impl Default for CemConfig {
+    fn default() -> Self {
+        Self {
+            horizon: 30,
+            population: 500,
+            elite_fraction: 0.1,
+            iterations: 5,
+            alpha: 0.1,
+            init_std: None,
+            min_std: 1e-3,
+            bounds: None,
+            seed: 0,
+        }
+    }
+}
+
+/// Cross-entropy method planner; see the module docs.
+#[derive(Debug, Clone)]
+pub struct Cem {
+    cfg: CemConfig,
+    rng: Rng,
+    mean: Option<Array2<f64>>,
+}
+
+impl Cem {
+    /// A planner with these settings (checked here).
+    pub fn new(cfg: CemConfig) -> Result<Self> {
+        nonzero("horizon", cfg.horizon)?;
+        nonzero("population", cfg.population)?;
+        nonzero("iterations", cfg.iterations)?;
+        fraction("elite fraction", cfg.elite_fraction)?;
+        if !(0.0..1.0).contains(&cfg.alpha) {
+            return Err(crate::PlanError::Config(format!(
+                "smoothing alpha must be in [0, 1), got {}",
+                cfg.alpha
+            )));
+        }
+        if cfg.min_std != 0.0 {
+            positive("min_std", cfg.min_std)?;
+        }
+        if let Some(s) = &cfg.init_std {
+            for v in s {
+                positive("init_std", *v)?;
+            }
+        }
+        let rng = rng_from_seed(cfg.seed);
+        Ok(Self {
+            cfg,
+            rng,
+            mean: None,
+        })
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &CemConfig {
+        &self.cfg
+    }
+
+    fn init_std(&self, a: usize) -> Result<Vec<f64>> {
+        if let Some(s) = &self.cfg.init_std {
+            crate::error::check_len("init_std", a, s.len())?;
+            return Ok(s.clone());
+        }
+        Ok(match &self.cfg.bounds {
+            Some(b) => b
+                .low
+                .iter()
+                .zip(&b.high)
+                .map(|(l, h)| {
+                    if (h - l).is_finite() {
+                        0.25 * (h - l)
+                    } else {
+                        1.0
+                    }
+                })
+                .collect(),
+            None => vec![1.0; a],
+        })
+    }
+}
+
+impl Planner for Cem {
+    fn plan(
+        &mut self,
+        x0: &[f64],
+        model: &dyn DynamicsModel,
+        objective: &Objective,
+    ) -> Result<Plan> {
+        let (_, a) = check_problem(x0, model, objective)?;
+        if let Some(b) = &self.cfg.bounds {
+            b.validate(a)?;
+        }
+        let (h, n) = (self.cfg.horizon, self.cfg.population);
+        let n_elite = ((self.cfg.elite_fraction * n as f64).round() as usize).clamp(1, n);
+        let std0 = self.init_std(a)?;
+        let mut mean = match self.mean.take() {
+            Some(mut m) if m.dim() == (h, a) => {
+                shift_plan(&mut m);
+                m
+            }
+            _ => {
+                let c = self
+                    .cfg
+                    .bounds
+                    .as_ref()
+                    .map_or(vec![0.0; a], |b| b.center());
+                Array2::from_shape_fn((h, a), |(_, j)| c[j])
+            }
+        };
+        let mut std = Array2::from_shape_fn((h, a), |(_, j)| std0[j]);
+        let mut acts = Array3::zeros((h, n, a));
+        for _ in 0..self.cfg.iterations {
+            fill_normal(&mut self.rng, acts.as_slice_mut().expect("standard layout"));
+            for t in 0..h {
+                for i in 0..n {
+                    for j in 0..a {
+                        let z = if i == 0 { 0.0 } else { acts[(t, i, j)] };
+                        acts[(t, i, j)] = mean[(t, j)] + std[(t, j)] * z;
+                    }
+                }
+                clamp_opt(&self.cfg.bounds, acts.slice_mut(s![t, .., ..]));
+            }
+            let (costs, _) = rollout_population(
+                x0,
+                model,
+                objective,
+                &mut self.rng,
+                &mut acts,
+                |_, _, _| Ok(()),
+                None,
+                None,
+            )?;
+            let elites = lowest_k(&costs, n_elite);
+            let el = acts.select(Axis(1), &elites);
+            let em = el.mean_axis(Axis(1)).expect("at least one elite");
+            let ev = el.var_axis(Axis(1), 0.0);
+            let al = self.cfg.alpha;
+            mean = &mean * al + &em * (1.0 - al);
+            std.zip_mut_with(&ev, |sd, v| {
+                *sd = (al * *sd * *sd + (1.0 - al) * v)
+                    .sqrt()
+                    .max(self.cfg.min_std)
+            });
+        }
+        clamp_opt(&self.cfg.bounds, mean.view_mut());
+        let plan = plan_from_actions(x0, model, objective, &mut self.rng, &mean)?;
+        self.mean = Some(mean);
+        Ok(plan)
+    }
+
+    fn reset(&mut self) {
+        self.mean = None;
+        self.rng = rng_from_seed(self.cfg.seed);
+    }
+}

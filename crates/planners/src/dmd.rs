@@ -1,0 +1,375 @@
+//! Dynamic mirror descent MPC (DMD-MPC: Wagener et al. 2019; p3 §2–3).
+//!
+//! The control distribution is a Gaussian over the `H x A` sequence with fixed covariance `Σ`
+//! per step. One round (p3 eq. 5–6 with the KL divergence as Bregman divergence):
+//!
+//! 1. **Shift** `μ̃ = Φ(μ_prev)`: either the previous plan moved one step earlier (Wagener et al.)
+//!    or, in p3's two-loop scheme, a policy proposal: `μ̃_h = π_θ(x_h)` along the model rollout of
+//!    the policy itself (eq. 10). Samples then draw `u_h ~ N(π_θ(x_h), Σ)` at their own states
+//!    (eq. 11) and step the model (eq. 12).
+//! 2. **Mirror-descent step** on the expectation parameter (eq. 9):
+//!    `μ = (1 − α) μ̃ + α g`, where `g` is the utility-weighted mean of the sampled sequences:
+//!    the elite mean (CEM utility, eq. 13; optionally reward-weighted among the elites, eq. 14) or
+//!    the exponentially weighted mean `Σ e^{−C_i/λ} u_i / Σ e^{−C_i/λ}` (MPPI's utility).
+//!
+//! The returned [`Plan`] is the model rollout of `μ` (p3 Algorithm 1, line 14); its
+//! [`Plan::transitions`] are what p3 adds to the MPC replay buffer (line 15). A terminal value
+//! `−V` enters through the [`Objective`].
+
+use nalgebra::DMatrix;
+use ndarray::{s, Array1, Array2, Array3, ArrayView2, ArrayViewMut2};
+use tandem_core::{seeding::rng_from_seed, Rng};
+use tandem_models::DynamicsModel;
+
+use crate::error::{check_len, PlanError, Result};
+use crate::mpc::{
+    check_problem, clamp_opt, fill_normal, fraction, lowest_k, nonzero, plan_from_actions,
+    positive, rollout_population, shift_plan, Bounds, Noise, Plan, Planner,
+};
+use crate::objective::Objective;
+
+/// A policy proposal for the shift operator: a batch of states (`B x S`) to action means
+/// (`B x A`), e.g. the mean action of p3's SAC actor.
+pub type Proposal = Box<dyn Fn(ArrayView2<'_, f64>) -> Array2<f64> + Send + Sync>;
+
+/// A borrowed policy proposal (states to action means).
+pub type ProposalFn<'a> = &'a dyn Fn(ArrayView2<'_, f64>) -> Array2<f64>;
+
+/// How sampled sequences are weighted into the gradient estimate `g` of eq. 9.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "snake_case")]
+pub enum Utility {
+    /// CEM utility `−log E[1{C ≤ C_max}]` (p3 eq. 13): `g` is the mean of the elite fraction.
+    /// With `reward_weighted`, elites are weighted by how much better than the worst elite they
+    /// are (`w_i = C_max − C_i`), our reading of p3 eq. 14's "reward weighted mean".
+    CemElite {
+        /// Fraction of samples kept (p3: 10%).
+        elite_fraction: f64,
+        /// Weight elites by their cost margin instead of equally.
+        reward_weighted: bool,
+    },
+    /// Exponential utility: `g = Σ e^{−(C_i − min C)/λ} u_i / Σ e^{−(C_i − min C)/λ}`.
+    Exponential {
+        /// Temperature `λ > 0`.
+        lambda: f64,
+    },
+}
+
+/// Settings of [`DmdMpc`]. Defaults follow p3 §4.1: 100 rollouts, 10% elites, horizon 15 (the top
+/// of their 5–15 schedule). p3 gives no step size or covariance; `α = 0.8` and unit noise are ours.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DmdMpcConfig {
+    /// Planning horizon `H`.
+    pub horizon: usize,
+    /// Sampled sequences `M` per round.
+    pub samples: usize,
+    /// Mirror-descent step size `α ∈ (0, 1]` (eq. 9).
+    pub step_size: f64,
+    /// Utility that weights the samples.
+    pub utility: Utility,
+    /// Covariance `Σ` of the control distribution at each step.
+    pub noise: Noise,
+    /// Rounds per call (the first uses the shift operator; later ones re-sample around `μ`).
+    pub iterations: usize,
+    /// Also take the mirror-descent step on the second moment (the Gaussian's other expectation
+    /// parameter): `E[u²] ← (1 − α) E_μ̃[u²] + α E_w[u²]`, per component (a diagonal covariance
+    /// restarted from the diagonal of `noise` at every call, as PETS restarts CEM's variance: a
+    /// collapsed covariance carried over by the shift stops exploring; floored at `min_std`).
+    /// p3 keeps `Σ` fixed (`false`).
+    pub adapt_covariance: bool,
+    /// Floor on the adapted standard deviation.
+    pub min_std: f64,
+    /// Action bounds.
+    pub bounds: Option<Bounds>,
+    /// Seed of the sampling stream.
+    pub seed: u64,
+}
+
+impl Default for DmdMpcConfig {
+    fn default() -> Self {
+        Self {
+            horizon: 15,
+            samples: 100,
+            step_size: 0.8,
+            utility: Utility::CemElite {
+                elite_fraction: 0.1,
+                reward_weighted: false,
+            },
+            noise: Noise::Isotropic(1.0),
+            iterations: 1,
+            adapt_covariance: false,
+            min_std: 0.05,
+            bounds: None,
+            seed: 0,
+        }
+    }
+}
+
+/// DMD-MPC planner; see the module docs.
+pub struct DmdMpc {
+    cfg: DmdMpcConfig,
+    rng: Rng,
+    mean: Option<Array2<f64>>,
+    proposal: Option<Proposal>,
+}
+
+impl std::fmt::Debug for DmdMpc {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DmdMpc")
+            .field("cfg", &self.cfg)
+            .field("has_proposal", &self.proposal.is_some())
+            .finish()
+    }
+}
+
+impl DmdMpc {
+    /// A planner with these settings (checked here), shifting the previous plan.
+    pub fn new(cfg: DmdMpcConfig) -> Result<Self> {
+        nonzero("horizon", cfg.horizon)?;
+        nonzero("samples", cfg.samples)?;
+        nonzero("iterations", cfg.iterations)?;
+        fraction("step size alpha", cfg.step_size)?;
+        if cfg.adapt_covariance {
+            positive("min_std", cfg.min_std)?;
+        }
+        match cfg.utility {
+            Utility::CemElite { elite_fraction, .. } => fraction("elite fraction", elite_fraction)?,
+            Utility::Exponential { lambda } => positive("lambda", lambda)?,
+        }
+        let rng = rng_from_seed(cfg.seed);
+        Ok(Self {
+            cfg,
+            rng,
+            mean: None,
+            proposal: None,
+        })
+    }
+
+    /// Uses a policy proposal as the shift operator (p3's two-loop shift, eq. 10–12).
+    pub fn with_proposal(
+        mut self,
+        proposal: impl Fn(ArrayView2<'_, f64>) -> Array2<f64> + Send + Sync + 'static,
+    ) -> Self {
+        self.proposal = Some(Box::new(proposal));
+        self
+    }
+
+    /// Replaces (or removes) the policy proposal, e.g. after the outer loop updated its policy.
+    pub fn set_proposal(&mut self, proposal: Option<Proposal>) {
+        self.proposal = proposal;
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &DmdMpcConfig {
+        &self.cfg
+    }
+
+    /// One call with an explicit proposal (borrowed for this call only), ignoring any stored one.
+    pub fn plan_with_proposal(
+        &mut self,
+        x0: &[f64],
+        model: &dyn DynamicsModel,
+        objective: &Objective,
+        proposal: ProposalFn<'_>,
+    ) -> Result<Plan> {
+        self.plan_impl(x0, model, objective, Some(proposal))
+    }
+
+    fn plan_impl(
+        &mut self,
+        x0: &[f64],
+        model: &dyn DynamicsModel,
+        objective: &Objective,
+        proposal: Option<ProposalFn<'_>>,
+    ) -> Result<Plan> {
+        let (_, a) = check_problem(x0, model, objective)?;
+        if let Some(b) = &self.cfg.bounds {
+            b.validate(a)?;
+        }
+        let l = self.cfg.noise.cholesky(a)?;
+        let (h, n) = (self.cfg.horizon, self.cfg.samples);
+        let mut mean = match self.mean.take() {
+            Some(mut m) if m.dim() == (h, a) => {
+                shift_plan(&mut m);
+                m
+            }
+            _ => {
+                let c = self
+                    .cfg
+                    .bounds
+                    .as_ref()
+                    .map_or(vec![0.0; a], |b| b.center());
+                Array2::from_shape_fn((h, a), |(_, j)| c[j])
+            }
+        };
+        let std0: Vec<f64> = (0..a).map(|j| l.row(j).norm()).collect();
+        let mut std = Array2::from_shape_fn((h, a), |(_, j)| std0[j]);
+        let adapt = self.cfg.adapt_covariance;
+        let mut z = Array3::zeros((h, n, a));
+        let mut acts = Array3::zeros((h, n, a));
+        for it in 0..self.cfg.iterations {
+            fill_normal(&mut self.rng, z.as_slice_mut().expect("standard layout"));
+            // Sample 0 carries no noise: it is the shifted mean μ̃ itself.
+            z.slice_mut(s![.., 0, ..]).fill(0.0);
+            let bounds = self.cfg.bounds.clone();
+            let policy = if it == 0 { proposal } else { None };
+            let mean_ref = &mean;
+            let std_ref = &std;
+            let act = |t: usize, states: ArrayView2<'_, f64>, mut u: ArrayViewMut2<'_, f64>| {
+                let centre: Array2<f64> = match policy {
+                    Some(p) => {
+                        let c = p(states);
+                        check_len("proposal rows", states.nrows(), c.nrows())?;
+                        check_len("proposal columns", a, c.ncols())?;
+                        if c.iter().any(|v| !v.is_finite()) {
+                            return Err(PlanError::NonFinite("policy proposal".into()));
+                        }
+                        c
+                    }
+                    None => {
+                        let row = mean_ref.row(t);
+                        Array2::from_shape_fn((states.nrows(), a), |(_, j)| row[j])
+                    }
+                };
+                if adapt {
+                    let zt = z.slice(s![t, .., ..]);
+                    u.zip_mut_with(&centre, |o, c| *o = *c);
+                    for i in 0..u.nrows() {
+                        for j in 0..a {
+                            u[(i, j)] += std_ref[(t, j)] * zt[(i, j)];
+                        }
+                    }
+                } else {
+                    add_noise(&l, &centre, z.slice(s![t, .., ..]), u.view_mut());
+                }
+                clamp_opt(&bounds, u);
+                Ok(())
+            };
+            let (costs, _) = rollout_population(
+                x0,
+                model,
+                objective,
+                &mut self.rng,
+                &mut acts,
+                act,
+                None,
+                None,
+            )?;
+            // μ̃: the noise-free sample (the shifted plan, or the policy's own rollout).
+            let shifted = acts.slice(s![.., 0, ..]).to_owned();
+            let (g, g2) = self.weighted_moments(&acts, &costs)?;
+            let al = self.cfg.step_size;
+            mean = &shifted * (1.0 - al) + &g * al;
+            if adapt {
+                for t in 0..h {
+                    for j in 0..a {
+                        let (mt, st) = (shifted[(t, j)], std[(t, j)]);
+                        let m2 = (1.0 - al) * (st * st + mt * mt) + al * g2[(t, j)];
+                        let var = m2 - mean[(t, j)] * mean[(t, j)];
+                        std[(t, j)] = var.max(0.0).sqrt().max(self.cfg.min_std);
+                    }
+                }
+            }
+        }
+        clamp_opt(&self.cfg.bounds, mean.view_mut());
+        let plan = plan_from_actions(x0, model, objective, &mut self.rng, &mean)?;
+        self.mean = Some(mean);
+        Ok(plan)
+    }
+
+    /// `g` of eq. 9, the utility-weighted mean sequence (`H x A`), and the weighted second moment.
+    fn weighted_moments(
+        &self,
+        acts: &Array3<f64>,
+        costs: &Array1<f64>,
+    ) -> Result<(Array2<f64>, Array2<f64>)> {
+        let (h, n, a) = acts.dim();
+        let mut w = Array1::zeros(n);
+        match self.cfg.utility {
+            Utility::CemElite {
+                elite_fraction,
+                reward_weighted,
+            } => {
+                let k = ((elite_fraction * n as f64).round() as usize).clamp(1, n);
+                let el = lowest_k(costs, k);
+                let cmax = costs[el[k - 1]];
+                let scale = 1e-9 * (1.0 + cmax.abs());
+                for &i in &el {
+                    w[i] = if reward_weighted {
+                        cmax - costs[i] + scale
+                    } else {
+                        1.0
+                    };
+                }
+            }
+            Utility::Exponential { lambda } => {
+                let beta = costs.iter().copied().fold(f64::INFINITY, f64::min);
+                w = costs.mapv(|c| (-(c - beta) / lambda).exp());
+            }
+        }
+        let wsum = w.sum();
+        if !(wsum > 0.0 && wsum.is_finite()) {
+            return Err(PlanError::Numerical("utility weights sum to zero".into()));
+        }
+        let mut g = Array2::zeros((h, a));
+        let mut g2 = Array2::zeros((h, a));
+        for t in 0..h {
+            for i in 0..n {
+                if w[i] != 0.0 {
+                    for j in 0..a {
+                        let v = acts[(t, i, j)];
+                        g[(t, j)] += w[i] * v;
+                        g2[(t, j)] += w[i] * v * v;
+                    }
+                }
+            }
+        }
+        Ok((g / wsum, g2 / wsum))
+    }
+}
+
+/// `u = centre + L z` row by row.
+fn add_noise(
+    l: &DMatrix<f64>,
+    centre: &Array2<f64>,
+    z: ArrayView2<'_, f64>,
+    mut u: ArrayViewMut2<'_, f64>,
+) {
+    let a = centre.ncols();
+    for i in 0..centre.nrows() {
+        for j in 0..a {
+            let mut e = 0.0;
+            for k in 0..=j {
+                e += l[(j, k)] * z[(i, k)];
+            }
+            u[(i, j)] = centre[(i, j)] + e;
+        }
+    }
+}
+
+impl Planner for DmdMpc {
+    fn plan(
+        &mut self,
+        x0: &[f64],
+        model: &dyn DynamicsModel,
+        objective: &Objective,
+    ) -> Result<Plan> {
+        let proposal = self.proposal.take();
+        let r = self.plan_impl(
+            x0,
+            model,
+            objective,
+            proposal
+                .as_ref()
+                .map(|p| p.as_ref() as &dyn Fn(ArrayView2<'_, f64>) -> Array2<f64>),
+        );
+        self.proposal = proposal;
+        r
+    }
+
+    fn reset(&mut self) {
+        self.mean = None;
+        self.rng = rng_from_seed(self.cfg.seed);
+    }
+}

@@ -1,0 +1,402 @@
+//! The [`Planner`] trait, the [`Plan`] it returns, action [`Bounds`], Gaussian [`Noise`], and
+//! the batched rollout every sampling planner shares.
+//!
+//! Populations are stored horizon-major, `H x N x A`, so that the actions of all `N` samples at
+//! one time step are one contiguous `N x A` block: a rollout makes exactly one
+//! [`DynamicsModel::predict`] call per time step for the whole population.
+
+use nalgebra::DMatrix;
+use ndarray::{s, Array1, Array2, Array3, ArrayView2, ArrayViewMut2};
+use rand::Rng as _;
+use rand_distr::StandardNormal;
+use tandem_core::Rng;
+use tandem_models::{DynamicsModel, ModelInput, Transitions};
+
+use crate::error::{check_finite, check_len, PlanError, Result};
+use crate::objective::Objective;
+
+/// A planned action sequence and its predicted consequences under the model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// Planned actions `u_0 .. u_{H-1}`, `H x A` (within the bounds).
+    pub actions: Array2<f64>,
+    /// Predicted states `x_0 .. x_H` along `actions`, `(H+1) x S`.
+    pub states: Array2<f64>,
+    /// Undiscounted running costs `c(x_h, u_h)` along the plan, length `H`.
+    pub costs: Array1<f64>,
+    /// Terminal cost (including `−V`) at `x_H`.
+    pub terminal_cost: f64,
+    /// The objective value `Σ γ^h c_h + γ^H c_H` of the plan.
+    pub total_cost: f64,
+}
+
+impl Plan {
+    /// The action to apply now, `u_0`.
+    pub fn first_action(&self) -> Vec<f64> {
+        self.actions.row(0).to_vec()
+    }
+
+    /// Horizon `H`.
+    pub fn horizon(&self) -> usize {
+        self.actions.nrows()
+    }
+
+    /// The planned transitions `(x_h, u_h, r_h = −c_h, x_{h+1})` as a dataset a pipeline can add to
+    /// a replay buffer (p3 Algorithm 1, lines 14–15). Previous actions are the plan's own (zeros
+    /// at `h = 0`); nothing is terminal.
+    pub fn transitions(&self) -> Transitions {
+        let h = self.horizon();
+        let a = self.actions.ncols();
+        let mut prev = Array2::zeros((h, a));
+        if h > 1 {
+            prev.slice_mut(s![1.., ..])
+                .assign(&self.actions.slice(s![..h - 1, ..]));
+        }
+        Transitions {
+            states: self.states.slice(s![..h, ..]).to_owned(),
+            actions: self.actions.clone(),
+            prev_actions: prev,
+            next_states: self.states.slice(s![1.., ..]).to_owned(),
+            rewards: self.costs.mapv(|c| -c),
+            terminated: Array1::from_elem(h, false),
+        }
+    }
+}
+
+/// A receding-horizon planner: plans through any [`DynamicsModel`] (a plant, a learned network,
+/// an ensemble) and keeps its warm start between calls.
+pub trait Planner {
+    /// Plans from state `x0`; the caller applies [`Plan::first_action`] and calls again at the next
+    /// state. The warm start is the previous plan shifted by one step.
+    fn plan(
+        &mut self,
+        x0: &[f64],
+        model: &dyn DynamicsModel,
+        objective: &Objective,
+    ) -> Result<Plan>;
+
+    /// Forgets the warm start and restarts the random stream from the configured seed (call at the
+    /// start of an episode).
+    fn reset(&mut self);
+}
+
+/// Box bounds on actions, `low ≤ u ≤ high` componentwise.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Bounds {
+    /// Lower bounds.
+    pub low: Vec<f64>,
+    /// Upper bounds.
+    pub high: Vec<f64>,
+}
+
+impl Bounds {
+    /// Bounds `low ≤ u ≤ high`; checked by [`Bounds::validate`] when a planner uses them.
+    pub fn new(low: Vec<f64>, high: Vec<f64>) -> Self {
+        Self { low, high }
+    }
+
+    /// The same bound `[-b, b]` on each of `dim` components.
+    pub fn symmetric(dim: usize, b: f64) -> Self {
+        Self::new(vec![-b; dim], vec![b; dim])
+    }
+
+    /// Checks lengths against `dim` and that `low ≤ high` with no NaN.
+    pub fn validate(&self, dim: usize) -> Result<()> {
+        check_len("bounds low", dim, self.low.len())?;
+        check_len("bounds high", dim, self.high.len())?;
+        for (i, (l, h)) in self.low.iter().zip(&self.high).enumerate() {
+            if l.is_nan() || h.is_nan() || l > h {
+                return Err(PlanError::Config(format!(
+                    "bounds component {i}: low {l} must not exceed high {h}"
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Clamps every row of `a` (`B x A`) into the bounds.
+    pub fn clamp_rows(&self, mut a: ArrayViewMut2<'_, f64>) {
+        for mut r in a.rows_mut() {
+            for (j, v) in r.iter_mut().enumerate() {
+                *v = v.clamp(self.low[j], self.high[j]);
+            }
+        }
+    }
+
+    /// Clamps one action in place.
+    pub fn clamp(&self, u: &mut [f64]) {
+        for (j, v) in u.iter_mut().enumerate() {
+            *v = v.clamp(self.low[j], self.high[j]);
+        }
+    }
+
+    /// Midpoint, or 0 where a side is unbounded.
+    pub fn center(&self) -> Vec<f64> {
+        self.low
+            .iter()
+            .zip(&self.high)
+            .map(|(l, h)| {
+                if l.is_finite() && h.is_finite() {
+                    0.5 * (l + h)
+                } else {
+                    0.0f64.clamp(*l, *h)
+                }
+            })
+            .collect()
+    }
+}
+
+pub(crate) fn clamp_opt(bounds: &Option<Bounds>, a: ArrayViewMut2<'_, f64>) {
+    if let Some(b) = bounds {
+        b.clamp_rows(a);
+    }
+}
+
+/// A zero-mean Gaussian over one action, `N(0, Σ)`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "snake_case")]
+pub enum Noise {
+    /// The same standard deviation on every component.
+    Isotropic(f64),
+    /// One standard deviation per component.
+    Diagonal(Vec<f64>),
+    /// A full covariance matrix, row by row.
+    Full(Vec<Vec<f64>>),
+}
+
+impl Noise {
+    /// Lower Cholesky factor `L` (`Σ = L Lᵀ`) for actions of length `dim`.
+    pub fn cholesky(&self, dim: usize) -> Result<DMatrix<f64>> {
+        match self {
+            Noise::Isotropic(s) => {
+                positive("noise standard deviation", *s)?;
+                Ok(DMatrix::identity(dim, dim) * *s)
+            }
+            Noise::Diagonal(v) => {
+                check_len("noise standard deviations", dim, v.len())?;
+                for s in v {
+                    positive("noise standard deviation", *s)?;
+                }
+                Ok(DMatrix::from_diagonal(
+                    &nalgebra::DVector::from_column_slice(v),
+                ))
+            }
+            Noise::Full(rows) => {
+                check_len("noise covariance rows", dim, rows.len())?;
+                for r in rows {
+                    check_len("noise covariance columns", dim, r.len())?;
+                    check_finite("noise covariance", r)?;
+                }
+                let m = DMatrix::from_fn(dim, dim, |i, j| rows[i][j]);
+                if (&m - m.transpose()).abs().max() > 1e-12 * m.abs().max().max(1.0) {
+                    return Err(PlanError::Config(
+                        "noise covariance is not symmetric".into(),
+                    ));
+                }
+                m.cholesky().map(|c| c.l()).ok_or_else(|| {
+                    PlanError::Config("noise covariance is not positive definite".into())
+                })
+            }
+        }
+    }
+}
+
+pub(crate) fn positive(what: &str, v: f64) -> Result<()> {
+    if v > 0.0 && v.is_finite() {
+        Ok(())
+    } else {
+        Err(PlanError::Config(format!(
+            "{what} must be positive and finite, got {v}"
+        )))
+    }
+}
+
+pub(crate) fn nonzero(what: &str, v: usize) -> Result<()> {
+    if v > 0 {
+        Ok(())
+    } else {
+        Err(PlanError::Config(format!("{what} must be at least 1")))
+    }
+}
+
+pub(crate) fn fraction(what: &str, v: f64) -> Result<()> {
+    if v > 0.0 && v <= 1.0 {
+        Ok(())
+    } else {
+        Err(PlanError::Config(format!(
+            "{what} must be in (0, 1], got {v}"
+        )))
+    }
+}
+
+/// Checks that the model, the objective and `x0` agree on dimensions and `x0` is finite; returns
+/// `(S, A)`.
+pub(crate) fn check_problem(
+    x0: &[f64],
+    model: &dyn DynamicsModel,
+    objective: &Objective,
+) -> Result<(usize, usize)> {
+    let (s, a) = (model.state_dim(), model.action_dim());
+    check_len(
+        "objective state dimension vs model",
+        s,
+        objective.state_dim(),
+    )?;
+    check_len(
+        "objective action dimension vs model",
+        a,
+        objective.action_dim(),
+    )?;
+    check_len("initial state", s, x0.len())?;
+    check_finite("initial state", x0)?;
+    Ok((s, a))
+}
+
+/// Fills `out` with standard normal draws.
+pub(crate) fn fill_normal(rng: &mut Rng, out: &mut [f64]) {
+    for v in out.iter_mut() {
+        *v = rng.sample(StandardNormal);
+    }
+}
+
+/// Shifts a `H x A` plan one step earlier, repeating the last action.
+pub(crate) fn shift_plan(mean: &mut Array2<f64>) {
+    let h = mean.nrows();
+    for t in 0..h.saturating_sub(1) {
+        let next = mean.row(t + 1).to_owned();
+        mean.row_mut(t).assign(&next);
+    }
+}
+
+/// Rolls a population out through `model`, one `predict` per step, and returns each sample's
+/// objective value `Σ γ^h c(x_h, u_h) + γ^H c_H(x_H)`.
+///
+/// `actions` is `H x N x A`. Before step `h` the callback `act(h, states, actions_h)` may write
+/// the actions of that step from the current states (a policy proposal); pass a no-op for
+/// open-loop sequences. `states_out`, when given (`(H+1) x N x S`), records the states.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn rollout_population(
+    x0: &[f64],
+    model: &dyn DynamicsModel,
+    objective: &Objective,
+    rng: &mut Rng,
+    actions: &mut Array3<f64>,
+    mut act: impl FnMut(usize, ArrayView2<'_, f64>, ArrayViewMut2<'_, f64>) -> Result<()>,
+    mut states_out: Option<&mut Array3<f64>>,
+    running_out: Option<&mut Array2<f64>>,
+) -> Result<(Array1<f64>, Vec<f64>)> {
+    let (h_len, n, a_dim) = actions.dim();
+    let s_dim = x0.len();
+    let mut states = Array2::zeros((n, s_dim));
+    for mut r in states.rows_mut() {
+        r.assign(&ndarray::ArrayView1::from(x0));
+    }
+    let mut total = Array1::zeros(n);
+    let mut step_cost = vec![0.0; n];
+    let gamma = objective.discount();
+    let mut disc = 1.0;
+    let mut running_out = running_out;
+    if let Some(so) = states_out.as_deref_mut() {
+        so.slice_mut(s![0, .., ..]).assign(&states);
+    }
+    for h in 0..h_len {
+        act(h, states.view(), actions.slice_mut(s![h, .., ..]))?;
+        let u = actions.slice(s![h, .., ..]);
+        objective.running_batch(states.view(), u, h, &mut step_cost)?;
+        let mut input = ModelInput::new(states.view(), u);
+        if h > 0 {
+            input = input.with_prev_actions(actions.slice(s![h - 1, .., ..]));
+        }
+        let pred = model.predict(&input, rng)?;
+        check_len("predicted next states (rows)", n, pred.next_states.nrows())?;
+        check_len(
+            "predicted next states (columns)",
+            s_dim,
+            pred.next_states.ncols(),
+        )?;
+        if objective.uses_model_reward() {
+            let r = pred.rewards.as_ref().ok_or_else(|| {
+                PlanError::Config(
+                    "objective uses the model's reward but the model predicts none".into(),
+                )
+            })?;
+            check_len("predicted rewards", n, r.len())?;
+            for (i, (c, rv)) in step_cost.iter_mut().zip(r.iter()).enumerate() {
+                if !rv.is_finite() {
+                    return Err(PlanError::NonFiniteCost {
+                        what: "model reward",
+                        sample: i,
+                        step: h,
+                        value: *rv,
+                    });
+                }
+                *c -= rv;
+            }
+        }
+        for (t, c) in total.iter_mut().zip(&step_cost) {
+            *t += disc * c;
+        }
+        if let Some(ro) = running_out.as_deref_mut() {
+            ro.row_mut(h)
+                .assign(&ndarray::ArrayView1::from(&step_cost[..]));
+        }
+        disc *= gamma;
+        states = pred.next_states;
+        if let Some(so) = states_out.as_deref_mut() {
+            so.slice_mut(s![h + 1, .., ..]).assign(&states);
+        }
+    }
+    let mut term = vec![0.0; n];
+    if objective.has_terminal() {
+        objective.terminal_batch(states.view(), h_len, &mut term)?;
+        for (t, c) in total.iter_mut().zip(&term) {
+            *t += disc * c;
+        }
+    }
+    let _ = a_dim;
+    Ok((total, term))
+}
+
+/// Rolls out one action sequence (`H x A`) and packages it as a [`Plan`].
+pub(crate) fn plan_from_actions(
+    x0: &[f64],
+    model: &dyn DynamicsModel,
+    objective: &Objective,
+    rng: &mut Rng,
+    actions: &Array2<f64>,
+) -> Result<Plan> {
+    let (h, a) = actions.dim();
+    let mut acts = actions
+        .clone()
+        .into_shape_with_order((h, 1, a))
+        .expect("same size");
+    let mut states = Array3::zeros((h + 1, 1, x0.len()));
+    let mut running = Array2::zeros((h, 1));
+    let (total, term) = rollout_population(
+        x0,
+        model,
+        objective,
+        rng,
+        &mut acts,
+        |_, _, _| Ok(()),
+        Some(&mut states),
+        Some(&mut running),
+    )?;
+    Ok(Plan {
+        actions: actions.clone(),
+        states: states.index_axis_move(ndarray::Axis(1), 0),
+        costs: running.column(0).to_owned(),
+        terminal_cost: term[0],
+        total_cost: total[0],
+    })
+}
+
+/// Indices of the `k` lowest costs, cheapest first (ties broken by index, so results are
+/// reproducible).
+pub(crate) fn lowest_k(costs: &Array1<f64>, k: usize) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..costs.len()).collect();
+    idx.sort_by(|&i, &j| costs[i].total_cmp(&costs[j]).then(i.cmp(&j)));
+    idx.truncate(k);
+    idx
+}
