@@ -33,6 +33,15 @@ pub enum EnvError {
     /// No environment of that name.
     #[error("unknown environment `{0}`")]
     Unknown(String),
+    /// A wrapper cannot wrap this environment (e.g. rescaling a discrete or unbounded action
+    /// space).
+    #[error("{env}: {reason}")]
+    Unsupported {
+        /// The environment's id.
+        env: String,
+        /// Why the wrapper does not apply.
+        reason: String,
+    },
 }
 
 /// What [`Env::step`] returns: gymnasium's `(observation, reward, terminated, truncated)`.
@@ -83,4 +92,98 @@ pub trait Env {
     /// Starts an episode from the internal state `state` (as returned by [`Env::state`]) and
     /// returns its observation.
     fn set_state(&mut self, state: &[f64]) -> Result<Vec<f64>, EnvError>;
+
+    /// The episode length after which the environment truncates, if it has one (set by
+    /// [`crate::TimeLimit`]). Base environments never truncate and return `None`.
+    fn max_episode_steps(&self) -> Option<usize> {
+        None
+    }
+}
+
+/// A boxed environment is an environment, so wrappers compose over `Box<dyn Env>`.
+impl<E: Env + ?Sized> Env for Box<E> {
+    fn id(&self) -> &str {
+        (**self).id()
+    }
+    fn observation_space(&self) -> &Space {
+        (**self).observation_space()
+    }
+    fn action_space(&self) -> &Space {
+        (**self).action_space()
+    }
+    fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
+        (**self).reset(seed)
+    }
+    fn step(&mut self, action: &Action) -> Result<Step, EnvError> {
+        (**self).step(action)
+    }
+    fn state(&self) -> Vec<f64> {
+        (**self).state()
+    }
+    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f64>, EnvError> {
+        (**self).set_state(state)
+    }
+    fn max_episode_steps(&self) -> Option<usize> {
+        (**self).max_episode_steps()
+    }
+}
+
+/// Checks a state given to [`Env::set_state`]: length `dim`, all components finite.
+pub fn check_state(env: &str, state: &[f64], dim: usize) -> Result<(), EnvError> {
+    if state.len() != dim {
+        return Err(EnvError::InvalidState {
+            env: env.to_string(),
+            reason: format!("expected {dim} components, got {}", state.len()),
+        });
+    }
+    if let Some((i, v)) = state.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(EnvError::InvalidState {
+            env: env.to_string(),
+            reason: format!("component {i} is not finite ({v})"),
+        });
+    }
+    Ok(())
+}
+
+/// Rounds every component to `f32` and back: gymnasium's observations are `float32` arrays.
+pub fn round_to_f32(v: &[f64]) -> Vec<f64> {
+    v.iter().map(|&x| x as f32 as f64).collect()
+}
+
+/// Where a base environment is in its episode; shared bookkeeping of the environments here.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Phase {
+    /// `reset` has not been called yet.
+    NotReset,
+    /// An episode is running.
+    Running,
+    /// The episode terminated.
+    Ended,
+}
+
+impl Phase {
+    /// `Ok` if `step` may be called.
+    pub(crate) fn check(self, env: &str) -> Result<(), EnvError> {
+        match self {
+            Phase::Running => Ok(()),
+            Phase::NotReset => Err(EnvError::NeedsReset {
+                env: env.to_string(),
+                when: "before reset",
+            }),
+            Phase::Ended => Err(EnvError::NeedsReset {
+                env: env.to_string(),
+                when: "after the episode ended",
+            }),
+        }
+    }
+}
+
+/// Checks `action` against `space`, naming the environment in the error.
+pub(crate) fn check_action(env: &str, space: &Space, action: &Action) -> Result<(), EnvError> {
+    space
+        .check(action)
+        .map_err(|source| EnvError::InvalidAction {
+            env: env.to_string(),
+            source,
+        })
 }

@@ -2,10 +2,34 @@
 //! over a [`tandem_dynamics::Plant`]), idealized/true pairs for sim-to-real gaps, and the wrappers
 //! every training loop needs.
 //!
+//! | item | what |
+//! |---|---|
+//! | [`Env`], [`Step`], [`EnvError`] | the trait, with gymnasium's `terminated`/`truncated` |
+//! | [`CartPoleEnv`] (`CartPole-v1`), [`PendulumEnv`] (`Pendulum-v1`) | exact to gymnasium 1.x |
+//! | [`DcMotorPendulumEnv`] (`DcMotorPendulum-idealized-v0`, `DcMotorPendulum-real-v0`) | p0's swing-up pair; reward [`dc_motor_pendulum_reward`] |
+//! | [`make`], [`make_unwrapped`], [`registered`] | the registry |
+//! | [`TimeLimit`], [`SampleCounter`], [`ClipAction`], [`RescaleAction`], [`TransformObservation`] | wrappers |
+//!
 //! Dependencies: `tandem-core` (spaces, actions, seeding), `tandem-dynamics` (the plants tasks
 //! run on), `nalgebra` (plant states), `rand`/`rand_distr` (seeded resets), `serde`, `thiserror`.
 
+mod cartpole;
+mod dc_motor;
 mod env;
+mod pendulum;
+mod registry;
+pub mod wrappers;
 
-pub use env::{Env, EnvError, Step};
+pub use cartpole::CartPoleEnv;
+pub use dc_motor::{
+    dc_motor_pendulum_reward, wrap_angle, DcMotorPendulumEnv, PendulumModel,
+    DC_MOTOR_PENDULUM_STEPS,
+};
+pub use env::{check_state, round_to_f32, Env, EnvError, Step};
+pub use pendulum::{angle_normalize, pendulum_reward, PendulumEnv};
+pub use registry::{make, make_unwrapped, registered, EnvSpec};
 pub use tandem_core::{Action, Space};
+pub use wrappers::{
+    ClipAction, NormalizeObservation, ObservationHook, RescaleAction, RunningNormalizer,
+    SampleCount, SampleCounter, TimeLimit, TransformObservation,
+};

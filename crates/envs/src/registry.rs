@@ -1,0 +1,120 @@
+//! The environment registry: ids to constructors, as `gymnasium.make`.
+
+use tandem_core::Space;
+
+use crate::{
+    CartPoleEnv, DcMotorPendulumEnv, Env, EnvError, PendulumEnv, PendulumModel, TimeLimit,
+};
+
+/// One registered environment: its id, what it is, its episode limit and its spaces.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvSpec {
+    /// The id [`make`] accepts.
+    pub id: &'static str,
+    /// One line on what the environment is.
+    pub description: &'static str,
+    /// The [`TimeLimit`] [`make`] adds.
+    pub max_episode_steps: usize,
+    /// Observation space.
+    pub observation_space: Space,
+    /// Action space.
+    pub action_space: Space,
+}
+
+/// (id, description, time limit) of every registered environment.
+const REGISTRY: &[(&str, &str, usize)] = &[
+    (
+        CartPoleEnv::ID,
+        "gymnasium CartPole-v1: balance a pole on a cart, push left or right",
+        500,
+    ),
+    (
+        PendulumEnv::ID,
+        "gymnasium Pendulum-v1: swing up and hold a torque-limited pendulum",
+        200,
+    ),
+    (
+        DcMotorPendulumEnv::ID_IDEALIZED,
+        "p0 DC-motor pendulum swing-up, idealized model (m = 0.055 kg)",
+        400,
+    ),
+    (
+        DcMotorPendulumEnv::ID_REAL,
+        "p0 DC-motor pendulum swing-up, true model (m = 0.090 kg)",
+        400,
+    ),
+];
+
+/// The environment `id` without a time limit, or [`EnvError::Unknown`].
+pub fn make_unwrapped(id: &str) -> Result<Box<dyn Env>, EnvError> {
+    Ok(match id {
+        CartPoleEnv::ID => Box::new(CartPoleEnv::new()),
+        PendulumEnv::ID => Box::new(PendulumEnv::new()),
+        DcMotorPendulumEnv::ID_IDEALIZED => {
+            Box::new(DcMotorPendulumEnv::new(PendulumModel::Idealized))
+        }
+        DcMotorPendulumEnv::ID_REAL => Box::new(DcMotorPendulumEnv::new(PendulumModel::Real)),
+        _ => return Err(EnvError::Unknown(id.to_string())),
+    })
+}
+
+/// The environment `id` with its registered [`TimeLimit`] (as `gymnasium.make`), or
+/// [`EnvError::Unknown`].
+///
+/// ```
+/// let mut env = tandem_envs::make("CartPole-v1").unwrap();
+/// env.reset(Some(0));
+/// assert_eq!(env.max_episode_steps(), Some(500));
+/// assert!(tandem_envs::make("CartPole-v0").is_err());
+/// ```
+pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
+    let env = make_unwrapped(id)?;
+    let (_, _, limit) = REGISTRY
+        .iter()
+        .find(|(rid, _, _)| *rid == id)
+        .ok_or_else(|| EnvError::Unknown(id.to_string()))?;
+    Ok(Box::new(TimeLimit::new(env, *limit)))
+}
+
+/// Every registered environment with its spaces, in registration order.
+pub fn registered() -> Vec<EnvSpec> {
+    REGISTRY
+        .iter()
+        .filter_map(|&(id, description, max_episode_steps)| {
+            let env = make_unwrapped(id).ok()?;
+            Some(EnvSpec {
+                id,
+                description,
+                max_episode_steps,
+                observation_space: env.observation_space().clone(),
+                action_space: env.action_space().clone(),
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_registered_id_makes_an_env_with_its_limit() {
+        let specs = registered();
+        assert_eq!(specs.len(), REGISTRY.len());
+        for spec in specs {
+            let env = make(spec.id).unwrap();
+            assert_eq!(env.id(), spec.id);
+            assert_eq!(env.max_episode_steps(), Some(spec.max_episode_steps));
+            assert_eq!(env.action_space(), &spec.action_space);
+        }
+        let limits: Vec<usize> = registered().iter().map(|s| s.max_episode_steps).collect();
+        assert_eq!(limits, vec![500, 200, 400, 400]);
+    }
+
+    #[test]
+    fn unknown_ids_are_errors_naming_the_id() {
+        let err = make("Nope-v9").err().unwrap();
+        assert_eq!(err, EnvError::Unknown("Nope-v9".into()));
+        assert!(err.to_string().contains("Nope-v9"));
+    }
+}
