@@ -59,6 +59,7 @@ pub mod heads;
 mod kernels;
 pub mod loss;
 pub mod mlp;
+pub mod normalizer;
 pub mod optim;
 
 pub use checkpoint::{Checkpoint, Checkpointable};
@@ -70,6 +71,7 @@ pub use heads::{
 pub use kernels::{gemm_threads, set_gemm_threads};
 pub use loss::{bce_with_logits, gaussian_nll, huber, mse};
 pub use mlp::{sigmoid, Activation, Init, LayerShape, Mlp, MlpConfig, MlpWorkspace};
+pub use normalizer::{NormalizerState, RunningNormalizer};
 pub use optim::{
     clip_grad_norm, clip_grad_norm_many, grad_norm, polyak_update, AdaGrad, AdaGradConfig, Adam,
     AdamConfig, Optimizer, Sgd, SgdConfig,
