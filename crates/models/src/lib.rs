@@ -7,14 +7,20 @@
 
 mod data;
 mod gmm;
+mod mlp_model;
 mod model;
 mod plant_model;
+#[cfg(test)]
+mod testutil;
+mod train;
 mod tvlg;
 
 pub use data::{holdout_indices, TransitionsBuilder};
 pub use gmm::Gmm;
+pub use mlp_model::{MlpModel, MlpModelConfig};
 pub use model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
 pub use plant_model::PlantModel;
+pub use train::{OptimizerConfig, Standardizer};
 pub use tvlg::{GmmPriorConfig, TvlgConfig, TvlgDynamics, TvlgFit};

@@ -1,0 +1,442 @@
+//! [`MlpModel`]: one MLP predicting the next-state change, the reward and the termination
+//! probability jointly (p2, eq. 1).
+
+use ndarray::{Array1, Array2};
+use tandem_core::seeding::rng_from_seed;
+use tandem_core::Rng;
+use tandem_nn::{sigmoid, Activation, Mlp, MlpConfig};
+
+use crate::data::check_input;
+use crate::model::{
+    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
+};
+use crate::train::{
+    nn_other, standardized_inputs, train_network, Objective, Opt, OptimizerConfig, Standardizer,
+};
+
+/// Settings of an [`MlpModel`]. `Default` = p2 (Sec. 3.1): two hidden layers of 256 units, SGD
+/// with learning rate 0.01, next state, reward and termination learned jointly. The activation is
+/// not stated in p2; ReLU.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MlpModelConfig {
+    /// Hidden layer widths.
+    pub hidden: Vec<usize>,
+    /// Hidden activation.
+    pub activation: Activation,
+    /// Optimizer.
+    pub optimizer: OptimizerConfig,
+    /// Learn the reward (an output and a squared-error term).
+    pub learn_reward: bool,
+    /// Learn the termination probability (an output and a cross-entropy term).
+    pub learn_termination: bool,
+    /// Seed of the weight initialization.
+    pub seed: u64,
+}
+
+impl Default for MlpModelConfig {
+    fn default() -> Self {
+        Self {
+            hidden: vec![256, 256],
+            activation: Activation::Relu,
+            optimizer: OptimizerConfig::sgd(0.01),
+            learn_reward: true,
+            learn_termination: true,
+            seed: 0,
+        }
+    }
+}
+
+/// p2's dynamics model: an MLP from `[s, a]` to `[Δs, r, logit p(done)]`, trained with p2 eq. (1)
+/// `Σ ‖s' − ŝ'‖² + (r − r̂)² − (d log p + (1 − d) log(1 − p))`.
+///
+/// It predicts the change `Δs = s' − s` rather than `s'` (the usual and better-conditioned target;
+/// `ŝ' = s + Δŝ`). Inputs, state changes and rewards are standardized with statistics of the
+/// training rows of the latest fit, so the squared errors of eq. (1) are in standard units. Each
+/// fit continues from the current weights and optimizer state; a failed fit changes nothing.
+///
+/// ```
+/// use ndarray::array;
+/// use tandem_core::seeding::rng_from_seed;
+/// use tandem_models::{DynamicsModel, FitConfig, MlpModel, MlpModelConfig, ModelInput,
+///     OptimizerConfig, TransitionsBuilder};
+///
+/// // s' = s + 0.1 a, reward -s².
+/// let mut b = TransitionsBuilder::new(1, 1);
+/// for i in 0..200 {
+///     let (s, a) = ((i % 20) as f64 / 10.0 - 1.0, (i / 20) as f64 / 5.0 - 1.0);
+///     b.push([s], &[a], &[s + 0.1 * a], -s * s, false).unwrap();
+/// }
+/// let cfg = MlpModelConfig { hidden: vec![32, 32], optimizer: OptimizerConfig::adam(3e-3),
+///     ..MlpModelConfig::default() };
+/// let mut m = MlpModel::new(1, 1, cfg).unwrap();
+/// let fit = FitConfig { epochs: 150, batch_size: 32, ..FitConfig::default() };
+/// m.fit(&b.build(), &fit).unwrap();
+/// let (s, a) = (array![[0.5]], array![[1.0]]);
+/// let p = m.predict(&ModelInput::new(s.view(), a.view()), &mut rng_from_seed(0)).unwrap();
+/// assert!((p.next_states[[0, 0]] - 0.6).abs() < 0.02);
+/// assert!((p.rewards.unwrap()[0] + 0.25).abs() < 0.05);
+/// assert!(p.terminal_prob.unwrap()[0] < 0.1);
+/// ```
+#[derive(Debug, Clone)]
+pub struct MlpModel {
+    cfg: MlpModelConfig,
+    state_dim: usize,
+    action_dim: usize,
+    net: Mlp,
+    opt: Opt,
+    in_state: Standardizer,
+    in_action: Standardizer,
+    /// Standardizes `[Δs, r]`.
+    out_norm: Standardizer,
+}
+
+impl MlpModel {
+    /// A model for the given widths, initialized from `cfg.seed`.
+    pub fn new(
+        state_dim: usize,
+        action_dim: usize,
+        cfg: MlpModelConfig,
+    ) -> Result<Self, ModelError> {
+        if state_dim == 0 {
+            return Err(ModelError::Dim {
+                what: "state_dim (must be positive)".into(),
+                expected: 1,
+                got: 0,
+            });
+        }
+        let out = state_dim + usize::from(cfg.learn_reward) + usize::from(cfg.learn_termination);
+        let mut sizes = vec![state_dim + action_dim];
+        sizes.extend(&cfg.hidden);
+        sizes.push(out);
+        let net = Mlp::new(
+            MlpConfig::new(&sizes).hidden(cfg.activation),
+            &mut rng_from_seed(cfg.seed),
+        )
+        .map_err(nn_other)?;
+        let opt = cfg.optimizer.build(net.num_params())?;
+        Ok(Self {
+            state_dim,
+            action_dim,
+            net,
+            opt,
+            in_state: Standardizer::identity(state_dim),
+            in_action: Standardizer::identity(action_dim),
+            out_norm: Standardizer::identity(state_dim + 1),
+            cfg,
+        })
+    }
+
+    /// Its settings.
+    pub fn config(&self) -> &MlpModelConfig {
+        &self.cfg
+    }
+
+    /// The network (for checkpoints and inspection).
+    pub fn network(&self) -> &Mlp {
+        &self.net
+    }
+}
+
+/// Training data of an [`MlpModel`]: standardized inputs and targets.
+struct MlpObjective {
+    din: usize,
+    x: Vec<f32>,
+    /// `[Δs (S), r]` standardized, per row.
+    y: Vec<f32>,
+    done: Vec<f32>,
+    s: usize,
+    reward: bool,
+    term: bool,
+}
+
+impl Objective for MlpObjective {
+    fn in_dim(&self) -> usize {
+        self.din
+    }
+
+    fn inputs(&self, idx: &[usize], buf: &mut [f32]) {
+        for (k, &i) in idx.iter().enumerate() {
+            buf[k * self.din..(k + 1) * self.din]
+                .copy_from_slice(&self.x[i * self.din..(i + 1) * self.din]);
+        }
+    }
+
+    fn loss(&self, idx: &[usize], out: &[f32], mut d_out: Option<&mut [f32]>) -> f64 {
+        let s = self.s;
+        let dout = s + usize::from(self.reward) + usize::from(self.term);
+        let n = idx.len() as f32;
+        let mut total = 0.0f64;
+        for (k, &i) in idx.iter().enumerate() {
+            let o = &out[k * dout..(k + 1) * dout];
+            let y = &self.y[i * (s + 1)..(i + 1) * (s + 1)];
+            let regress = s + usize::from(self.reward);
+            for j in 0..regress {
+                let e = o[j] - y[j];
+                total += f64::from(e * e);
+                if let Some(d) = d_out.as_deref_mut() {
+                    d[k * dout + j] = 2.0 * e / n;
+                }
+            }
+            if self.term {
+                // Stable binary cross-entropy with logits.
+                let z = o[dout - 1];
+                let t = self.done[i];
+                let bce = z.max(0.0) - z * t + (-z.abs()).exp().ln_1p();
+                total += f64::from(bce);
+                if let Some(d) = d_out.as_deref_mut() {
+                    d[k * dout + dout - 1] = (sigmoid(z) - t) / n;
+                }
+            }
+        }
+        total / idx.len().max(1) as f64
+    }
+}
+
+impl DynamicsModel for MlpModel {
+    fn state_dim(&self) -> usize {
+        self.state_dim
+    }
+
+    fn action_dim(&self) -> usize {
+        self.action_dim
+    }
+
+    fn predict(&self, input: &ModelInput<'_>, _rng: &mut Rng) -> Result<Prediction, ModelError> {
+        let b = check_input(input, self.state_dim, self.action_dim, false)?;
+        let x = standardized_inputs(
+            &[
+                (input.states, &self.in_state),
+                (input.actions, &self.in_action),
+            ],
+            b,
+        );
+        let mut ws = self.net.workspace();
+        let out = self.net.forward(&x, b, &mut ws).map_err(nn_other)?;
+        let s = self.state_dim;
+        let dout = self.net.output_dim();
+        let mut next = Array2::zeros((b, s));
+        let mut rewards = self.cfg.learn_reward.then(|| Array1::zeros(b));
+        let mut probs = self.cfg.learn_termination.then(|| Array1::zeros(b));
+        for r in 0..b {
+            let o = &out[r * dout..(r + 1) * dout];
+            for j in 0..s {
+                next[[r, j]] = input.states[[r, j]] + self.out_norm.invert(j, o[j]);
+            }
+            if let Some(rw) = rewards.as_mut() {
+                rw[r] = self.out_norm.invert(s, o[s]);
+            }
+            if let Some(p) = probs.as_mut() {
+                p[r] = f64::from(sigmoid(o[dout - 1]));
+            }
+        }
+        Ok(Prediction {
+            next_states: next,
+            variance: None,
+            rewards,
+            terminal_prob: probs,
+        })
+    }
+
+    fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
+        data.validate(self.state_dim, self.action_dim)?;
+        let n = data.len();
+        let mut rng = rng_from_seed(cfg.seed);
+        let (train, holdout) = crate::data::holdout_indices(n, cfg.holdout_fraction, &mut rng);
+        let s = self.state_dim;
+        let mut targets = Array2::zeros((n, s + 1));
+        for r in 0..n {
+            for j in 0..s {
+                targets[[r, j]] = data.next_states[[r, j]] - data.states[[r, j]];
+            }
+            targets[[r, s]] = data.rewards[r];
+        }
+        let in_state = Standardizer::fit(data.states.view(), &train);
+        let in_action = Standardizer::fit(data.actions.view(), &train);
+        let out_norm = Standardizer::fit(targets.view(), &train);
+        let obj = MlpObjective {
+            din: s + self.action_dim,
+            x: standardized_inputs(
+                &[
+                    (data.states.view(), &in_state),
+                    (data.actions.view(), &in_action),
+                ],
+                n,
+            ),
+            y: standardized_inputs(&[(targets.view(), &out_norm)], n),
+            done: data
+                .terminated
+                .iter()
+                .map(|&d| f32::from(u8::from(d)))
+                .collect(),
+            s,
+            reward: self.cfg.learn_reward,
+            term: self.cfg.learn_termination,
+        };
+        let mut net = self.net.clone();
+        let mut opt = self.opt.clone();
+        let report = train_network(
+            &mut net,
+            &mut opt,
+            &obj,
+            &train,
+            &holdout,
+            cfg.epochs,
+            cfg.batch_size,
+            &mut rng,
+        )?;
+        self.net = net;
+        self.opt = opt;
+        self.in_state = in_state;
+        self.in_action = in_action;
+        self.out_norm = out_norm;
+        Ok(report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testutil::{cartpole_data, pendulum_data, rmse, zero_change_rmse};
+    use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
+
+    fn small(seed: u64) -> MlpModelConfig {
+        MlpModelConfig {
+            hidden: vec![64, 64],
+            optimizer: OptimizerConfig::adam(3e-3),
+            seed,
+            ..MlpModelConfig::default()
+        }
+    }
+
+    #[test]
+    fn one_step_error_on_the_p0_pendulum() {
+        let plant = DcMotorPendulum::new(DcMotorPendulumParams::real());
+        let train = pendulum_data(&plant, 3000, 1);
+        let test = pendulum_data(&plant, 500, 2);
+        let mut m = MlpModel::new(2, 1, small(0)).unwrap();
+        let fit = FitConfig {
+            epochs: 60,
+            batch_size: 64,
+            holdout_fraction: 0.1,
+            seed: 0,
+        };
+        let rep = m.fit(&train, &fit).unwrap();
+        assert_eq!(rep.train_loss.len(), 60);
+        assert_eq!(rep.holdout_loss.len(), 60);
+        let (e, e0) = (rmse(&m, &test), zero_change_rmse(&test));
+        eprintln!("p0 pendulum MlpModel one-step RMSE {e:.5} (no-change predictor {e0:.4})");
+        assert!(e < 0.03 * e0, "rmse {e}, no-change {e0}");
+    }
+
+    #[test]
+    fn one_step_error_reward_and_termination_on_cartpole() {
+        let train = cartpole_data(3000, 3);
+        let test = cartpole_data(500, 4);
+        let mut m = MlpModel::new(4, 1, small(1)).unwrap();
+        let fit = FitConfig {
+            epochs: 60,
+            batch_size: 64,
+            holdout_fraction: 0.1,
+            seed: 1,
+        };
+        m.fit(&train, &fit).unwrap();
+        let (e, e0) = (rmse(&m, &test), zero_change_rmse(&test));
+        let p = m
+            .predict(
+                &ModelInput::new(test.states.view(), test.actions.view()),
+                &mut rng_from_seed(0),
+            )
+            .unwrap();
+        let probs = p.terminal_prob.unwrap();
+        let correct = probs
+            .iter()
+            .zip(&test.terminated)
+            .filter(|(p, d)| (**p > 0.5) == **d)
+            .count();
+        let acc = correct as f64 / test.len() as f64;
+        let base = test.terminated.iter().filter(|d| !**d).count() as f64 / test.len() as f64;
+        let rerr = p
+            .rewards
+            .unwrap()
+            .iter()
+            .zip(&test.rewards)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        eprintln!("CartPole MlpModel one-step RMSE {e:.5} (no-change {e0:.4}), termination accuracy {acc:.3} (majority {base:.3}), max reward error {rerr:.4}");
+        assert!(e < 0.03 * e0, "rmse {e}, no-change {e0}");
+        assert!(
+            acc > 0.95 && acc > base,
+            "termination accuracy {acc}, majority {base}"
+        );
+        assert!(rerr < 0.05, "reward error {rerr}");
+    }
+
+    #[test]
+    fn same_seed_same_fit_bit_for_bit() {
+        let plant = DcMotorPendulum::new(DcMotorPendulumParams::idealized());
+        let data = pendulum_data(&plant, 300, 5);
+        let fit = FitConfig {
+            epochs: 3,
+            batch_size: 32,
+            holdout_fraction: 0.2,
+            seed: 9,
+        };
+        let run = |seed: u64, fit_seed: u64| {
+            let mut m = MlpModel::new(2, 1, small(seed)).unwrap();
+            let r = m
+                .fit(
+                    &data,
+                    &FitConfig {
+                        seed: fit_seed,
+                        ..fit.clone()
+                    },
+                )
+                .unwrap();
+            (m.network().params().to_vec(), r)
+        };
+        let (a, ra) = run(7, 9);
+        let (b, rb) = run(7, 9);
+        assert_eq!(a, b);
+        assert_eq!(ra, rb);
+        assert_ne!(a, run(8, 9).0);
+        assert_ne!(a, run(7, 10).0);
+    }
+
+    #[test]
+    fn divergence_and_bad_data_leave_the_model_unchanged() {
+        let plant = DcMotorPendulum::new(DcMotorPendulumParams::idealized());
+        let data = pendulum_data(&plant, 200, 6);
+        let cfg = MlpModelConfig {
+            optimizer: OptimizerConfig::sgd(1e12),
+            ..small(0)
+        };
+        let mut m = MlpModel::new(2, 1, cfg).unwrap();
+        let before = m.network().params().to_vec();
+        let fit = FitConfig {
+            epochs: 20,
+            batch_size: 32,
+            ..FitConfig::default()
+        };
+        assert!(matches!(
+            m.fit(&data, &fit),
+            Err(ModelError::Diverged { .. })
+        ));
+        assert_eq!(m.network().params(), &before[..]);
+
+        let mut bad = data.clone();
+        bad.actions[[17, 0]] = f64::NAN;
+        assert_eq!(
+            m.fit(&bad, &fit),
+            Err(ModelError::NonFinite {
+                what: "actions".into(),
+                row: 17
+            })
+        );
+        assert_eq!(m.fit(&Transitions::default(), &fit), Err(ModelError::Empty));
+        let wrong = pendulum_data(&plant, 10, 7);
+        let mut m3 = MlpModel::new(3, 1, small(0)).unwrap();
+        assert!(matches!(m3.fit(&wrong, &fit), Err(ModelError::Dim { .. })));
+        assert_eq!(m.network().params(), &before[..]);
+    }
+}

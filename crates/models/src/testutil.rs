@@ -1,0 +1,72 @@
+//! Data generators and error measures shared by the models' tests.
+
+use nalgebra::DVector;
+use rand::Rng as _;
+use tandem_core::seeding::rng_from_seed;
+use tandem_dynamics::classic::CartPole;
+use tandem_dynamics::Plant;
+
+use crate::{DynamicsModel, ModelInput, Transitions, TransitionsBuilder};
+
+/// `n` transitions of a p0 pendulum from uniform states (φ in [-π, π], φ̇ in [-10, 10] rad/s) and
+/// voltages in [-3, 3] V; reward p0-like `-(φ² + 0.1 φ̇²)`.
+pub(crate) fn pendulum_data<P: Plant>(plant: &P, n: usize, seed: u64) -> Transitions {
+    let mut rng = rng_from_seed(seed);
+    let mut b = TransitionsBuilder::new(2, 1);
+    for _ in 0..n {
+        let s = [
+            rng.random_range(-std::f64::consts::PI..std::f64::consts::PI),
+            rng.random_range(-10.0..10.0),
+        ];
+        let a = [rng.random_range(-3.0..3.0)];
+        let next = plant.step(&DVector::from_row_slice(&s), &DVector::from_row_slice(&a));
+        b.push(
+            s,
+            &a,
+            next.as_slice(),
+            -(s[0] * s[0] + 0.1 * s[1] * s[1]),
+            false,
+        )
+        .unwrap();
+        b.end_episode();
+    }
+    b.build()
+}
+
+/// `n` CartPole-v1 transitions from uniform states within the episode bounds and forces ±10 N;
+/// reward 1, terminated when the next state leaves `|x| <= 2.4`, `|θ| <= 12°` (gymnasium).
+pub(crate) fn cartpole_data(n: usize, seed: u64) -> Transitions {
+    let plant = CartPole::default();
+    let mut rng = rng_from_seed(seed);
+    let mut b = TransitionsBuilder::new(4, 1);
+    let limit = 12.0 * 2.0 * std::f64::consts::PI / 360.0;
+    for _ in 0..n {
+        let s = [
+            rng.random_range(-2.4..2.4),
+            rng.random_range(-2.0..2.0),
+            rng.random_range(-limit..limit),
+            rng.random_range(-2.0..2.0),
+        ];
+        let a = [if rng.random::<bool>() { 10.0 } else { -10.0 }];
+        let next = plant.step_array(&s, a[0]);
+        let done = next[0].abs() > 2.4 || next[2].abs() > limit;
+        b.push(s, &a, &next, 1.0, done).unwrap();
+        b.end_episode();
+    }
+    b.build()
+}
+
+/// Root mean squared one-step error of `model` on `data`.
+pub(crate) fn rmse(model: &dyn DynamicsModel, data: &Transitions) -> f64 {
+    let input = ModelInput::new(data.states.view(), data.actions.view())
+        .with_prev_actions(data.prev_actions.view());
+    let p = model.predict(&input, &mut rng_from_seed(0)).unwrap();
+    let e = &p.next_states - &data.next_states;
+    (e.mapv(|v| v * v).sum() / e.len() as f64).sqrt()
+}
+
+/// Root mean squared error of predicting `s' = s`.
+pub(crate) fn zero_change_rmse(data: &Transitions) -> f64 {
+    let e = &data.states - &data.next_states;
+    (e.mapv(|v| v * v).sum() / e.len() as f64).sqrt()
+}
