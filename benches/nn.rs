@@ -1,0 +1,368 @@
+//! Hot paths of `tandem-nn`: the network work of one RL update, at the sizes the issues compare
+//! against PyTorch (issue 4: critic update, dynamics-model step, batched prediction; issue 5: one
+//! full SAC update with stable-baselines3's defaults).
+//!
+//! Run: `cargo bench --bench nn` (medians are what the notes quote).
+
+use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use rand::Rng as _;
+use tandem_core::seeding::{rng_from_seed, Rng};
+use tandem_nn::{
+    AdaGrad, AdaGradConfig, Adam, AdamConfig, Mlp, MlpConfig, MlpWorkspace, Optimizer,
+    TanhGaussian, TanhGaussianSample,
+};
+
+fn random(n: usize, rng: &mut Rng) -> Vec<f32> {
+    (0..n).map(|_| rng.random::<f32>() * 2.0 - 1.0).collect()
+}
+
+/// One critic regression step: forward, MSE gradient, backward, Adam.
+struct CriticStep {
+    net: Mlp,
+    opt: Adam,
+    ws: MlpWorkspace,
+    grads: Vec<f32>,
+    d_out: Vec<f32>,
+    x: Vec<f32>,
+    y: Vec<f32>,
+    batch: usize,
+}
+
+impl CriticStep {
+    fn step(&mut self) {
+        let pred = self
+            .net
+            .forward_train(&self.x, self.batch, &mut self.ws, None)
+            .unwrap();
+        tandem_nn::mse(pred, &self.y, Some(&mut self.d_out)).unwrap();
+        self.net
+            .backward(&mut self.ws, &self.d_out, Some(&mut self.grads), None)
+            .unwrap();
+        self.opt.step(self.net.params_mut(), &self.grads).unwrap();
+    }
+}
+
+fn critic_update(c: &mut Criterion) {
+    let mut rng = rng_from_seed(0);
+    let batch = 256;
+    let net = Mlp::new(MlpConfig::new(&[23, 256, 256, 1]), &mut rng).unwrap();
+    let mut s = CriticStep {
+        opt: Adam::new(AdamConfig::with_lr(1e-3), net.num_params()).unwrap(),
+        ws: net.workspace(),
+        grads: net.zero_grads(),
+        d_out: vec![0.0; batch],
+        x: random(batch * 23, &mut rng),
+        y: random(batch, &mut rng),
+        batch,
+        net,
+    };
+    c.bench_function("critic update 23-256-256-1 b256 adam", |b| {
+        b.iter(|| s.step())
+    });
+}
+
+fn dynamics_step(c: &mut Criterion) {
+    let mut rng = rng_from_seed(1);
+    let batch = 256;
+    let mut net = Mlp::new(
+        MlpConfig::new(&[23, 400, 400, 400, 17]).dropout(0.3),
+        &mut rng,
+    )
+    .unwrap();
+    let mut opt = AdaGrad::new(AdaGradConfig::default(), net.num_params()).unwrap();
+    let mut ws = net.workspace();
+    let mut grads = net.zero_grads();
+    let mut d_out = vec![0.0; batch * 17];
+    let x = random(batch * 23, &mut rng);
+    let y = random(batch * 17, &mut rng);
+    let mut drop_rng = rng_from_seed(2);
+    c.bench_function("dynamics step 23-400x3-17 dropout0.3 b256 adagrad", |b| {
+        b.iter(|| {
+            let pred = net
+                .forward_train(&x, batch, &mut ws, Some(&mut drop_rng))
+                .unwrap();
+            tandem_nn::mse(pred, &y, Some(&mut d_out)).unwrap();
+            net.backward(&mut ws, &d_out, Some(&mut grads), None)
+                .unwrap();
+            opt.step(net.params_mut(), &grads).unwrap();
+        })
+    });
+    let x500 = random(500 * 23, &mut rng);
+    c.bench_function("dynamics forward 23-400x3-17 b500", |b| {
+        b.iter(|| black_box(net.forward(&x500, 500, &mut ws).unwrap()[0]))
+    });
+}
+
+fn actor_forward(c: &mut Criterion) {
+    let mut rng = rng_from_seed(3);
+    let net = Mlp::new(MlpConfig::new(&[17, 256, 256, 12]), &mut rng).unwrap();
+    let mut ws = net.workspace();
+    let x = random(17, &mut rng);
+    c.bench_function("actor forward 17-256-256-12 b1", |b| {
+        b.iter(|| black_box(net.forward(&x, 1, &mut ws).unwrap()[0]))
+    });
+    let sac_actor = Mlp::new(MlpConfig::new(&[3, 256, 256, 2]), &mut rng).unwrap();
+    let xs = random(3, &mut rng);
+    c.bench_function("actor forward 3-256-256-2 b1", |b| {
+        b.iter(|| black_box(sac_actor.forward(&xs, 1, &mut ws).unwrap()[0]))
+    });
+}
+
+/// One SAC update with stable-baselines3's defaults (Haarnoja et al. 2018 with automatic entropy
+/// tuning): twin critics and their targets (obs 3 + act 1 → 256 → 256 → 1), a tanh-Gaussian actor
+/// (3 → 256 → 256 → 2·1), batch 256, Adam 3e-4 everywhere, τ = 0.005, γ = 0.99.
+struct Sac {
+    obs_dim: usize,
+    act_dim: usize,
+    batch: usize,
+    actor: Mlp,
+    critics: [Mlp; 2],
+    targets: [Mlp; 2],
+    actor_opt: Adam,
+    critic_opts: [Adam; 2],
+    log_alpha: f32,
+    alpha_opt: Adam,
+    target_entropy: f32,
+    head: TanhGaussian,
+    rng: Rng,
+    // scratch
+    ws_actor: MlpWorkspace,
+    ws_critic: [MlpWorkspace; 2],
+    ws_target: MlpWorkspace,
+    pi: TanhGaussianSample,
+    pi_next: TanhGaussianSample,
+    sa: Vec<f32>,
+    q_target: Vec<f32>,
+    q_min: Vec<f32>,
+    d_q: Vec<f32>,
+    d_sa: [Vec<f32>; 2],
+    d_act: Vec<f32>,
+    d_logp: Vec<f32>,
+    d_head: Vec<f32>,
+    grads_actor: Vec<f32>,
+    grads_critic: Vec<f32>,
+    // batch
+    obs: Vec<f32>,
+    act: Vec<f32>,
+    rew: Vec<f32>,
+    next_obs: Vec<f32>,
+    done: Vec<f32>,
+}
+
+fn concat_rows(a: &[f32], da: usize, b: &[f32], db: usize, out: &mut [f32]) {
+    for ((o, ra), rb) in out
+        .chunks_exact_mut(da + db)
+        .zip(a.chunks_exact(da))
+        .zip(b.chunks_exact(db))
+    {
+        o[..da].copy_from_slice(ra);
+        o[da..].copy_from_slice(rb);
+    }
+}
+
+impl Sac {
+    fn new(seed: u64) -> Self {
+        let (obs_dim, act_dim, batch) = (3, 1, 256);
+        let mut rng = rng_from_seed(seed);
+        let actor = Mlp::new(MlpConfig::new(&[obs_dim, 256, 256, 2 * act_dim]), &mut rng).unwrap();
+        let qcfg = MlpConfig::new(&[obs_dim + act_dim, 256, 256, 1]);
+        let critics = [
+            Mlp::new(qcfg.clone(), &mut rng).unwrap(),
+            Mlp::new(qcfg, &mut rng).unwrap(),
+        ];
+        let targets = critics.clone();
+        let adam = |n| Adam::new(AdamConfig::with_lr(3e-4), n).unwrap();
+        let np_q = critics[0].num_params();
+        Self {
+            obs_dim,
+            act_dim,
+            batch,
+            actor_opt: adam(actor.num_params()),
+            critic_opts: [adam(np_q), adam(np_q)],
+            grads_actor: actor.zero_grads(),
+            grads_critic: vec![0.0; np_q],
+            actor,
+            critics,
+            targets,
+            log_alpha: 0.0,
+            alpha_opt: adam(1),
+            target_entropy: -(act_dim as f32),
+            head: TanhGaussian::new(act_dim),
+            ws_actor: MlpWorkspace::default(),
+            ws_critic: Default::default(),
+            ws_target: MlpWorkspace::default(),
+            pi: TanhGaussianSample::default(),
+            pi_next: TanhGaussianSample::default(),
+            sa: vec![0.0; batch * (obs_dim + act_dim)],
+            q_target: vec![0.0; batch],
+            q_min: vec![0.0; batch],
+            d_q: vec![0.0; batch],
+            d_sa: [
+                vec![0.0; batch * (obs_dim + act_dim)],
+                vec![0.0; batch * (obs_dim + act_dim)],
+            ],
+            d_act: vec![0.0; batch * act_dim],
+            d_logp: vec![0.0; batch],
+            d_head: vec![0.0; batch * 2 * act_dim],
+            obs: random(batch * obs_dim, &mut rng),
+            act: random(batch * act_dim, &mut rng),
+            rew: random(batch, &mut rng),
+            next_obs: random(batch * obs_dim, &mut rng),
+            done: (0..batch)
+                .map(|i| if i % 50 == 0 { 1.0 } else { 0.0 })
+                .collect(),
+            rng,
+        }
+    }
+
+    fn update(&mut self) {
+        let (b, od, ad) = (self.batch, self.obs_dim, self.act_dim);
+        let bf = b as f32;
+        // Policy sample at s, and the entropy temperature step.
+        let out = self
+            .actor
+            .forward_train(&self.obs, b, &mut self.ws_actor, None)
+            .unwrap();
+        self.head
+            .sample(out, b, &mut self.rng, &mut self.pi)
+            .unwrap();
+        let alpha = self.log_alpha.exp();
+        let g_log_alpha = -self
+            .pi
+            .log_prob
+            .iter()
+            .map(|lp| lp + self.target_entropy)
+            .sum::<f32>()
+            / bf;
+        let mut la = [self.log_alpha];
+        self.alpha_opt.step(&mut la, &[g_log_alpha]).unwrap();
+        self.log_alpha = la[0];
+
+        // Targets: y = r + γ(1-d)(min Q'(s', a') - α log π(a'|s')).
+        let out = self
+            .actor
+            .forward(&self.next_obs, b, &mut self.ws_target)
+            .unwrap();
+        self.head
+            .sample(out, b, &mut self.rng, &mut self.pi_next)
+            .unwrap();
+        concat_rows(&self.next_obs, od, &self.pi_next.action, ad, &mut self.sa);
+        self.q_target.fill(f32::INFINITY);
+        for t in &self.targets {
+            let q = t.forward(&self.sa, b, &mut self.ws_target).unwrap();
+            for (m, v) in self.q_target.iter_mut().zip(q) {
+                *m = m.min(*v);
+            }
+        }
+        for i in 0..b {
+            let soft = self.q_target[i] - alpha * self.pi_next.log_prob[i];
+            self.q_target[i] = self.rew[i] + 0.99 * (1.0 - self.done[i]) * soft;
+        }
+
+        // Critic step: loss = ½ Σ_k mse(Q_k(s, a), y).
+        concat_rows(&self.obs, od, &self.act, ad, &mut self.sa);
+        for k in 0..2 {
+            let q = self.critics[k]
+                .forward_train(&self.sa, b, &mut self.ws_critic[k], None)
+                .unwrap();
+            for ((d, qv), y) in self.d_q.iter_mut().zip(q).zip(&self.q_target) {
+                *d = (qv - y) / bf; // ½ · 2(q - y)/B
+            }
+            self.critics[k]
+                .backward(
+                    &mut self.ws_critic[k],
+                    &self.d_q,
+                    Some(&mut self.grads_critic),
+                    None,
+                )
+                .unwrap();
+            self.critic_opts[k]
+                .step(self.critics[k].params_mut(), &self.grads_critic)
+                .unwrap();
+        }
+
+        // Actor step: loss = mean(α log π(a|s) - min_k Q_k(s, a)), a = tanh-Gaussian sample.
+        concat_rows(&self.obs, od, &self.pi.action, ad, &mut self.sa);
+        self.q_min.fill(f32::INFINITY);
+        let mut which = [0u8; 256];
+        for k in 0..2 {
+            let q = self.critics[k]
+                .forward_train(&self.sa, b, &mut self.ws_critic[k], None)
+                .unwrap();
+            for i in 0..b {
+                if q[i] < self.q_min[i] {
+                    self.q_min[i] = q[i];
+                    which[i] = k as u8;
+                }
+            }
+        }
+        for k in 0..2 {
+            for i in 0..b {
+                self.d_q[i] = if which[i] as usize == k {
+                    -1.0 / bf
+                } else {
+                    0.0
+                };
+            }
+            self.critics[k]
+                .backward(
+                    &mut self.ws_critic[k],
+                    &self.d_q,
+                    None,
+                    Some(&mut self.d_sa[k]),
+                )
+                .unwrap();
+        }
+        for i in 0..b {
+            for j in 0..ad {
+                let c = i * (od + ad) + od + j;
+                self.d_act[i * ad + j] = self.d_sa[0][c] + self.d_sa[1][c];
+            }
+        }
+        self.d_logp.fill(alpha / bf);
+        self.head
+            .backward(
+                &self.pi,
+                Some(&self.d_act),
+                Some(&self.d_logp),
+                &mut self.d_head,
+            )
+            .unwrap();
+        self.actor
+            .backward(
+                &mut self.ws_actor,
+                &self.d_head,
+                Some(&mut self.grads_actor),
+                None,
+            )
+            .unwrap();
+        self.actor_opt
+            .step(self.actor.params_mut(), &self.grads_actor)
+            .unwrap();
+
+        for k in 0..2 {
+            tandem_nn::polyak_update(
+                self.targets[k].params_mut(),
+                self.critics[k].params(),
+                0.005,
+            )
+            .unwrap();
+        }
+    }
+}
+
+fn sac_update(c: &mut Criterion) {
+    let mut sac = Sac::new(7);
+    c.bench_function("sac update pendulum-shaped b256 2x256", |b| {
+        b.iter(|| sac.update())
+    });
+}
+
+criterion_group!(
+    benches,
+    critic_update,
+    dynamics_step,
+    actor_forward,
+    sac_update
+);
+criterion_main!(benches);
