@@ -174,7 +174,7 @@ impl Batch {
 
 /// One complete episode (or the part of it an episodic learner sees), in `f64` as the environment
 /// produced it.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Episode {
     /// Observations `s_0 .. s_{T-1}`.
     pub observations: Vec<Vec<f64>>,

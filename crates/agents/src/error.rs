@@ -35,6 +35,9 @@ pub enum AgentError {
         /// The valid range.
         reason: &'static str,
     },
+    /// A configuration file that does not parse (unknown key, wrong type).
+    #[error("{0}")]
+    ConfigParse(String),
     /// An input of the wrong length (observation, action, batch column).
     #[error("{what}: expected length {expected}, got {got}")]
     Dim {
@@ -59,6 +62,9 @@ pub enum AgentError {
     /// A checkpoint that cannot be read, or that belongs to another algorithm or architecture.
     #[error("checkpoint: {0}")]
     Checkpoint(String),
+    /// An environment error during training or evaluation.
+    #[error("environment: {0}")]
+    Env(String),
     /// An action that does not belong to the action space.
     #[error(transparent)]
     Space(#[from] SpaceError),

@@ -14,20 +14,26 @@ pub mod config;
 pub mod ddpg;
 pub mod dqn;
 pub mod error;
+pub mod learner;
 pub mod noise;
 pub mod reinforce;
 pub mod replay;
 pub mod sac;
+pub mod trainer;
 
 pub use agent::{Agent, Batch, Episode, EpisodicAgent, Metrics, Mode, OffPolicyAgent};
 pub use config::{Baseline, DdpgConfig, DqnConfig, OffPolicySchedule, ReinforceConfig, SacConfig};
 pub use ddpg::{random_action, Ddpg};
 pub use dqn::Dqn;
 pub use error::{AgentError, Result};
+pub use learner::{Algo, AlgoConfig, Learner};
 pub use noise::{Noise, NoiseConfig};
 pub use reinforce::Reinforce;
 pub use replay::{MixedSampler, ReplayBuffer, TransitionRef};
 pub use sac::Sac;
+pub use trainer::{EpisodeRecord, EvalRecord, RunLog, TrainSettings, Trainer};
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod trainer_tests;
