@@ -1,10 +1,60 @@
 //! The `tandem` program.
+//!
+//! Each subcommand lives in its own module under `src/cli/`. Adding one takes three lines here
+//! and in `cli/mod.rs`: a `pub mod NAME;` in `cli/mod.rs`, one variant in [`Command`] (its
+//! arguments or nested subcommands defined in the module), and one arm in [`run`] calling the
+//! module's `run`, which returns [`cli::Result`]. Errors are printed as `error: ...` on stderr
+//! with exit status 1; clap's usage errors exit with status 2.
 
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
 use mimalloc::MiMalloc;
+
+mod cli;
 
 #[global_allocator]
 static GLOBAL: MiMalloc = MiMalloc;
 
-fn main() {
-    println!("tandem");
+/// tandem: sample-efficient robot learning, model-based and model-free methods in tandem.
+#[derive(Debug, Parser)]
+#[command(name = "tandem", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// List the registered environments with their spaces and episode limits.
+    Envs,
+    /// Run a random or zero policy for some episodes and print the returns.
+    Rollout(cli::rollout::RolloutArgs),
+    /// Environment tools (replay a trajectory from a state).
+    #[command(subcommand)]
+    Env(cli::env::EnvCommand),
+    /// Train a model-free agent (ddpg, sac, dqn, reinforce) and write a run directory.
+    Train(cli::train::TrainArgs),
+}
+
+/// Runs one parsed command.
+fn run(command: Command) -> cli::Result<()> {
+    match command {
+        Command::Envs => cli::envs::run(),
+        Command::Rollout(args) => cli::rollout::run(&args),
+        Command::Env(cmd) => cli::env::run(cmd),
+        Command::Train(args) => cli::train::run(&args),
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli.command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
 }

@@ -1,0 +1,57 @@
+//! Subcommands of the `tandem` program, one module each, and the error type they share.
+
+pub mod env;
+pub mod envs;
+pub mod json;
+pub mod rollout;
+pub mod train;
+
+use std::path::PathBuf;
+
+use tandem_envs::EnvError;
+
+/// Why a command failed. The message names the problem and where it is; `main` prints it and
+/// exits with status 1.
+#[derive(Debug, thiserror::Error)]
+pub enum CliError {
+    /// An environment refused something (unknown id, invalid action or state).
+    #[error(transparent)]
+    Env(#[from] EnvError),
+    /// A file could not be read or written.
+    #[error("cannot read {}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's error.
+        source: std::io::Error,
+    },
+    /// Malformed or unsuitable input (JSON, actions, arguments).
+    #[error("{what}: {message}")]
+    Input {
+        /// Which input, e.g. `--state` or `actions file a.json`.
+        what: String,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// Anything else, already phrased for the user.
+    #[error("{0}")]
+    Other(String),
+}
+
+impl CliError {
+    /// An [`CliError::Input`] error.
+    pub fn input(what: impl Into<String>, message: impl Into<String>) -> Self {
+        CliError::Input {
+            what: what.into(),
+            message: message.into(),
+        }
+    }
+
+    /// A [`CliError::Other`] error from anything printable (e.g. another crate's error).
+    pub fn other(e: impl std::fmt::Display) -> Self {
+        CliError::Other(e.to_string())
+    }
+}
+
+/// The result of a command.
+pub type Result<T> = std::result::Result<T, CliError>;
