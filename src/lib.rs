@@ -23,3 +23,4 @@ pub use tandem_nn as nn;
 pub use tandem_planners as planners;
 
 pub mod pipelines;
+pub mod run;

@@ -101,12 +101,11 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     let (agent_cfg, settings) = read_config(algo, args.config.as_deref())?;
     let mut env = make(&args.env)?;
     let mut eval_env = make(&args.env)?;
-    let mut trainer = Trainer::new(agent_cfg.clone(), settings.clone(), &*env, args.seed)
-        .map_err(other)?;
+    let mut trainer =
+        Trainer::new(agent_cfg.clone(), settings.clone(), &*env, args.seed).map_err(other)?;
     if let Some(p) = &args.resume {
-        let ckpt = tandem_nn::Checkpoint::load(p).map_err(|e| {
-            CliError::input(format!("--resume {}", p.display()), e.to_string())
-        })?;
+        let ckpt = tandem_nn::Checkpoint::load(p)
+            .map_err(|e| CliError::input(format!("--resume {}", p.display()), e.to_string()))?;
         trainer
             .load(&ckpt, &mut *env)
             .map_err(|e| CliError::input(format!("--resume {}", p.display()), e.to_string()))?;
@@ -130,7 +129,8 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         train: &settings,
     };
     let cfg_text = toml::to_string(&resolved).map_err(other)?;
-    dir.write("config.toml", &cfg_text).map_err(io(dir.path()))?;
+    dir.write("config.toml", &cfg_text)
+        .map_err(io(dir.path()))?;
 
     let bar = if args.quiet {
         ProgressBar::hidden()
@@ -138,11 +138,9 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         ProgressBar::new(args.steps)
     };
     bar.set_style(
-        ProgressStyle::with_template(
-            "{msg} [{bar:30}] {pos}/{len} steps ({per_sec}, eta {eta})",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar())
-        .progress_chars("=> "),
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} steps ({per_sec}, eta {eta})")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
     );
     bar.set_position(trainer.steps());
     let start = Instant::now();
@@ -283,10 +281,8 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     dir.write("summary.json", &text).map_err(io(dir.path()))?;
 
     let eval_series = Series {
-        name: "evaluation (10 deterministic episodes, mean ± std)".replace(
-            "10",
-            &settings.eval_episodes.to_string(),
-        ),
+        name: "evaluation (10 deterministic episodes, mean ± std)"
+            .replace("10", &settings.eval_episodes.to_string()),
         points: log.evals.iter().map(|e| (e.step as f64, e.mean)).collect(),
         band: log
             .evals
