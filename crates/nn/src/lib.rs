@@ -7,7 +7,14 @@
 //!   ([`Mlp::forward`], [`Mlp::forward_train`], [`Mlp::backward`] with optional `dL/dinput`).
 //! * Optimizers updating flat buffers in place ([`Adam`], [`AdaGrad`], [`Sgd`] behind
 //!   [`Optimizer`]), [`clip_grad_norm`], [`polyak_update`].
+//! * Distribution heads with gradients ([`TanhGaussian`] for SAC, [`GaussianHead`] for PETS-style
+//!   models, [`Categorical`]) and losses ([`mse`], [`huber`], [`bce_with_logits`],
+//!   [`gaussian_nll`]).
+//! * [`RunningNormalizer`]: running mean/variance (f64, Chan merge) for inputs and targets.
 //! * Checkpoints ([`Checkpoint`], [`Checkpointable`]) in the safetensors format, bit-exact.
+//! * [`candle_ext`]: seeded candle parameters ([`candle_ext::ParamSet`]: linear, conv,
+//!   transposed conv) stepped by the same optimizers, and [`candle_ext::configure_cpu_threads`].
+//! * [`join`]: run two closures on two threads (rayon), e.g. SAC's twin critics.
 //! * Errors: one enum, [`NnError`]; shape mismatches and non-finite numbers are errors.
 //!
 //! Why a hand-derived MLP rather than candle modules: on the 2-core CPUs this project runs on,
@@ -51,8 +58,10 @@
 //! Dependencies: `gemm` (the matrix kernels candle itself uses on CPU), `safetensors` (the
 //! checkpoint format; already a dependency of candle), `candle-core`/`candle-nn` (general
 //! autograd, gradient oracle), `rand`/`rand_distr` (seeded initialization and noise), `serde`,
-//! `serde_json` (JSON payloads inside checkpoints), `thiserror`.
+//! `serde_json` (JSON payloads inside checkpoints), `thiserror`, `rayon` (two-thread task
+//! parallelism; already in the tree through candle and gemm).
 
+pub mod candle_ext;
 pub mod checkpoint;
 pub mod error;
 pub mod heads;
@@ -61,6 +70,9 @@ pub mod loss;
 pub mod mlp;
 pub mod normalizer;
 pub mod optim;
+
+/// Runs two closures, potentially in parallel (rayon's `join`), returning both results.
+pub use rayon::join;
 
 pub use checkpoint::{Checkpoint, Checkpointable};
 pub use error::{check_finite, NnError, Result};
