@@ -7,9 +7,11 @@
 
 mod data;
 mod gmm;
+mod incremental;
 mod mlp_model;
 mod model;
 mod plant_model;
+mod residual;
 #[cfg(test)]
 mod testutil;
 mod train;
@@ -17,10 +19,12 @@ mod tvlg;
 
 pub use data::{holdout_indices, TransitionsBuilder};
 pub use gmm::Gmm;
+pub use incremental::{GainStructure, IncrementalModel, IncrementalModelConfig};
 pub use mlp_model::{MlpModel, MlpModelConfig};
 pub use model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
 pub use plant_model::PlantModel;
+pub use residual::{ResidualModel, ResidualModelConfig};
 pub use train::{OptimizerConfig, Standardizer};
 pub use tvlg::{GmmPriorConfig, TvlgConfig, TvlgDynamics, TvlgFit};

@@ -1,0 +1,584 @@
+//! [`IncrementalModel`]: p1's deep incremental model `s_{t+1} = s_t + L_θ(·) Δa_t`
+//! (eqs. 4–6).
+
+use nalgebra::DMatrix;
+use ndarray::{Array2, ArrayView2};
+use tandem_core::seeding::rng_from_seed;
+use tandem_core::Rng;
+use tandem_nn::{Activation, Mlp, MlpConfig};
+
+use crate::data::check_input;
+use crate::model::{
+    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
+};
+use crate::train::{
+    nn_other, standardized_inputs, train_network, Objective, Opt, OptimizerConfig, Standardizer,
+};
+
+/// Shape of the learned matrix `L_t` (`S x A`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GainStructure {
+    /// A full `S x A` matrix.
+    Full,
+    /// A diagonal matrix (p1 Remark 3; needs `S == A`).
+    Diagonal,
+}
+
+/// Settings of an [`IncrementalModel`]. `Default`: p1 trains `L_θ` with Adam (Sec. 4.2) and
+/// gives no architecture; two hidden layers of 200 ReLU units (MBPO's width), Adam 1e-3, a full
+/// `L`, no prior.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IncrementalModelConfig {
+    /// Hidden layer widths of the network giving `L_θ`.
+    pub hidden: Vec<usize>,
+    /// Hidden activation.
+    pub activation: Activation,
+    /// Full or diagonal `L`.
+    pub structure: GainStructure,
+    /// Prior `L0` (p1 Remark 4), row-major `S x A` for `Full`, the `S` diagonal entries for
+    /// `Diagonal`: the model starts at `L = L0` and learns the correction.
+    pub prior_gain: Option<Vec<f64>>,
+    /// Transitions whose largest `|Δa_j|` is at most this carry no information about `L_t`
+    /// (p1: `L_t = L_{t-1}` when `Δa_t = 0`) and are left out of the fit.
+    pub min_action_change: f64,
+    /// Optimizer.
+    pub optimizer: OptimizerConfig,
+    /// Seed of the weight initialization.
+    pub seed: u64,
+}
+
+impl Default for IncrementalModelConfig {
+    fn default() -> Self {
+        Self {
+            hidden: vec![200, 200],
+            activation: Activation::Relu,
+            structure: GainStructure::Full,
+            prior_gain: None,
+            min_action_change: 1e-9,
+            optimizer: OptimizerConfig::adam(1e-3),
+            seed: 0,
+        }
+    }
+}
+
+/// p1's deep incremental model: `ŝ_{t+1} = s_t + L_θ(s_t, a_{t−1}) Δa_t` with
+/// `Δa_t = a_t − a_{t−1}` (eqs. 4 and 6), fitted by least squares on one-step-back data (eq. 5,
+/// squared norm).
+///
+/// **What `L_θ` sees.** p1 estimates the unknown part from one step back,
+/// `ĥ_t = s_t − L a_{t−1}` (eq. 3), so `(s_t, a_{t−1})` is what is known before `a_t` is chosen;
+/// the network maps it to `L_t`. The prediction is linear in `a_t`, which makes the model an
+/// error-evolution model for linear MPC/LQR (p1 eq. 9; [`IncrementalModel::gain`] gives `L_t`).
+///
+/// **Previous actions** are required: pass them with [`ModelInput::with_prev_actions`]
+/// ([`Transitions::prev_actions`] holds them for data; zero at episode starts). Without them
+/// `predict` returns [`ModelError::MissingInput`].
+///
+/// **Δa = 0.** The prediction is then `s_t` whatever `L_t` is (p1 keeps `L_t = L_{t−1}` there to
+/// avoid the singularity of its definition); such transitions give no information about `L`
+/// and are excluded from the fit (`min_action_change`). A dataset with no action change at all is
+/// an error.
+///
+/// **Scaling.** The network sees standardized `(s_t, a_{t−1})` and outputs `M`;
+/// `L = L0 + diag(σ_Δs) M diag(σ_Δa)⁻¹` with `σ` the root-mean-square state and action changes
+/// of the training rows, so the loss is in standard units. The output layer starts at zero, so
+/// before any fit `L = L0` exactly (Remark 4's starting point; `L0 = 0` without a prior).
+///
+/// ```
+/// use ndarray::array;
+/// use tandem_core::seeding::rng_from_seed;
+/// use tandem_models::{DynamicsModel, IncrementalModel, IncrementalModelConfig, ModelInput};
+///
+/// let cfg = IncrementalModelConfig { prior_gain: Some(vec![0.5, 2.0]), ..Default::default() };
+/// let m = IncrementalModel::new(2, 1, cfg).unwrap();
+/// let (s, a, prev) = (array![[1.0, 1.0]], array![[0.3]], array![[0.1]]);
+/// let input = ModelInput::new(s.view(), a.view()).with_prev_actions(prev.view());
+/// let p = m.predict(&input, &mut rng_from_seed(0)).unwrap();
+/// // Unfitted: s + L0 (a - a_prev) = [1 + 0.5 * 0.2, 1 + 2 * 0.2].
+/// assert!((p.next_states[[0, 0]] - 1.1).abs() < 1e-12);
+/// assert!((p.next_states[[0, 1]] - 1.4).abs() < 1e-12);
+/// ```
+#[derive(Debug, Clone)]
+pub struct IncrementalModel {
+    cfg: IncrementalModelConfig,
+    state_dim: usize,
+    action_dim: usize,
+    net: Mlp,
+    opt: Opt,
+    in_state: Standardizer,
+    in_prev: Standardizer,
+    /// RMS of the state changes (length S) and of the action changes (length A).
+    ds_scale: Vec<f64>,
+    da_scale: Vec<f64>,
+    /// `L0`, row-major `S x A` (zeros without a prior).
+    l0: Vec<f64>,
+}
+
+impl IncrementalModel {
+    /// A model for the given widths; errors if `Diagonal` is asked with `S != A` or the prior
+    /// has the wrong length or non-finite entries.
+    pub fn new(
+        state_dim: usize,
+        action_dim: usize,
+        cfg: IncrementalModelConfig,
+    ) -> Result<Self, ModelError> {
+        let (s, a) = (state_dim, action_dim);
+        if s == 0 || a == 0 {
+            return Err(ModelError::Dim {
+                what: "state_dim and action_dim (must be positive)".into(),
+                expected: 1,
+                got: 0,
+            });
+        }
+        if cfg.structure == GainStructure::Diagonal && s != a {
+            return Err(ModelError::Dim {
+                what: "action_dim (a diagonal L needs as many actions as states)".into(),
+                expected: s,
+                got: a,
+            });
+        }
+        let n_out = match cfg.structure {
+            GainStructure::Full => s * a,
+            GainStructure::Diagonal => s,
+        };
+        let mut l0 = vec![0.0; s * a];
+        if let Some(p) = &cfg.prior_gain {
+            if p.len() != n_out {
+                return Err(ModelError::Dim {
+                    what: "prior_gain entries".into(),
+                    expected: n_out,
+                    got: p.len(),
+                });
+            }
+            if let Some(row) = p.iter().position(|v| !v.is_finite()) {
+                return Err(ModelError::NonFinite {
+                    what: "prior_gain (row = entry)".into(),
+                    row,
+                });
+            }
+            match cfg.structure {
+                GainStructure::Full => l0.copy_from_slice(p),
+                GainStructure::Diagonal => {
+                    for (i, v) in p.iter().enumerate() {
+                        l0[i * a + i] = *v;
+                    }
+                }
+            }
+        }
+        let mut sizes = vec![s + a];
+        sizes.extend(&cfg.hidden);
+        sizes.push(n_out);
+        let mut net = Mlp::new(
+            MlpConfig::new(&sizes).hidden(cfg.activation),
+            &mut rng_from_seed(cfg.seed),
+        )
+        .map_err(nn_other)?;
+        // Zero output layer: L = L0 before any fit (Remark 4).
+        let last = *net.layers().last().expect("at least one layer");
+        net.params_mut()[last.weight_offset..last.bias_offset + last.fan_out].fill(0.0);
+        let opt = cfg.optimizer.build(net.num_params())?;
+        Ok(Self {
+            state_dim: s,
+            action_dim: a,
+            net,
+            opt,
+            in_state: Standardizer::identity(s),
+            in_prev: Standardizer::identity(a),
+            ds_scale: vec![1.0; s],
+            da_scale: vec![1.0; a],
+            l0,
+            cfg,
+        })
+    }
+
+    /// Its settings.
+    pub fn config(&self) -> &IncrementalModelConfig {
+        &self.cfg
+    }
+
+    /// The network giving `L_θ` (for checkpoints and inspection).
+    pub fn network(&self) -> &Mlp {
+        &self.net
+    }
+
+    /// `L_t = L_θ(s_t, a_{t−1})` for each row, `S x A` each.
+    pub fn gain<'a>(
+        &self,
+        states: ArrayView2<'a, f64>,
+        prev_actions: ArrayView2<'a, f64>,
+    ) -> Result<Vec<DMatrix<f64>>, ModelError> {
+        let input = ModelInput::new(states, prev_actions).with_prev_actions(prev_actions);
+        let b = check_input(&input, self.state_dim, self.action_dim, true)?;
+        let out = self.raw_outputs(states, prev_actions, b)?;
+        Ok((0..b).map(|r| self.gain_of(&out, r)).collect())
+    }
+
+    fn raw_outputs<'a>(
+        &self,
+        states: ArrayView2<'a, f64>,
+        prev: ArrayView2<'a, f64>,
+        b: usize,
+    ) -> Result<Vec<f32>, ModelError> {
+        let x = standardized_inputs(&[(states, &self.in_state), (prev, &self.in_prev)], b);
+        let mut ws = self.net.workspace();
+        Ok(self.net.forward(&x, b, &mut ws).map_err(nn_other)?.to_vec())
+    }
+
+    fn gain_of(&self, out: &[f32], r: usize) -> DMatrix<f64> {
+        let (s, a) = (self.state_dim, self.action_dim);
+        let n_out = self.net.output_dim();
+        let o = &out[r * n_out..(r + 1) * n_out];
+        DMatrix::from_fn(s, a, |i, j| {
+            let m = match self.cfg.structure {
+                GainStructure::Full => f64::from(o[i * a + j]),
+                GainStructure::Diagonal if i == j => f64::from(o[i]),
+                GainStructure::Diagonal => 0.0,
+            };
+            self.l0[i * a + j] + self.ds_scale[i] * m / self.da_scale[j]
+        })
+    }
+}
+
+/// Standardized `(s_t, a_{t−1})`, scaled action changes `u = Δa / σ_Δa` and residual targets
+/// `r = Δs / σ_Δs − σ_Δs⁻¹ L0 Δa`.
+struct IncrementalObjective {
+    din: usize,
+    s: usize,
+    a: usize,
+    diagonal: bool,
+    x: Vec<f32>,
+    u: Vec<f32>,
+    r: Vec<f32>,
+}
+
+impl Objective for IncrementalObjective {
+    fn in_dim(&self) -> usize {
+        self.din
+    }
+
+    fn inputs(&self, idx: &[usize], buf: &mut [f32]) {
+        for (k, &i) in idx.iter().enumerate() {
+            buf[k * self.din..(k + 1) * self.din]
+                .copy_from_slice(&self.x[i * self.din..(i + 1) * self.din]);
+        }
+    }
+
+    fn loss(&self, idx: &[usize], out: &[f32], mut d_out: Option<&mut [f32]>) -> f64 {
+        let (s, a) = (self.s, self.a);
+        let n_out = if self.diagonal { s } else { s * a };
+        let n = idx.len() as f32;
+        let mut total = 0.0f64;
+        for (k, &row) in idx.iter().enumerate() {
+            let o = &out[k * n_out..(k + 1) * n_out];
+            let u = &self.u[row * a..(row + 1) * a];
+            for i in 0..s {
+                let pred = if self.diagonal {
+                    o[i] * u[i]
+                } else {
+                    (0..a).map(|j| o[i * a + j] * u[j]).sum()
+                };
+                let e = pred - self.r[row * s + i];
+                total += f64::from(e * e);
+                if let Some(g) = d_out.as_deref_mut() {
+                    let g = &mut g[k * n_out..(k + 1) * n_out];
+                    if self.diagonal {
+                        g[i] = 2.0 * e * u[i] / n;
+                    } else {
+                        for j in 0..a {
+                            g[i * a + j] = 2.0 * e * u[j] / n;
+                        }
+                    }
+                }
+            }
+        }
+        total / idx.len().max(1) as f64
+    }
+}
+
+impl DynamicsModel for IncrementalModel {
+    fn state_dim(&self) -> usize {
+        self.state_dim
+    }
+
+    fn action_dim(&self) -> usize {
+        self.action_dim
+    }
+
+    fn predict(&self, input: &ModelInput<'_>, _rng: &mut Rng) -> Result<Prediction, ModelError> {
+        let b = check_input(input, self.state_dim, self.action_dim, true)?;
+        let prev = input.prev_actions.expect("checked");
+        let out = self.raw_outputs(input.states, prev, b)?;
+        let (s, a) = (self.state_dim, self.action_dim);
+        let mut next = input.states.to_owned();
+        for r in 0..b {
+            let l = self.gain_of(&out, r);
+            for i in 0..s {
+                next[[r, i]] += (0..a)
+                    .map(|j| l[(i, j)] * (input.actions[[r, j]] - prev[[r, j]]))
+                    .sum::<f64>();
+            }
+        }
+        Ok(Prediction {
+            next_states: next,
+            variance: None,
+            rewards: None,
+            terminal_prob: None,
+        })
+    }
+
+    fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
+        let (s, a) = (self.state_dim, self.action_dim);
+        data.validate(s, a)?;
+        let n = data.len();
+        let da: Array2<f64> = &data.actions - &data.prev_actions;
+        let ds: Array2<f64> = &data.next_states - &data.states;
+        let informative: Vec<bool> = da
+            .outer_iter()
+            .map(|r| r.iter().any(|v| v.abs() > self.cfg.min_action_change))
+            .collect();
+        let mut rng = rng_from_seed(cfg.seed);
+        let (train, holdout) = crate::data::holdout_indices(n, cfg.holdout_fraction, &mut rng);
+        let train: Vec<usize> = train.into_iter().filter(|&i| informative[i]).collect();
+        let holdout: Vec<usize> = holdout.into_iter().filter(|&i| informative[i]).collect();
+        if train.is_empty() {
+            return Err(ModelError::Other(
+                "incremental model: no training transition with a nonzero action change \
+                 (Δa = 0 carries no information about L)"
+                    .into(),
+            ));
+        }
+        let rms = |m: &Array2<f64>| -> Vec<f64> {
+            (0..m.ncols())
+                .map(|j| {
+                    let v = train.iter().map(|&i| m[[i, j]] * m[[i, j]]).sum::<f64>()
+                        / train.len() as f64;
+                    let r = v.sqrt();
+                    if r < 1e-9 {
+                        1.0
+                    } else {
+                        r
+                    }
+                })
+                .collect()
+        };
+        let (ds_scale, da_scale) = (rms(&ds), rms(&da));
+        let in_state = Standardizer::fit(data.states.view(), &train);
+        let in_prev = Standardizer::fit(data.prev_actions.view(), &train);
+        let mut u = vec![0.0f32; n * a];
+        let mut r = vec![0.0f32; n * s];
+        for row in 0..n {
+            for j in 0..a {
+                u[row * a + j] = (da[[row, j]] / da_scale[j]) as f32;
+            }
+            for i in 0..s {
+                let prior: f64 = (0..a).map(|j| self.l0[i * a + j] * da[[row, j]]).sum();
+                r[row * s + i] = ((ds[[row, i]] - prior) / ds_scale[i]) as f32;
+            }
+        }
+        let obj = IncrementalObjective {
+            din: s + a,
+            s,
+            a,
+            diagonal: self.cfg.structure == GainStructure::Diagonal,
+            x: standardized_inputs(
+                &[
+                    (data.states.view(), &in_state),
+                    (data.prev_actions.view(), &in_prev),
+                ],
+                n,
+            ),
+            u,
+            r,
+        };
+        let mut net = self.net.clone();
+        let mut opt = self.opt.clone();
+        let report = train_network(
+            &mut net,
+            &mut opt,
+            &obj,
+            &train,
+            &holdout,
+            cfg.epochs,
+            cfg.batch_size,
+            &mut rng,
+        )?;
+        self.net = net;
+        self.opt = opt;
+        self.in_state = in_state;
+        self.in_prev = in_prev;
+        self.ds_scale = ds_scale;
+        self.da_scale = da_scale;
+        Ok(report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array1;
+    use rand::Rng as _;
+
+    /// Trajectories of `x_{t+1} = B u_t + c` (a linear system with `A = 0`, for which the
+    /// incremental form is exact with `L = B`): `episodes` of `len` steps, actions uniform in
+    /// [-1, 1], with a fraction of steps repeating the previous action (Δa = 0).
+    fn static_linear_data(
+        b: &DMatrix<f64>,
+        c: &[f64],
+        episodes: usize,
+        len: usize,
+        seed: u64,
+    ) -> Transitions {
+        let (s, a) = b.shape();
+        let mut rng = rng_from_seed(seed);
+        let n = episodes * len;
+        let mut t = Transitions {
+            states: Array2::zeros((n, s)),
+            actions: Array2::zeros((n, a)),
+            prev_actions: Array2::zeros((n, a)),
+            next_states: Array2::zeros((n, s)),
+            rewards: Array1::zeros(n),
+            terminated: Array1::from_elem(n, false),
+        };
+        let step = |u: &[f64]| -> Vec<f64> {
+            (0..s)
+                .map(|i| c[i] + (0..a).map(|j| b[(i, j)] * u[j]).sum::<f64>())
+                .collect()
+        };
+        let mut row = 0;
+        for _ in 0..episodes {
+            let mut prev: Vec<f64> = (0..a).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let mut x = step(&prev);
+            for _ in 0..len {
+                let u: Vec<f64> = if rng.random::<f64>() < 0.2 {
+                    prev.clone()
+                } else {
+                    (0..a).map(|_| rng.random_range(-1.0..1.0)).collect()
+                };
+                let next = step(&u);
+                for i in 0..s {
+                    t.states[[row, i]] = x[i];
+                    t.next_states[[row, i]] = next[i];
+                }
+                for j in 0..a {
+                    t.actions[[row, j]] = u[j];
+                    t.prev_actions[[row, j]] = prev[j];
+                }
+                row += 1;
+                x = next;
+                prev = u;
+            }
+        }
+        t
+    }
+
+    fn fast(structure: GainStructure, prior: Option<Vec<f64>>) -> IncrementalModelConfig {
+        IncrementalModelConfig {
+            hidden: vec![32, 32],
+            structure,
+            prior_gain: prior,
+            optimizer: OptimizerConfig::adam(3e-3),
+            ..IncrementalModelConfig::default()
+        }
+    }
+
+    #[test]
+    fn recovers_the_input_matrix_of_a_linear_system() {
+        let b = DMatrix::from_row_slice(3, 2, &[0.5, -0.2, 0.0, 1.5, -0.8, 0.3]);
+        let data = static_linear_data(&b, &[0.1, -0.2, 0.3], 40, 25, 1);
+        let mut m = IncrementalModel::new(3, 2, fast(GainStructure::Full, None)).unwrap();
+        let fit = FitConfig {
+            epochs: 60,
+            batch_size: 32,
+            holdout_fraction: 0.1,
+            seed: 0,
+        };
+        m.fit(&data, &fit).unwrap();
+        let test = static_linear_data(&b, &[0.1, -0.2, 0.3], 10, 10, 2);
+        let gains = m
+            .gain(test.states.view(), test.prev_actions.view())
+            .unwrap();
+        let worst = gains
+            .iter()
+            .map(|l| (l - &b).abs().max())
+            .fold(0.0, f64::max);
+        eprintln!("incremental model: largest |L - B| entry over 100 held-out states {worst:.4}");
+        assert!(worst < 0.03, "largest gain error {worst}");
+        let e = crate::testutil::rmse(&m, &test);
+        assert!(e < 0.02, "one-step rmse {e}");
+    }
+
+    #[test]
+    fn diagonal_gain_and_prior_starting_point() {
+        let b = DMatrix::from_diagonal(&nalgebra::dvector![0.7, -1.2]);
+        let data = static_linear_data(&b, &[0.0, 0.5], 40, 25, 3);
+        let prior = vec![0.6, -1.0];
+        let mut m =
+            IncrementalModel::new(2, 2, fast(GainStructure::Diagonal, Some(prior))).unwrap();
+        // Remark 4: before any fit, L = L0 exactly.
+        let l = m
+            .gain(data.states.view(), data.prev_actions.view())
+            .unwrap();
+        assert_eq!(l[0], DMatrix::from_diagonal(&nalgebra::dvector![0.6, -1.0]));
+        let fit = FitConfig {
+            epochs: 40,
+            batch_size: 32,
+            holdout_fraction: 0.1,
+            seed: 0,
+        };
+        let rep = m.fit(&data, &fit).unwrap();
+        assert!(rep.holdout_loss.last().unwrap() < &1e-3, "{rep:?}");
+        let l = m
+            .gain(data.states.view(), data.prev_actions.view())
+            .unwrap();
+        assert!((&l[5] - &b).abs().max() < 0.02, "{}", l[5]);
+        assert_eq!((l[5][(0, 1)], l[5][(1, 0)]), (0.0, 0.0));
+    }
+
+    #[test]
+    fn zero_action_change_and_missing_previous_actions() {
+        let m =
+            IncrementalModel::new(2, 1, fast(GainStructure::Full, Some(vec![1.0, 2.0]))).unwrap();
+        let s = ndarray::array![[0.3, -0.4]];
+        let a = ndarray::array![[0.7]];
+        let mut rng = rng_from_seed(0);
+        assert!(matches!(
+            m.predict(&ModelInput::new(s.view(), a.view()), &mut rng),
+            Err(ModelError::MissingInput(_))
+        ));
+        let p = m
+            .predict(
+                &ModelInput::new(s.view(), a.view()).with_prev_actions(a.view()),
+                &mut rng,
+            )
+            .unwrap();
+        assert_eq!(p.next_states, s);
+        // Data where the action never changes cannot inform L.
+        let mut m = m;
+        let data = Transitions {
+            states: ndarray::array![[0.0, 0.0], [0.1, 0.1]],
+            actions: ndarray::array![[0.5], [0.5]],
+            prev_actions: ndarray::array![[0.5], [0.5]],
+            next_states: ndarray::array![[0.1, 0.1], [0.2, 0.2]],
+            rewards: ndarray::array![0.0, 0.0],
+            terminated: ndarray::array![false, false],
+        };
+        assert!(matches!(
+            m.fit(&data, &FitConfig::default()),
+            Err(ModelError::Other(_))
+        ));
+        assert!(matches!(
+            IncrementalModel::new(2, 1, fast(GainStructure::Diagonal, None)),
+            Err(ModelError::Dim { .. })
+        ));
+        assert!(matches!(
+            IncrementalModel::new(2, 1, fast(GainStructure::Full, Some(vec![1.0]))),
+            Err(ModelError::Dim {
+                expected: 2,
+                got: 1,
+                ..
+            })
+        ));
+    }
+}

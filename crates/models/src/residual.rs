@@ -1,0 +1,358 @@
+//! [`ResidualModel`]: a known plant plus a learned difference, `s' = f_idl(s, a) + d_θ(s, a)`
+//! (p0's difference model).
+
+use ndarray::Array2;
+use tandem_core::seeding::rng_from_seed;
+use tandem_core::Rng;
+use tandem_dynamics::Plant;
+use tandem_nn::{Activation, Mlp, MlpConfig};
+
+use crate::data::check_input;
+use crate::model::{
+    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
+};
+use crate::plant_model::step_rows;
+use crate::train::{
+    nn_other, standardized_inputs, train_network, Objective, Opt, OptimizerConfig, Standardizer,
+};
+
+/// Settings of a [`ResidualModel`]. `Default` = p0 (Sec. IV): 3 hidden layers of 400 ReLU
+/// units, linear output, dropout 0.3 on every hidden layer, AdaGrad (p0 gives no learning rate
+/// and notes it matters little with AdaGrad; PyTorch's default 0.01).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ResidualModelConfig {
+    /// Hidden layer widths.
+    pub hidden: Vec<usize>,
+    /// Hidden activation.
+    pub activation: Activation,
+    /// Dropout probability on hidden layers during training.
+    pub dropout: f32,
+    /// Optimizer.
+    pub optimizer: OptimizerConfig,
+    /// Seed of the weight initialization.
+    pub seed: u64,
+}
+
+impl Default for ResidualModelConfig {
+    fn default() -> Self {
+        Self {
+            hidden: vec![400, 400, 400],
+            activation: Activation::Relu,
+            dropout: 0.3,
+            optimizer: OptimizerConfig::adagrad(0.01),
+            seed: 0,
+        }
+    }
+}
+
+/// p0's difference model over any [`Plant`]: the plant (the idealized model) predicts
+/// `f_idl(s, a)`, a network learns the difference `d(s, a) = s'_true − f_idl(s, a)` from real
+/// transitions, and the model predicts their sum.
+///
+/// Inputs `[s, a]` and the differences are standardized with the statistics of the latest fit's
+/// training rows; the loss is the squared error of the standardized difference, summed over state
+/// components and averaged over the batch. Dropout is active only in training. Each fit
+/// continues from the current weights and optimizer state (p0 refits on the growing buffer);
+/// a failed fit changes nothing. Before any fit the network's output is not trained: fit first.
+///
+/// ```
+/// use nalgebra::{dvector, DVector};
+/// use tandem_dynamics::Plant;
+/// use tandem_models::{ResidualModel, ResidualModelConfig, DynamicsModel};
+///
+/// struct Integrator;
+/// impl Plant for Integrator {
+///     fn state_dim(&self) -> usize { 1 }
+///     fn action_dim(&self) -> usize { 1 }
+///     fn dt(&self) -> f64 { 0.1 }
+///     fn step(&self, x: &DVector<f64>, u: &DVector<f64>) -> DVector<f64> {
+///         dvector![x[0] + 0.1 * u[0]]
+///     }
+/// }
+/// let m = ResidualModel::new(Integrator, ResidualModelConfig::default()).unwrap();
+/// assert_eq!((m.state_dim(), m.action_dim()), (1, 1));
+/// ```
+#[derive(Debug, Clone)]
+pub struct ResidualModel<P: Plant> {
+    plant: P,
+    cfg: ResidualModelConfig,
+    net: Mlp,
+    opt: Opt,
+    in_state: Standardizer,
+    in_action: Standardizer,
+    out_norm: Standardizer,
+    fitted: bool,
+}
+
+impl<P: Plant> ResidualModel<P> {
+    /// A difference model over `plant`, initialized from `cfg.seed`.
+    pub fn new(plant: P, cfg: ResidualModelConfig) -> Result<Self, ModelError> {
+        let (s, a) = (plant.state_dim(), plant.action_dim());
+        let mut sizes = vec![s + a];
+        sizes.extend(&cfg.hidden);
+        sizes.push(s);
+        let net = Mlp::new(
+            MlpConfig::new(&sizes)
+                .hidden(cfg.activation)
+                .dropout(cfg.dropout),
+            &mut rng_from_seed(cfg.seed),
+        )
+        .map_err(nn_other)?;
+        let opt = cfg.optimizer.build(net.num_params())?;
+        Ok(Self {
+            in_state: Standardizer::identity(s),
+            in_action: Standardizer::identity(a),
+            out_norm: Standardizer::identity(s),
+            plant,
+            cfg,
+            net,
+            opt,
+            fitted: false,
+        })
+    }
+
+    /// The known plant.
+    pub fn plant(&self) -> &P {
+        &self.plant
+    }
+
+    /// Its settings.
+    pub fn config(&self) -> &ResidualModelConfig {
+        &self.cfg
+    }
+
+    /// The difference network (for checkpoints and inspection).
+    pub fn network(&self) -> &Mlp {
+        &self.net
+    }
+
+    /// Whether a fit has succeeded; before that, `predict` returns the plant's prediction alone
+    /// (an untrained difference network would only add noise).
+    pub fn is_fitted(&self) -> bool {
+        self.fitted
+    }
+}
+
+/// Standardized inputs and standardized differences.
+pub(crate) struct RegressionObjective {
+    pub din: usize,
+    pub dout: usize,
+    pub x: Vec<f32>,
+    pub y: Vec<f32>,
+}
+
+impl Objective for RegressionObjective {
+    fn in_dim(&self) -> usize {
+        self.din
+    }
+
+    fn inputs(&self, idx: &[usize], buf: &mut [f32]) {
+        for (k, &i) in idx.iter().enumerate() {
+            buf[k * self.din..(k + 1) * self.din]
+                .copy_from_slice(&self.x[i * self.din..(i + 1) * self.din]);
+        }
+    }
+
+    fn loss(&self, idx: &[usize], out: &[f32], mut d_out: Option<&mut [f32]>) -> f64 {
+        let d = self.dout;
+        let n = idx.len() as f32;
+        let mut total = 0.0f64;
+        for (k, &i) in idx.iter().enumerate() {
+            for j in 0..d {
+                let e = out[k * d + j] - self.y[i * d + j];
+                total += f64::from(e * e);
+                if let Some(g) = d_out.as_deref_mut() {
+                    g[k * d + j] = 2.0 * e / n;
+                }
+            }
+        }
+        total / idx.len().max(1) as f64
+    }
+}
+
+impl<P: Plant> DynamicsModel for ResidualModel<P> {
+    fn state_dim(&self) -> usize {
+        self.plant.state_dim()
+    }
+
+    fn action_dim(&self) -> usize {
+        self.plant.action_dim()
+    }
+
+    fn predict(&self, input: &ModelInput<'_>, _rng: &mut Rng) -> Result<Prediction, ModelError> {
+        let b = check_input(input, self.state_dim(), self.action_dim(), false)?;
+        let mut next = step_rows(&self.plant, input)?;
+        if self.fitted {
+            let x = standardized_inputs(
+                &[
+                    (input.states, &self.in_state),
+                    (input.actions, &self.in_action),
+                ],
+                b,
+            );
+            let mut ws = self.net.workspace();
+            let out = self.net.forward(&x, b, &mut ws).map_err(nn_other)?;
+            let s = self.state_dim();
+            for (r, mut row) in next.outer_iter_mut().enumerate() {
+                for j in 0..s {
+                    row[j] += self.out_norm.invert(j, out[r * s + j]);
+                }
+            }
+        }
+        Ok(Prediction {
+            next_states: next,
+            variance: None,
+            rewards: None,
+            terminal_prob: None,
+        })
+    }
+
+    fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
+        let (s, a) = (self.state_dim(), self.action_dim());
+        data.validate(s, a)?;
+        let n = data.len();
+        let idl = step_rows(
+            &self.plant,
+            &ModelInput::new(data.states.view(), data.actions.view()),
+        )?;
+        let diff: Array2<f64> = &data.next_states - &idl;
+        let mut rng = rng_from_seed(cfg.seed);
+        let (train, holdout) = crate::data::holdout_indices(n, cfg.holdout_fraction, &mut rng);
+        let in_state = Standardizer::fit(data.states.view(), &train);
+        let in_action = Standardizer::fit(data.actions.view(), &train);
+        let out_norm = Standardizer::fit(diff.view(), &train);
+        let obj = RegressionObjective {
+            din: s + a,
+            dout: s,
+            x: standardized_inputs(
+                &[
+                    (data.states.view(), &in_state),
+                    (data.actions.view(), &in_action),
+                ],
+                n,
+            ),
+            y: standardized_inputs(&[(diff.view(), &out_norm)], n),
+        };
+        let mut net = self.net.clone();
+        let mut opt = self.opt.clone();
+        let report = train_network(
+            &mut net,
+            &mut opt,
+            &obj,
+            &train,
+            &holdout,
+            cfg.epochs,
+            cfg.batch_size,
+            &mut rng,
+        )?;
+        self.net = net;
+        self.opt = opt;
+        self.in_state = in_state;
+        self.in_action = in_action;
+        self.out_norm = out_norm;
+        self.fitted = true;
+        Ok(report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testutil::{pendulum_data, rmse};
+    use crate::PlantModel;
+    use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
+
+    fn idealized() -> DcMotorPendulum {
+        DcMotorPendulum::new(DcMotorPendulumParams::idealized())
+    }
+
+    /// Fits on 3750 transitions of the true p0 pendulum and compares held-out one-step errors.
+    pub(super) fn residual_gain(cfg: ResidualModelConfig, fit: &FitConfig) -> (f64, f64) {
+        let real = DcMotorPendulum::new(DcMotorPendulumParams::real());
+        let train = pendulum_data(&real, 3750, 11);
+        let test = pendulum_data(&real, 1000, 12);
+        let mut m = ResidualModel::new(idealized(), cfg).unwrap();
+        m.fit(&train, fit).unwrap();
+        (rmse(&PlantModel::new(idealized()), &test), rmse(&m, &test))
+    }
+
+    #[test]
+    fn cuts_the_idealized_one_step_error_tenfold_on_the_p0_pendulum() {
+        // A narrower network than p0's 3x400 without dropout keeps this test fast (dropout 0.3
+        // on 64-unit layers costs most of the accuracy: ratio 7 instead of 64 measured); p0's
+        // own network and dropout run in the ignored test below. AdaGrad and ReLU as in p0.
+        let cfg = ResidualModelConfig {
+            hidden: vec![64, 64, 64],
+            dropout: 0.0,
+            optimizer: OptimizerConfig::adagrad(0.03),
+            ..ResidualModelConfig::default()
+        };
+        let fit = FitConfig {
+            epochs: 60,
+            batch_size: 64,
+            holdout_fraction: 0.1,
+            seed: 0,
+        };
+        let (e_idl, e_res) = residual_gain(cfg, &fit);
+        eprintln!(
+            "p0 pendulum one-step RMSE: idealized {e_idl:.4}, residual {e_res:.5}, ratio {:.1}",
+            e_idl / e_res
+        );
+        assert!(e_res * 30.0 < e_idl, "idealized {e_idl}, residual {e_res}");
+    }
+
+    #[test]
+    #[ignore = "p0's 3x400 network: about 40 s in the test profile (measured ratio 11.8)"]
+    fn p0_network_cuts_the_idealized_one_step_error_tenfold() {
+        let fit = FitConfig {
+            epochs: 100,
+            batch_size: 64,
+            holdout_fraction: 0.1,
+            seed: 0,
+        };
+        let (e_idl, e_res) = residual_gain(ResidualModelConfig::default(), &fit);
+        eprintln!(
+            "p0 network: idealized {e_idl:.4}, residual {e_res:.5}, ratio {:.1}",
+            e_idl / e_res
+        );
+        assert!(e_res * 10.0 < e_idl, "idealized {e_idl}, residual {e_res}");
+    }
+
+    #[test]
+    fn unfitted_model_is_the_plant_and_failures_change_nothing() {
+        let real = DcMotorPendulum::new(DcMotorPendulumParams::real());
+        let data = pendulum_data(&real, 200, 13);
+        let mut m = ResidualModel::new(
+            idealized(),
+            ResidualModelConfig {
+                hidden: vec![16],
+                optimizer: OptimizerConfig::sgd(1e12),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(rmse(&m, &data), rmse(&PlantModel::new(idealized()), &data));
+        let before = m.network().params().to_vec();
+        let fit = FitConfig {
+            epochs: 20,
+            batch_size: 32,
+            ..FitConfig::default()
+        };
+        assert!(matches!(
+            m.fit(&data, &fit),
+            Err(ModelError::Diverged { .. })
+        ));
+        assert_eq!(m.network().params(), &before[..]);
+        assert!(!m.is_fitted());
+        let mut bad = data.clone();
+        bad.next_states[[3, 1]] = f64::INFINITY;
+        assert_eq!(
+            m.fit(&bad, &fit),
+            Err(ModelError::NonFinite {
+                what: "next_states".into(),
+                row: 3
+            })
+        );
+    }
+}
