@@ -13,9 +13,13 @@
 //! Dependencies: `nalgebra` (states, small matrices and spatial algebra), `serde` (plant
 //! parameters are readable from configs), `thiserror` (error types).
 
+pub mod actuators;
+pub mod biped;
 pub mod classic;
+pub mod contact;
 pub mod integrate;
 mod plant;
 pub mod rigid;
+pub mod rigid_plant;
 
 pub use plant::{check_dims, Plant, PlantError};

@@ -55,6 +55,14 @@ fn models() -> Vec<Model> {
         Model::from_urdf_file(format!("{DIR}arm7.urdf")).unwrap(),
         Model::from_urdf_file(format!("{DIR}leg2r.urdf")).unwrap(),
         Model::from_urdf_str(TREE).unwrap(),
+        {
+            // The same tree with geared motors' reflected inertia on two joints.
+            let mut m = Model::from_urdf_str(TREE).unwrap();
+            m.name = "tree+armature".into();
+            m.joints[1].armature = 0.05;
+            m.joints[3].armature = 0.01;
+            m
+        },
     ]
 }
 

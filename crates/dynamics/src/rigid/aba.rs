@@ -60,7 +60,7 @@ pub fn aba<'d>(
         let s = m6(&j.subspace());
         let ia = data.yaba[i];
         let u = ia * s;
-        let d_inv = 1.0 / s.dot(&u);
+        let d_inv = 1.0 / (s.dot(&u) + j.armature);
         let uu = tau[i] - s.dot(&data.pa[i]);
         data.u_vec[i] = u;
         data.d_inv[i] = d_inv;

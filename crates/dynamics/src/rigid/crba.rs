@@ -15,7 +15,7 @@ pub fn crba<'d>(model: &Model, data: &'d mut Data, q: &[f64]) -> &'d DMatrix<f64
         let s = j.subspace();
         // F = Ycrb_i S_i, carried up the tree one frame at a time.
         let mut f = data.ycrb[i].mul_motion(&s);
-        data.mass_matrix[(i, i)] = s.dot(&f);
+        data.mass_matrix[(i, i)] = s.dot(&f) + j.armature;
         let mut k = i;
         while let Some(p) = model.joints[k].parent {
             f = data.li_m_i[k].act_force(&f);

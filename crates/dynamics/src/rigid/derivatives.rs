@@ -89,6 +89,7 @@ pub fn rnea_derivatives(model: &Model, data: &mut Data, q: &[f64], v: &[f64], a:
             for jj in (k..end).rev() {
                 let j = &model.joints[jj];
                 out[(jj, k)] = j.subspace().dot(&data.df[jj]);
+                // (Armature adds `armature * a` to τ: no q or v dependence.)
                 if jj == k {
                     break;
                 }

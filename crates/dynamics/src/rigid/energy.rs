@@ -29,14 +29,14 @@ pub fn center_of_mass(model: &Model, data: &mut Data, q: &[f64], v: &[f64]) {
     }
 }
 
-/// Kinetic energy `½ vᵀ M(q) v`, summed body by body.
+/// Kinetic energy `½ vᵀ M(q) v`, summed body by body (joint armatures included).
 pub fn kinetic_energy(model: &Model, data: &mut Data, q: &[f64], v: &[f64]) -> f64 {
     forward_kinematics_velocity(model, data, q, v);
     model
         .joints
         .iter()
         .enumerate()
-        .map(|(i, j)| j.inertia.kinetic_energy(&data.v[i]))
+        .map(|(i, j)| j.inertia.kinetic_energy(&data.v[i]) + 0.5 * j.armature * v[i] * v[i])
         .sum()
 }
 

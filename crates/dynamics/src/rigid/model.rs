@@ -161,6 +161,9 @@ pub struct JointModel {
     pub damping: f64,
     /// Coulomb friction from `<dynamics friction>`.
     pub friction: f64,
+    /// Reflected rotor inertia added to `M[i][i]` (0 from URDF; set for geared motors). RNEA,
+    /// CRBA and ABA include it, as Pinocchio's `armature` does.
+    pub armature: f64,
 }
 
 impl JointModel {
@@ -721,6 +724,7 @@ impl Tree<'_> {
                 velocity: nz(lim.velocity),
                 damping,
                 friction,
+                armature: 0.0,
             });
             model.frames.push(Frame {
                 name: child.name.clone(),

@@ -38,7 +38,7 @@ pub fn rnea<'d>(
     // Backward pass: project onto the joint axes and accumulate towards the root.
     for i in (0..model.nv()).rev() {
         let j = &model.joints[i];
-        data.tau[i] = j.subspace().dot(&data.f[i]);
+        data.tau[i] = j.subspace().dot(&data.f[i]) + j.armature * a[i];
         if let Some(p) = j.parent {
             let fp = data.li_m_i[i].act_force(&data.f[i]);
             data.f[p] += fp;

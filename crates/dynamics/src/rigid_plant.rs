@@ -1,0 +1,396 @@
+//! [`RigidBodyPlant`]: a URDF model plus actuators, joint friction and ground contact, as a
+//! [`Plant`].
+//!
+//! State `x = [q; q̇]` (`2 nv`), action `u` = one component per learned actuator (a voltage for a
+//! [`DcMotor`](crate::actuators::DcMotor), a torque for a torque source), in the order they were
+//! added. The continuous dynamics `q̈ = ABA(q, q̇, τ_act + τ_friction + Jᵀ f_contact)` are integrated
+//! by RK4 with a fixed internal step; [`Plant::step`] advances one control period with the action
+//! held (zero-order hold).
+//!
+//! An idealized and a true system are two configurations of one model: [`Overrides`] changes a
+//! body's mass and the friction coefficients (p0, Table I: Leo's torso mass and joint viscous
+//! friction).
+
+use crate::actuators::{Actuator, JointFriction};
+use crate::contact::{point_state, ContactPoint, GroundContact};
+use crate::rigid::{
+    aba, forward_kinematics_velocity, kinetic_energy, potential_energy, Data, Model,
+};
+use crate::Plant;
+use nalgebra::DVector;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::sync::Mutex;
+
+/// Timing of a [`RigidBodyPlant`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RigidPlantConfig {
+    /// Control period `dt` of [`Plant::step`] (s).
+    pub control_period: f64,
+    /// Internal RK4 step (s); the period is split into `round(dt / step)` equal steps.
+    pub internal_step: f64,
+}
+
+impl Default for RigidPlantConfig {
+    /// Leo's 30 ms control period (33 Hz, as in its RBDL simulation used by p0) and a 1 ms
+    /// internal step, stable with the default ground contact.
+    fn default() -> Self {
+        Self {
+            control_period: 0.03,
+            internal_step: 1e-3,
+        }
+    }
+}
+
+/// Parameter overrides that turn an idealized model into a "true" one (or back).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Overrides {
+    /// New total mass of a body, keyed by its URDF link name (the child link of a movable joint);
+    /// the body's centre of mass is kept and its inertia scaled with the mass.
+    pub link_mass: BTreeMap<String, f64>,
+    /// Viscous friction coefficient for every actuated joint (N m s/rad).
+    pub viscous_friction: Option<f64>,
+    /// Coulomb friction torque for every actuated joint (N m).
+    pub coulomb_friction: Option<f64>,
+    /// Ground friction coefficient μ.
+    pub ground_friction: Option<f64>,
+}
+
+/// Why a plant could not be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RigidPlantError {
+    /// A joint name that the model does not have.
+    #[error("unknown joint '{0}'")]
+    UnknownJoint(String),
+    /// A link name that is not the child of a movable joint.
+    #[error("unknown link '{0}' (overrides address links moved by a joint)")]
+    UnknownLink(String),
+    /// A bad number in the configuration.
+    #[error("invalid configuration: {0}")]
+    Config(String),
+}
+
+/// Scratch buffers of one evaluation.
+#[derive(Debug, Clone)]
+struct Work {
+    data: Data,
+    tau: Vec<f64>,
+    x: Vec<f64>,
+    k: [Vec<f64>; 4],
+}
+
+/// A rigid-body robot as a [`Plant`].
+#[derive(Debug)]
+pub struct RigidBodyPlant {
+    model: Model,
+    actuators: Vec<(usize, Actuator)>,
+    friction: Vec<JointFriction>,
+    contacts: Vec<ContactPoint>,
+    ground: Option<GroundContact>,
+    config: RigidPlantConfig,
+    substeps: usize,
+    work: Mutex<Work>,
+}
+
+impl Clone for RigidBodyPlant {
+    fn clone(&self) -> Self {
+        Self {
+            model: self.model.clone(),
+            actuators: self.actuators.clone(),
+            friction: self.friction.clone(),
+            contacts: self.contacts.clone(),
+            ground: self.ground,
+            config: self.config,
+            substeps: self.substeps,
+            work: Mutex::new(Work::new(&self.model)),
+        }
+    }
+}
+
+impl Work {
+    fn new(model: &Model) -> Self {
+        let n = model.nv();
+        Self {
+            data: Data::new(model),
+            tau: vec![0.0; n],
+            x: vec![0.0; 2 * n],
+            k: std::array::from_fn(|_| vec![0.0; 2 * n]),
+        }
+    }
+}
+
+impl RigidBodyPlant {
+    /// A plant with no actuators, URDF joint friction (`<dynamics damping friction>`) and no
+    /// contact.
+    pub fn new(model: Model, config: RigidPlantConfig) -> Result<Self, RigidPlantError> {
+        if !(config.control_period > 0.0
+            && config.internal_step > 0.0
+            && config.control_period.is_finite())
+        {
+            return Err(RigidPlantError::Config(format!(
+                "control_period {} and internal_step {} must be positive",
+                config.control_period, config.internal_step
+            )));
+        }
+        let substeps = (config.control_period / config.internal_step)
+            .round()
+            .max(1.0) as usize;
+        let friction = model
+            .joints
+            .iter()
+            .map(|j| JointFriction {
+                viscous: j.damping,
+                coulomb: j.friction,
+                ..JointFriction::default()
+            })
+            .collect();
+        Ok(Self {
+            work: Mutex::new(Work::new(&model)),
+            model,
+            actuators: Vec::new(),
+            friction,
+            contacts: Vec::new(),
+            ground: None,
+            config,
+            substeps,
+        })
+    }
+
+    /// Drives joint `joint` with `actuator` (a motor's armature is added to the joint).
+    pub fn with_actuator(
+        mut self,
+        joint: &str,
+        actuator: Actuator,
+    ) -> Result<Self, RigidPlantError> {
+        let i = self
+            .model
+            .joint_index(joint)
+            .ok_or_else(|| RigidPlantError::UnknownJoint(joint.into()))?;
+        if let Actuator::Motor(m) = &actuator {
+            self.model.joints[i].armature += m.armature;
+        }
+        self.actuators.push((i, actuator));
+        *self.work.get_mut().unwrap_or_else(|e| e.into_inner()) = Work::new(&self.model);
+        Ok(self)
+    }
+
+    /// Sets the friction of joint `joint`.
+    pub fn with_friction(mut self, joint: &str, f: JointFriction) -> Result<Self, RigidPlantError> {
+        let i = self
+            .model
+            .joint_index(joint)
+            .ok_or_else(|| RigidPlantError::UnknownJoint(joint.into()))?;
+        self.friction[i] = f;
+        Ok(self)
+    }
+
+    /// Adds a contact point `point` (in the frame of link `link`) against the ground.
+    pub fn with_contact(
+        mut self,
+        name: &str,
+        link: &str,
+        point: [f64; 3],
+    ) -> Result<Self, RigidPlantError> {
+        let k = self
+            .model
+            .frame_index(link)
+            .ok_or_else(|| RigidPlantError::UnknownLink(link.into()))?;
+        let fr = &self.model.frames[k];
+        let joint = fr
+            .joint
+            .ok_or_else(|| RigidPlantError::UnknownLink(link.into()))?;
+        let p = fr.placement.act_point(&nalgebra::Vector3::from(point));
+        self.contacts.push(ContactPoint {
+            name: name.into(),
+            joint,
+            point: p,
+        });
+        Ok(self)
+    }
+
+    /// Sets the ground plane.
+    pub fn with_ground(mut self, ground: GroundContact) -> Self {
+        self.ground = Some(ground);
+        self
+    }
+
+    /// Applies parameter overrides.
+    pub fn with_overrides(mut self, o: &Overrides) -> Result<Self, RigidPlantError> {
+        for (link, &mass) in &o.link_mass {
+            let joint = self
+                .model
+                .joints
+                .iter()
+                .find(|j| &j.child_link == link)
+                .map(|j| j.name.clone())
+                .ok_or_else(|| RigidPlantError::UnknownLink(link.clone()))?;
+            if !self.model.scale_body_mass(&joint, mass) {
+                return Err(RigidPlantError::Config(format!(
+                    "mass {mass} for link '{link}' must be positive and finite"
+                )));
+            }
+        }
+        for &(i, _) in &self.actuators {
+            if let Some(b) = o.viscous_friction {
+                self.friction[i].viscous = b;
+            }
+            if let Some(c) = o.coulomb_friction {
+                self.friction[i].coulomb = c;
+            }
+        }
+        if let (Some(mu), Some(g)) = (o.ground_friction, self.ground.as_mut()) {
+            g.friction = mu;
+        }
+        Ok(self)
+    }
+
+    /// The model (with armature and mass overrides applied).
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// Actuated joints in action order (learned actuators only).
+    pub fn action_joints(&self) -> Vec<String> {
+        self.actuators
+            .iter()
+            .filter(|(_, a)| a.is_learned())
+            .map(|(i, _)| self.model.joints[*i].name.clone())
+            .collect()
+    }
+
+    /// The actuators (joint index, actuator), PD ones included.
+    pub fn actuators(&self) -> &[(usize, Actuator)] {
+        &self.actuators
+    }
+
+    /// The contact points.
+    pub fn contacts(&self) -> &[ContactPoint] {
+        &self.contacts
+    }
+
+    /// The ground, if any.
+    pub fn ground(&self) -> Option<&GroundContact> {
+        self.ground.as_ref()
+    }
+
+    /// Mechanical energy (kinetic + potential) of state `x`.
+    pub fn energy(&self, x: &[f64]) -> f64 {
+        let n = self.model.nv();
+        let mut w = self.lock();
+        kinetic_energy(&self.model, &mut w.data, &x[..n], &x[n..])
+            + potential_energy(&self.model, &mut w.data, &x[..n])
+    }
+
+    /// [`RigidBodyPlant::energy`] plus the energy stored in the PD controllers' virtual springs
+    /// (`½ kp (q − q*)²`) and in the compressed contact springs (`½ k d²`): the quantity that
+    /// passive motion (motors off) must not increase.
+    pub fn total_energy(&self, x: &[f64]) -> f64 {
+        let mut e = self.energy(x);
+        for (i, a) in &self.actuators {
+            if let Actuator::Pd(pd) = a {
+                let d = x[*i] - pd.target;
+                e += 0.5 * pd.kp * d * d;
+            }
+        }
+        if let Some(g) = &self.ground {
+            for h in self.contact_heights(x) {
+                let d = (g.height - h).max(0.0);
+                e += 0.5 * g.stiffness * d * d;
+            }
+        }
+        e
+    }
+
+    /// World heights of the contact points at state `x` (for penetration checks).
+    pub fn contact_heights(&self, x: &[f64]) -> Vec<f64> {
+        let n = self.model.nv();
+        let mut w = self.lock();
+        forward_kinematics_velocity(&self.model, &mut w.data, &x[..n], &x[n..]);
+        self.contacts
+            .iter()
+            .map(|c| point_state(&w.data, c).0.z)
+            .collect()
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Work> {
+        self.work.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Continuous dynamics `ẋ = f(x, u)` into `out` (length `2 nv`).
+    fn derivative(&self, w: &mut Work, x: &[f64], u: &[f64], out: &mut [f64]) {
+        let n = self.model.nv();
+        let (q, v) = x.split_at(n);
+        for ((t, f), vi) in w.tau.iter_mut().zip(&self.friction).zip(v) {
+            *t = f.torque(*vi);
+        }
+        let mut k = 0;
+        for (i, act) in &self.actuators {
+            let ui = if act.is_learned() {
+                k += 1;
+                u[k - 1]
+            } else {
+                0.0
+            };
+            w.tau[*i] += act.torque(ui, q[*i], v[*i]);
+        }
+        if let Some(g) = &self.ground {
+            if !self.contacts.is_empty() {
+                forward_kinematics_velocity(&self.model, &mut w.data, q, v);
+                g.add_generalized_forces(&self.model, &w.data, &self.contacts, &mut w.tau);
+            }
+        }
+        let ddq = aba(&self.model, &mut w.data, q, v, &w.tau);
+        out[..n].copy_from_slice(v);
+        out[n..].copy_from_slice(ddq.as_slice());
+    }
+
+    /// Integrates one control period from `x` under action `u`, in place.
+    pub fn step_in_place(&self, x: &mut [f64], u: &[f64]) {
+        let mut guard = self.lock();
+        let w = &mut *guard;
+        let h = self.config.control_period / self.substeps as f64;
+        let m = x.len();
+        for _ in 0..self.substeps {
+            let mut k = std::mem::take(&mut w.k);
+            let mut xs = std::mem::take(&mut w.x);
+            self.derivative(w, x, u, &mut k[0]);
+            for (stage, frac) in [(1, 0.5), (2, 0.5), (3, 1.0)] {
+                for i in 0..m {
+                    xs[i] = x[i] + frac * h * k[stage - 1][i];
+                }
+                let (_, rest) = k.split_at_mut(stage);
+                self.derivative(w, &xs, u, &mut rest[0]);
+            }
+            for i in 0..m {
+                x[i] += h / 6.0 * (k[0][i] + 2.0 * k[1][i] + 2.0 * k[2][i] + k[3][i]);
+            }
+            w.k = k;
+            w.x = xs;
+        }
+    }
+}
+
+impl Plant for RigidBodyPlant {
+    fn state_dim(&self) -> usize {
+        2 * self.model.nv()
+    }
+
+    fn action_dim(&self) -> usize {
+        self.actuators
+            .iter()
+            .filter(|(_, a)| a.is_learned())
+            .count()
+    }
+
+    fn dt(&self) -> f64 {
+        self.config.control_period
+    }
+
+    fn step(&self, x: &DVector<f64>, u: &DVector<f64>) -> DVector<f64> {
+        let mut y = x.clone();
+        self.step_in_place(y.as_mut_slice(), u.as_slice());
+        y
+    }
+}
