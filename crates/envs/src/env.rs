@@ -70,6 +70,29 @@ impl Step {
 /// continues the current generator. The internal state is exposed ([`Env::state`],
 /// [`Env::set_state`]) so that trajectories can be replayed from a given state and compared with
 /// other implementations.
+///
+/// ```
+/// use tandem_envs::{make, Action, Env};
+///
+/// let mut env = make("CartPole-v1").unwrap();
+/// let first = env.reset(Some(42));
+/// assert_eq!(first.len(), 4);
+/// let mut ret = 0.0;
+/// loop {
+///     let step = env.step(&Action::Discrete(1)).unwrap(); // always push right
+///     ret += step.reward;
+///     if step.done() {
+///         assert!(step.terminated); // the pole falls long before the 500-step limit
+///         break;
+///     }
+/// }
+/// assert!(ret >= 1.0 && ret < 500.0);
+/// // Replaying from a state: the same action from the same state gives the same step.
+/// env.set_state(&[0.0, 0.1, 0.02, -0.1]).unwrap();
+/// let a = env.step(&Action::Discrete(0)).unwrap();
+/// env.set_state(&[0.0, 0.1, 0.02, -0.1]).unwrap();
+/// assert_eq!(a, env.step(&Action::Discrete(0)).unwrap());
+/// ```
 pub trait Env {
     /// The registered id, e.g. `"CartPole-v1"`.
     fn id(&self) -> &str;

@@ -116,7 +116,7 @@ impl Default for DcMotorPendulumParams {
 /// use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 /// let p = DcMotorPendulum::new(DcMotorPendulumParams::real());
 /// // Hanging at rest is an equilibrium; upright at rest too (unstable).
-/// assert_eq!(p.step_array(&[std::f64::consts::PI, 0.0], 0.0)[1].abs() < 1e-12, true);
+/// assert!(p.step_array(&[std::f64::consts::PI, 0.0], 0.0)[1].abs() < 1e-12);
 /// let up = p.step_array(&[0.0, 0.0], 0.0);
 /// assert_eq!(up, [0.0, 0.0]);
 /// ```
@@ -356,6 +356,44 @@ mod tests {
             );
             assert!((coarse[0] - fine[0]).abs() < 1e-8, "{coarse:?} vs {fine}");
             assert!((coarse[1] - fine[1]).abs() < 1e-7, "{coarse:?} vs {fine}");
+        }
+    }
+
+    #[test]
+    fn linearization_upright_matches_the_matrix_exponential() {
+        // Around (0, 0) the continuous dynamics are ẋ = A x + B u with
+        // A = [[0, 1], [mgl/J, −c/J]], B = [0, K/(R J)]. The exact discretization is
+        // exp([[A, B], [0, 0]] T_s) = [[A_d, B_d], [0, 1]], computed here by its Taylor series.
+        for params in [
+            DcMotorPendulumParams::idealized(),
+            DcMotorPendulumParams::real(),
+        ] {
+            let p = DcMotorPendulum::new(params);
+            let mut m = nalgebra::Matrix3::<f64>::zeros();
+            m[(0, 1)] = 1.0;
+            m[(1, 0)] = params.m * params.g * params.l / params.j;
+            m[(1, 1)] = -params.damping() / params.j;
+            m[(1, 2)] = params.k / (params.r * params.j);
+            let m = m * params.dt;
+            let mut term = nalgebra::Matrix3::<f64>::identity();
+            let mut expm = term;
+            for k in 1..40 {
+                term = term * m / k as f64;
+                expm += term;
+            }
+            let (a, b) = p.linearize(&DVector::zeros(2), &DVector::zeros(1));
+            for i in 0..2 {
+                for j in 0..2 {
+                    assert!(
+                        (a[(i, j)] - expm[(i, j)]).abs() < 1e-6,
+                        "A[{i},{j}] {a} vs {expm}"
+                    );
+                }
+                assert!(
+                    (b[(i, 0)] - expm[(i, 2)]).abs() < 1e-6,
+                    "B[{i}] {b} vs {expm}"
+                );
+            }
         }
     }
 

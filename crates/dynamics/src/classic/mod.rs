@@ -16,5 +16,5 @@ mod dc_motor_pendulum;
 mod gym_pendulum;
 
 pub use cartpole::{CartPole, CartPoleParams};
-pub use dc_motor_pendulum::{DcMotorPendulum, DcMotorPendulumParams};
+pub use dc_motor_pendulum::{DcMotorPendulum, DcMotorPendulumParams, M_IDEALIZED, M_REAL};
 pub use gym_pendulum::{GymPendulum, GymPendulumParams};
