@@ -6,6 +6,7 @@
 //! `ndarray` (batched data), `nalgebra` (plant states), `rand`, `serde`, `thiserror`.
 
 mod data;
+mod ensemble;
 mod gmm;
 mod incremental;
 mod mlp_model;
@@ -18,6 +19,7 @@ mod train;
 mod tvlg;
 
 pub use data::{holdout_indices, TransitionsBuilder};
+pub use ensemble::{EnsembleConfig, MemberData, ProbabilisticEnsemble, Propagation};
 pub use gmm::Gmm;
 pub use incremental::{GainStructure, IncrementalModel, IncrementalModelConfig};
 pub use mlp_model::{MlpModel, MlpModelConfig};

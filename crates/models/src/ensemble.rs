@@ -1,0 +1,808 @@
+//! [`ProbabilisticEnsemble`]: `K` Gaussian MLPs predicting the state change and the reward, with
+//! held-out elite selection and PETS's propagation modes (p3's dynamics model; Chua et al. 2018,
+//! Janner et al. 2019).
+
+use ndarray::{Array1, Array2};
+use rand::seq::SliceRandom;
+use rand::Rng as _;
+use rand_distr::{Distribution, StandardNormal};
+use tandem_core::seeding::SeedStream;
+use tandem_core::Rng;
+use tandem_nn::{gaussian_nll, Activation, GaussianHead, GaussianOutput, Mlp, MlpConfig};
+
+use crate::data::{check_input, holdout_indices};
+use crate::model::{
+    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
+};
+use crate::train::{nn_other, nn_train, standardized_inputs, Opt, OptimizerConfig, Standardizer};
+
+/// How a batch is propagated through the ensemble (PETS, Sec. 4.2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Propagation {
+    /// Every row picks a random elite at every call (PETS "TS1"; MBPO's model rollouts).
+    RandomMember,
+    /// Row `i` always uses elite `(i + offset) mod E` (PETS "TS∞"): a planner that keeps a
+    /// trajectory in the same row keeps its member for the whole rollout. `offset` is set with
+    /// [`ProbabilisticEnsemble::set_member_offset`] (e.g. drawn anew for each plan).
+    FixedMember,
+    /// The elites' mixture moments: mean of the means, and variance = mean of the variances +
+    /// variance of the means (aleatoric + epistemic). Deterministic.
+    Expectation,
+}
+
+/// Which data each member trains on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MemberData {
+    /// A bootstrap resample (with replacement) of the training rows, drawn per fit (PETS).
+    Bootstrap,
+    /// All training rows, each member in its own shuffled order (MBPO's practice).
+    Shuffle,
+}
+
+/// Settings of a [`ProbabilisticEnsemble`]. `Default` = MBPO's model (the PETS/MBPO line p3
+/// builds on; p3 gives no sizes): 7 members, 5 elites, 4 hidden layers of 200 SiLU units, Adam
+/// 1e-3, log-variance bounded softly to `[-10, 0.5]` with learned bounds (PETS penalty
+/// `0.01 (Σ max − Σ min)`), bootstrapped members, random-member propagation with sampling.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EnsembleConfig {
+    /// Number of members `K`.
+    pub members: usize,
+    /// Number of elites used for prediction (`<= members`).
+    pub elites: usize,
+    /// Hidden widths of each member.
+    pub hidden: Vec<usize>,
+    /// Hidden activation.
+    pub activation: Activation,
+    /// Optimizer of each member.
+    pub optimizer: OptimizerConfig,
+    /// Initial lower bound of the log-variance (standardized units).
+    pub min_log_var: f32,
+    /// Initial upper bound of the log-variance (standardized units).
+    pub max_log_var: f32,
+    /// Learn the bounds with the PETS penalty (else they stay fixed).
+    pub learn_log_var_bounds: bool,
+    /// Bootstrap or shuffled members.
+    pub member_data: MemberData,
+    /// Propagation mode of `predict` (changeable with
+    /// [`ProbabilisticEnsemble::set_propagation`]).
+    pub propagation: Propagation,
+    /// In the member modes, return a sample of the member's Gaussian (PETS particles) rather
+    /// than its mean. Rewards are always the mean (p3 uses a deterministic reward estimate).
+    pub sample: bool,
+    /// Learn the reward as an extra Gaussian output.
+    pub learn_reward: bool,
+    /// Seed of the weight initialization.
+    pub seed: u64,
+}
+
+impl Default for EnsembleConfig {
+    fn default() -> Self {
+        Self {
+            members: 7,
+            elites: 5,
+            hidden: vec![200, 200, 200, 200],
+            activation: Activation::Silu,
+            optimizer: OptimizerConfig::adam(1e-3),
+            min_log_var: -10.0,
+            max_log_var: 0.5,
+            learn_log_var_bounds: true,
+            member_data: MemberData::Bootstrap,
+            propagation: Propagation::RandomMember,
+            sample: true,
+            learn_reward: true,
+            seed: 0,
+        }
+    }
+}
+
+/// One Gaussian MLP with its optimizers.
+#[derive(Debug, Clone)]
+struct Member {
+    net: Mlp,
+    opt: Opt,
+    head: GaussianHead,
+    bounds_opt: Opt,
+}
+
+/// A probabilistic ensemble: each member maps standardized `[s, a]` to a Gaussian over the
+/// standardized `[Δs, r]` (mean and bounded log-variance) and is trained by Gaussian negative
+/// log-likelihood (summed over outputs, averaged over the batch). After each fit the `elites`
+/// members with the lowest held-out mean squared error are the ones that predict.
+///
+/// `predict` follows [`EnsembleConfig::propagation`]; [`Prediction::variance`] is the chosen
+/// member's variance (member modes) or the mixture variance (expectation), in state units;
+/// [`Prediction::rewards`] is the mean reward. Fit reports give the mean over members of the
+/// per-element NLL (including `½ ln 2π`) on training and held-out rows, per epoch. Each fit
+/// continues from the current weights; a failed fit changes nothing.
+///
+/// ```
+/// use ndarray::array;
+/// use tandem_core::seeding::rng_from_seed;
+/// use tandem_models::{DynamicsModel, EnsembleConfig, FitConfig, ModelInput,
+///     ProbabilisticEnsemble, Propagation, TransitionsBuilder};
+///
+/// let mut b = TransitionsBuilder::new(1, 1);
+/// for i in 0..100 {
+///     let (s, a) = (i as f64 / 50.0 - 1.0, ((i * 7) % 10) as f64 / 5.0 - 1.0);
+///     b.push([s], &[a], &[s + 0.1 * a], -s * s, false).unwrap();
+/// }
+/// let cfg = EnsembleConfig { members: 3, elites: 2, hidden: vec![16], ..Default::default() };
+/// let mut ens = ProbabilisticEnsemble::new(1, 1, cfg).unwrap();
+/// ens.fit(&b.build(), &FitConfig { epochs: 5, batch_size: 32, ..Default::default() }).unwrap();
+/// ens.set_propagation(Propagation::Expectation);
+/// let (s, a) = (array![[0.0]], array![[0.5]]);
+/// let p = ens.predict(&ModelInput::new(s.view(), a.view()), &mut rng_from_seed(0)).unwrap();
+/// assert!(p.variance.is_some() && p.rewards.is_some());
+/// assert_eq!(ens.elites().len(), 2);
+/// ```
+#[derive(Debug, Clone)]
+pub struct ProbabilisticEnsemble {
+    cfg: EnsembleConfig,
+    state_dim: usize,
+    action_dim: usize,
+    members: Vec<Member>,
+    elites: Vec<usize>,
+    holdout_mse: Vec<f64>,
+    in_state: Standardizer,
+    in_action: Standardizer,
+    out_norm: Standardizer,
+    propagation: Propagation,
+    member_offset: usize,
+}
+
+impl ProbabilisticEnsemble {
+    /// An ensemble for the given widths, members initialized from independent streams of
+    /// `cfg.seed`.
+    pub fn new(
+        state_dim: usize,
+        action_dim: usize,
+        cfg: EnsembleConfig,
+    ) -> Result<Self, ModelError> {
+        if state_dim == 0 {
+            return Err(ModelError::Dim {
+                what: "state_dim (must be positive)".into(),
+                expected: 1,
+                got: 0,
+            });
+        }
+        if cfg.members == 0 || cfg.elites == 0 || cfg.elites > cfg.members {
+            return Err(ModelError::Other(format!(
+                "ensemble needs 1 <= elites <= members, got {} elites of {} members",
+                cfg.elites, cfg.members
+            )));
+        }
+        let dim = state_dim + usize::from(cfg.learn_reward);
+        let mut sizes = vec![state_dim + action_dim];
+        sizes.extend(&cfg.hidden);
+        sizes.push(2 * dim);
+        let seeds = SeedStream::new(cfg.seed);
+        let mut members = Vec::with_capacity(cfg.members);
+        for k in 0..cfg.members {
+            let net = Mlp::new(
+                MlpConfig::new(&sizes).hidden(cfg.activation),
+                &mut seeds.rng(&format!("member-{k}")),
+            )
+            .map_err(nn_other)?;
+            let head = GaussianHead::with_bounds(dim, cfg.min_log_var, cfg.max_log_var)
+                .map_err(nn_other)?;
+            members.push(Member {
+                opt: cfg.optimizer.build(net.num_params())?,
+                bounds_opt: cfg.optimizer.build(2 * dim)?,
+                net,
+                head,
+            });
+        }
+        Ok(Self {
+            elites: (0..cfg.elites).collect(),
+            holdout_mse: vec![f64::NAN; cfg.members],
+            in_state: Standardizer::identity(state_dim),
+            in_action: Standardizer::identity(action_dim),
+            out_norm: Standardizer::identity(dim),
+            propagation: cfg.propagation,
+            member_offset: 0,
+            state_dim,
+            action_dim,
+            members,
+            cfg,
+        })
+    }
+
+    /// Its settings.
+    pub fn config(&self) -> &EnsembleConfig {
+        &self.cfg
+    }
+
+    /// Indices of the elite members, best first.
+    pub fn elites(&self) -> &[usize] {
+        &self.elites
+    }
+
+    /// Each member's held-out mean squared error (standardized units) after the last fit.
+    pub fn member_holdout_mse(&self) -> &[f64] {
+        &self.holdout_mse
+    }
+
+    /// The propagation mode of `predict`.
+    pub fn propagation(&self) -> Propagation {
+        self.propagation
+    }
+
+    /// Sets the propagation mode of `predict`.
+    pub fn set_propagation(&mut self, p: Propagation) {
+        self.propagation = p;
+    }
+
+    /// Sets the row-to-member offset of [`Propagation::FixedMember`].
+    pub fn set_member_offset(&mut self, offset: usize) {
+        self.member_offset = offset;
+    }
+
+    /// Draws a new row-to-member offset for [`Propagation::FixedMember`].
+    pub fn resample_member_offset(&mut self, rng: &mut Rng) {
+        self.member_offset = rng.random_range(0..self.elites.len());
+    }
+
+    /// The network of member `k` (for checkpoints and inspection).
+    pub fn member_network(&self, k: usize) -> Option<&Mlp> {
+        self.members.get(k).map(|m| &m.net)
+    }
+
+    /// Width of the Gaussian output (`S`, plus one with the reward).
+    fn out_dim(&self) -> usize {
+        self.state_dim + usize::from(self.cfg.learn_reward)
+    }
+
+    /// Standardized means and log-variances of member `k` for the standardized inputs `x`.
+    fn member_forward(&self, k: usize, x: &[f32], b: usize) -> Result<GaussianOutput, ModelError> {
+        let m = &self.members[k];
+        let mut ws = m.net.workspace();
+        let out = m.net.forward(x, b, &mut ws).map_err(nn_other)?;
+        let mut g = GaussianOutput::default();
+        m.head.forward(out, b, &mut g).map_err(nn_other)?;
+        Ok(g)
+    }
+}
+
+/// Per-member training data and loss of one minibatch.
+struct Batch<'a> {
+    x: &'a [f32],
+    y: &'a [f32],
+    din: usize,
+    dim: usize,
+}
+
+impl Batch<'_> {
+    fn gather(&self, idx: &[usize], xb: &mut Vec<f32>, yb: &mut Vec<f32>) {
+        xb.clear();
+        yb.clear();
+        for &i in idx {
+            xb.extend_from_slice(&self.x[i * self.din..(i + 1) * self.din]);
+            yb.extend_from_slice(&self.y[i * self.dim..(i + 1) * self.dim]);
+        }
+    }
+}
+
+/// Held-out `(nll per element, mse per element)` of one member.
+fn member_eval(
+    m: &Member,
+    data: &Batch<'_>,
+    idx: &[usize],
+) -> Result<(f64, f64), tandem_nn::NnError> {
+    if idx.is_empty() {
+        return Ok((f64::NAN, f64::NAN));
+    }
+    let (mut xb, mut yb) = (Vec::new(), Vec::new());
+    let mut ws = m.net.workspace();
+    let mut g = GaussianOutput::default();
+    let (mut nll, mut mse) = (0.0, 0.0);
+    for chunk in idx.chunks(1024) {
+        data.gather(chunk, &mut xb, &mut yb);
+        let out = m.net.forward(&xb, chunk.len(), &mut ws)?;
+        m.head.forward(out, chunk.len(), &mut g)?;
+        let l = gaussian_nll(&g.mean, &g.log_var, &yb, None, None)?;
+        nll += f64::from(l) * chunk.len() as f64;
+        mse += g
+            .mean
+            .iter()
+            .zip(&yb)
+            .map(|(p, t)| f64::from((p - t) * (p - t)))
+            .sum::<f64>()
+            / data.dim as f64;
+    }
+    Ok((nll / idx.len() as f64, mse / idx.len() as f64))
+}
+
+impl DynamicsModel for ProbabilisticEnsemble {
+    fn state_dim(&self) -> usize {
+        self.state_dim
+    }
+
+    fn action_dim(&self) -> usize {
+        self.action_dim
+    }
+
+    fn predict(&self, input: &ModelInput<'_>, rng: &mut Rng) -> Result<Prediction, ModelError> {
+        let b = check_input(input, self.state_dim, self.action_dim, false)?;
+        let (s, dim) = (self.state_dim, self.out_dim());
+        let x = standardized_inputs(
+            &[
+                (input.states, &self.in_state),
+                (input.actions, &self.in_action),
+            ],
+            b,
+        );
+        let din = self.state_dim + self.action_dim;
+        let mut next = input.states.to_owned();
+        let mut var = Array2::zeros((b, s));
+        let mut rewards = self.cfg.learn_reward.then(|| Array1::zeros(b));
+        let e = self.elites.len();
+        match self.propagation {
+            Propagation::Expectation => {
+                // Mixture moments in original units.
+                let mut mean_acc = Array2::<f64>::zeros((b, dim));
+                let mut sq_acc = Array2::<f64>::zeros((b, dim));
+                let mut var_acc = Array2::<f64>::zeros((b, dim));
+                for &k in &self.elites {
+                    let g = self.member_forward(k, &x, b)?;
+                    for r in 0..b {
+                        for j in 0..dim {
+                            let mu = self.out_norm.invert(j, g.mean[r * dim + j]);
+                            let sd = self.out_norm.std[j];
+                            let v = f64::from(g.log_var[r * dim + j]).exp() * sd * sd;
+                            mean_acc[[r, j]] += mu;
+                            sq_acc[[r, j]] += mu * mu;
+                            var_acc[[r, j]] += v;
+                        }
+                    }
+                }
+                let ef = e as f64;
+                for r in 0..b {
+                    for j in 0..dim {
+                        let m = mean_acc[[r, j]] / ef;
+                        let v = var_acc[[r, j]] / ef + (sq_acc[[r, j]] / ef - m * m).max(0.0);
+                        if j < s {
+                            next[[r, j]] += m;
+                            var[[r, j]] = v;
+                        } else if let Some(rw) = rewards.as_mut() {
+                            rw[r] = m;
+                        }
+                    }
+                }
+            }
+            mode => {
+                let assign: Vec<usize> = match mode {
+                    Propagation::RandomMember => (0..b)
+                        .map(|_| self.elites[rng.random_range(0..e)])
+                        .collect(),
+                    _ => (0..b)
+                        .map(|r| self.elites[(r + self.member_offset) % e])
+                        .collect(),
+                };
+                let mut xb = Vec::new();
+                for &k in &self.elites {
+                    let rows: Vec<usize> = (0..b).filter(|&r| assign[r] == k).collect();
+                    if rows.is_empty() {
+                        continue;
+                    }
+                    xb.clear();
+                    for &r in &rows {
+                        xb.extend_from_slice(&x[r * din..(r + 1) * din]);
+                    }
+                    let g = self.member_forward(k, &xb, rows.len())?;
+                    for (q, &r) in rows.iter().enumerate() {
+                        for j in 0..dim {
+                            let mu = self.out_norm.invert(j, g.mean[q * dim + j]);
+                            let sd = self.out_norm.std[j];
+                            let v = f64::from(g.log_var[q * dim + j]).exp() * sd * sd;
+                            if j < s {
+                                let noise: f64 = if self.cfg.sample {
+                                    StandardNormal.sample(rng)
+                                } else {
+                                    0.0
+                                };
+                                next[[r, j]] += mu + v.sqrt() * noise;
+                                var[[r, j]] = v;
+                            } else if let Some(rw) = rewards.as_mut() {
+                                rw[r] = mu;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        Ok(Prediction {
+            next_states: next,
+            variance: Some(var),
+            rewards,
+            terminal_prob: None,
+        })
+    }
+
+    fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
+        let (s, a) = (self.state_dim, self.action_dim);
+        data.validate(s, a)?;
+        let n = data.len();
+        let dim = self.out_dim();
+        let din = s + a;
+        let seeds = SeedStream::new(cfg.seed);
+        let mut split_rng = seeds.rng("holdout");
+        let (train, holdout) = holdout_indices(n, cfg.holdout_fraction, &mut split_rng);
+        let mut targets = Array2::zeros((n, dim));
+        for r in 0..n {
+            for j in 0..s {
+                targets[[r, j]] = data.next_states[[r, j]] - data.states[[r, j]];
+            }
+            if self.cfg.learn_reward {
+                targets[[r, s]] = data.rewards[r];
+            }
+        }
+        let in_state = Standardizer::fit(data.states.view(), &train);
+        let in_action = Standardizer::fit(data.actions.view(), &train);
+        let out_norm = Standardizer::fit(targets.view(), &train);
+        let x = standardized_inputs(
+            &[
+                (data.states.view(), &in_state),
+                (data.actions.view(), &in_action),
+            ],
+            n,
+        );
+        let y = standardized_inputs(&[(targets.view(), &out_norm)], n);
+        let batch_data = Batch {
+            x: &x,
+            y: &y,
+            din,
+            dim,
+        };
+
+        let mut members = self.members.clone();
+        let mut rngs: Vec<Rng> = (0..members.len())
+            .map(|k| seeds.rng(&format!("member-{k}")))
+            .collect();
+        let member_rows: Vec<Vec<usize>> = rngs
+            .iter_mut()
+            .map(|rng| match self.cfg.member_data {
+                MemberData::Bootstrap => (0..train.len())
+                    .map(|_| train[rng.random_range(0..train.len())])
+                    .collect(),
+                MemberData::Shuffle => train.clone(),
+            })
+            .collect();
+
+        let bs = cfg.batch_size.max(1);
+        let mut report = FitReport::default();
+        let (mut xb, mut yb) = (Vec::new(), Vec::new());
+        let mut g = GaussianOutput::default();
+        let mut d_mean = Vec::new();
+        let mut d_lv = Vec::new();
+        let mut d_out = Vec::new();
+        let mut d_bounds = vec![0.0f32; 2 * dim];
+        let mut grads = Vec::new();
+        let mut hold_mse = vec![f64::NAN; members.len()];
+        for epoch in 0..cfg.epochs {
+            let mut epoch_train = 0.0;
+            let mut epoch_hold = 0.0;
+            for (k, m) in members.iter_mut().enumerate() {
+                let mut order = member_rows[k].clone();
+                order.shuffle(&mut rngs[k]);
+                let mut ws = m.net.workspace();
+                grads.resize(m.net.num_params(), 0.0);
+                let mut total = 0.0;
+                for (step, idx) in order.chunks(bs).enumerate() {
+                    let nb = idx.len();
+                    batch_data.gather(idx, &mut xb, &mut yb);
+                    let out = m
+                        .net
+                        .forward_train(&xb, nb, &mut ws, None)
+                        .map_err(|e| nn_train(e, epoch, step))?;
+                    m.head
+                        .forward(out, nb, &mut g)
+                        .map_err(|e| nn_train(e, epoch, step))?;
+                    d_mean.resize(nb * dim, 0.0);
+                    d_lv.resize(nb * dim, 0.0);
+                    let nll =
+                        gaussian_nll(&g.mean, &g.log_var, &yb, Some(&mut d_mean), Some(&mut d_lv))
+                            .map_err(|e| nn_train(e, epoch, step))?;
+                    if !nll.is_finite() {
+                        return Err(ModelError::Diverged { epoch, step });
+                    }
+                    total += f64::from(nll) * nb as f64;
+                    // Sum over outputs, mean over the batch (gaussian_nll averages both).
+                    let scale = dim as f32;
+                    d_mean.iter_mut().for_each(|v| *v *= scale);
+                    d_lv.iter_mut().for_each(|v| *v *= scale);
+                    d_out.resize(nb * 2 * dim, 0.0);
+                    m.head
+                        .backward(&g, &d_mean, &d_lv, &mut d_out, Some(&mut d_bounds))
+                        .map_err(|e| nn_train(e, epoch, step))?;
+                    m.net
+                        .backward(&mut ws, &d_out, Some(&mut grads), None)
+                        .map_err(|e| nn_train(e, epoch, step))?;
+                    m.opt
+                        .step(m.net.params_mut(), &grads)
+                        .map_err(|e| nn_train(e, epoch, step))?;
+                    if self.cfg.learn_log_var_bounds {
+                        // PETS penalty 0.01 (Σ max − Σ min).
+                        for (j, db) in d_bounds.iter_mut().enumerate() {
+                            *db += if j < dim { -0.01 } else { 0.01 };
+                        }
+                        m.bounds_opt
+                            .step(m.head.bounds_mut(), &d_bounds)
+                            .map_err(|e| nn_train(e, epoch, step))?;
+                    }
+                }
+                epoch_train += total / order.len().max(1) as f64;
+                if !holdout.is_empty() {
+                    let (nll, mse) =
+                        member_eval(m, &batch_data, &holdout).map_err(|e| nn_train(e, epoch, 0))?;
+                    if !nll.is_finite() {
+                        return Err(ModelError::Diverged { epoch, step: 0 });
+                    }
+                    epoch_hold += nll;
+                    hold_mse[k] = mse;
+                }
+            }
+            let kf = members.len() as f64;
+            report.train_loss.push(epoch_train / kf);
+            if !holdout.is_empty() {
+                report.holdout_loss.push(epoch_hold / kf);
+            }
+        }
+        // Elites: lowest held-out MSE (training MSE without a holdout).
+        if holdout.is_empty() {
+            for (k, m) in members.iter().enumerate() {
+                hold_mse[k] = member_eval(m, &batch_data, &train).map_err(nn_other)?.1;
+            }
+        }
+        let mut order: Vec<usize> = (0..members.len()).collect();
+        order.sort_by(|&i, &j| hold_mse[i].total_cmp(&hold_mse[j]));
+        order.truncate(self.cfg.elites);
+
+        self.members = members;
+        self.elites = order;
+        self.holdout_mse = hold_mse;
+        self.in_state = in_state;
+        self.in_action = in_action;
+        self.out_norm = out_norm;
+        Ok(report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{MlpModel, MlpModelConfig, TransitionsBuilder};
+    use tandem_core::seeding::rng_from_seed;
+
+    /// `s' = s + 0.1 a + 0.1 sin(2 s) + σ(s) ε`, `σ(s) = 0.01 + 0.05 (s + 1)`, s, a in [-1, 1].
+    fn noisy(n: usize, seed: u64) -> Transitions {
+        let mut rng = rng_from_seed(seed);
+        let mut b = TransitionsBuilder::new(1, 1);
+        for _ in 0..n {
+            let s: f64 = rng.random_range(-1.0..1.0);
+            let a: f64 = rng.random_range(-1.0..1.0);
+            let e: f64 = StandardNormal.sample(&mut rng);
+            let next = s + 0.1 * a + 0.1 * (2.0 * s).sin() + (0.01 + 0.05 * (s + 1.0)) * e;
+            b.push([s], &[a], &[next], s, false).unwrap();
+            b.end_episode();
+        }
+        b.build()
+    }
+
+    fn small(seed: u64) -> EnsembleConfig {
+        EnsembleConfig {
+            members: 5,
+            elites: 4,
+            hidden: vec![32, 32],
+            optimizer: OptimizerConfig::adam(3e-3),
+            seed,
+            ..EnsembleConfig::default()
+        }
+    }
+
+    fn gauss_nll(mean: f64, var: f64, y: f64) -> f64 {
+        0.5 * ((y - mean).powi(2) / var + var.ln() + (2.0 * std::f64::consts::PI).ln())
+    }
+
+    #[test]
+    fn heldout_nll_beats_a_fixed_variance_model_and_variance_grows_off_data() {
+        let train = noisy(2000, 1);
+        let test = noisy(1000, 2);
+        let fit = FitConfig {
+            epochs: 40,
+            batch_size: 64,
+            holdout_fraction: 0.1,
+            seed: 0,
+        };
+        let mut ens = ProbabilisticEnsemble::new(1, 1, small(0)).unwrap();
+        let rep = ens.fit(&train, &fit).unwrap();
+        assert!(rep.holdout_loss.last() < rep.holdout_loss.first());
+        ens.set_propagation(Propagation::Expectation);
+        let mut rng = rng_from_seed(0);
+        let p = ens
+            .predict(
+                &ModelInput::new(test.states.view(), test.actions.view()),
+                &mut rng,
+            )
+            .unwrap();
+        let var = p.variance.unwrap();
+        let nll_ens: f64 = (0..test.len())
+            .map(|i| gauss_nll(p.next_states[[i, 0]], var[[i, 0]], test.next_states[[i, 0]]))
+            .sum::<f64>()
+            / test.len() as f64;
+
+        // Fixed-variance baseline: a deterministic MLP and the variance of its training residuals.
+        let mut det = MlpModel::new(
+            1,
+            1,
+            MlpModelConfig {
+                hidden: vec![32, 32],
+                optimizer: OptimizerConfig::adam(3e-3),
+                learn_reward: false,
+                learn_termination: false,
+                ..MlpModelConfig::default()
+            },
+        )
+        .unwrap();
+        det.fit(&train, &fit).unwrap();
+        let mut resid = |d: &Transitions| {
+            let q = det
+                .predict(
+                    &ModelInput::new(d.states.view(), d.actions.view()),
+                    &mut rng,
+                )
+                .unwrap();
+            q.next_states.column(0).to_owned() - d.next_states.column(0)
+        };
+        let v0 = resid(&train).mapv(|e| e * e).mean().unwrap();
+        let r = resid(&test);
+        let pt = det
+            .predict(
+                &ModelInput::new(test.states.view(), test.actions.view()),
+                &mut rng,
+            )
+            .unwrap();
+        let nll_fixed: f64 = (0..test.len())
+            .map(|i| gauss_nll(pt.next_states[[i, 0]], v0, test.next_states[[i, 0]]))
+            .sum::<f64>()
+            / test.len() as f64;
+        eprintln!(
+            "held-out NLL: ensemble {nll_ens:.4}, fixed variance {nll_fixed:.4} (residual rms {:.4})",
+            r.mapv(|e| e * e).mean().unwrap().sqrt()
+        );
+        assert!(
+            nll_ens < nll_fixed - 0.1,
+            "ensemble {nll_ens}, fixed {nll_fixed}"
+        );
+
+        // Predicted standard deviation follows σ(s) on the data ...
+        let q = |s: f64| {
+            let (st, ac) = (ndarray::array![[s]], ndarray::array![[0.0]]);
+            ens.predict(
+                &ModelInput::new(st.view(), ac.view()),
+                &mut rng_from_seed(0),
+            )
+            .unwrap()
+            .variance
+            .unwrap()[[0, 0]]
+        };
+        let (lo, hi) = (q(-0.9).sqrt(), q(0.9).sqrt());
+        eprintln!("predicted std at s=-0.9: {lo:.4} (true 0.015), at s=0.9: {hi:.4} (true 0.105)");
+        assert!(hi > 3.0 * lo, "std at -0.9 {lo}, at 0.9 {hi}");
+        // ... and grows off the data (epistemic disagreement and extrapolated noise).
+        let (far_lo, far_hi) = (q(-4.0).sqrt(), q(4.0).sqrt());
+        eprintln!("predicted std off the data: {far_lo:.4} at s=-4, {far_hi:.4} at s=4");
+        assert!(far_lo > 3.0 * lo, "std at -4 {far_lo}, at -0.9 {lo}");
+        assert!(far_hi > 1.2 * hi, "std at 4 {far_hi}, at 0.9 {hi}");
+    }
+
+    #[test]
+    fn propagation_modes_and_elites() {
+        let data = noisy(400, 3);
+        let mut ens = ProbabilisticEnsemble::new(1, 1, small(1)).unwrap();
+        let fit = FitConfig {
+            epochs: 5,
+            batch_size: 64,
+            holdout_fraction: 0.2,
+            seed: 0,
+        };
+        ens.fit(&data, &fit).unwrap();
+        // Elites are the members with the lowest held-out MSE, best first.
+        let mse = ens.member_holdout_mse().to_vec();
+        let e = ens.elites().to_vec();
+        assert_eq!(e.len(), 4);
+        assert!(e.windows(2).all(|w| mse[w[0]] <= mse[w[1]]));
+        let worst = (0..5).find(|k| !e.contains(k)).unwrap();
+        assert!(e.iter().all(|&k| mse[k] <= mse[worst]));
+
+        let s = ndarray::Array2::from_elem((8, 1), 0.2);
+        let a = ndarray::Array2::from_elem((8, 1), 0.1);
+        let input = ModelInput::new(s.view(), a.view());
+        // Fixed member without sampling: row i and row i + E use the same member; a repeat call
+        // gives the same numbers.
+        ens.cfg.sample = false;
+        ens.set_propagation(Propagation::FixedMember);
+        let p1 = ens.predict(&input, &mut rng_from_seed(1)).unwrap();
+        let p2 = ens.predict(&input, &mut rng_from_seed(2)).unwrap();
+        assert_eq!(p1, p2);
+        for r in 0..4 {
+            assert_eq!(p1.next_states[[r, 0]], p1.next_states[[r + 4, 0]]);
+        }
+        let distinct: std::collections::BTreeSet<u64> =
+            (0..4).map(|r| p1.next_states[[r, 0]].to_bits()).collect();
+        assert_eq!(distinct.len(), 4, "four elites, four different predictions");
+        // Random member: rows draw members from the rng.
+        ens.set_propagation(Propagation::RandomMember);
+        let p3 = ens.predict(&input, &mut rng_from_seed(3)).unwrap();
+        assert!(p3
+            .next_states
+            .iter()
+            .all(|v| distinct.contains(&v.to_bits())));
+        // Expectation: mean of the member means, deterministic.
+        ens.set_propagation(Propagation::Expectation);
+        let pe = ens.predict(&input, &mut rng_from_seed(4)).unwrap();
+        let mean: f64 = (0..4).map(|r| p1.next_states[[r, 0]]).sum::<f64>() / 4.0;
+        assert!((pe.next_states[[0, 0]] - mean).abs() < 1e-9);
+        // Sampling adds noise of the member's variance.
+        ens.cfg.sample = true;
+        ens.set_propagation(Propagation::FixedMember);
+        let ps = ens.predict(&input, &mut rng_from_seed(5)).unwrap();
+        assert!((0..8).any(|r| ps.next_states[[r, 0]] != p1.next_states[[r, 0]]));
+    }
+
+    #[test]
+    fn same_seed_same_fit_and_failures_change_nothing() {
+        let data = noisy(300, 4);
+        let fit = FitConfig {
+            epochs: 3,
+            batch_size: 32,
+            holdout_fraction: 0.2,
+            seed: 5,
+        };
+        let run = |seed: u64| {
+            let mut e = ProbabilisticEnsemble::new(1, 1, small(seed)).unwrap();
+            let r = e.fit(&data, &fit).unwrap();
+            let p = e
+                .predict(
+                    &ModelInput::new(data.states.view(), data.actions.view()),
+                    &mut rng_from_seed(0),
+                )
+                .unwrap();
+            (e.member_network(2).unwrap().params().to_vec(), r, p)
+        };
+        let (a, ra, pa) = run(3);
+        let (b, rb, pb) = run(3);
+        assert_eq!((a.clone(), ra), (b, rb));
+        assert_eq!(pa, pb);
+        assert_ne!(a, run(4).0);
+
+        let cfg = EnsembleConfig {
+            optimizer: OptimizerConfig::sgd(1e12),
+            ..small(0)
+        };
+        let mut e = ProbabilisticEnsemble::new(1, 1, cfg).unwrap();
+        let before = e.member_network(0).unwrap().params().to_vec();
+        assert!(matches!(
+            e.fit(
+                &data,
+                &FitConfig {
+                    epochs: 20,
+                    ..fit.clone()
+                }
+            ),
+            Err(ModelError::Diverged { .. })
+        ));
+        assert_eq!(e.member_network(0).unwrap().params(), &before[..]);
+        let mut bad = data.clone();
+        bad.rewards[9] = f64::NAN;
+        assert_eq!(
+            e.fit(&bad, &fit),
+            Err(ModelError::NonFinite {
+                what: "rewards".into(),
+                row: 9
+            })
+        );
+    }
+}
