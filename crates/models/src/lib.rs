@@ -1,9 +1,95 @@
-//! Learned dynamics models: the [`DynamicsModel`] trait, transition datasets and fit reports, and
-//! the models the papers use (MLP, residual over a known plant, incremental, probabilistic
-//! ensemble, time-varying linear-Gaussian fit).
+//! Dynamics models: the [`DynamicsModel`] trait, the transition data they are fitted on, and the
+//! models the papers use.
 //!
-//! Dependencies: `tandem-dynamics` (the plants residual models wrap), `tandem-nn` (networks),
-//! `ndarray` (batched data), `nalgebra` (plant states), `rand`, `serde`, `thiserror`.
+//! What this crate owns:
+//! * [`DynamicsModel`]: batched one-step prediction ([`ModelInput`] → [`Prediction`]: next state,
+//!   and where the model has them its variance, reward and termination probability) and `fit` on
+//!   [`Transitions`] (which keep each transition's previous action: p1's one-step-back data),
+//!   returning a [`FitReport`] of training and held-out loss per epoch. Object-safe: planners
+//!   take `&dyn DynamicsModel`.
+//! * [`PlantModel`]: any known [`tandem_dynamics::Plant`] as a deterministic model, so "plan on
+//!   the true physics" and "plan on a learned model" are the same call.
+//! * The learned models, each with a serde `Config` whose `Default` is its paper's setting:
+//!   [`MlpModel`] (p2 eq. 1: state change, reward, termination), [`ResidualModel`] (p0:
+//!   `f_idl(s, a) + d_θ(s, a)` over any plant), [`IncrementalModel`] (p1 eqs. 4–6:
+//!   `s_t + L_θ Δa_t`), [`ProbabilisticEnsemble`] (p3 / PETS / MBPO: Gaussian members, elites,
+//!   three [`Propagation`] modes).
+//! * [`TvlgFit`]: time-varying linear-Gaussian dynamics from trajectories with a GMM
+//!   normal-inverse-Wishart prior (p4 / guided policy search). Time-varying, so not a
+//!   `DynamicsModel`: it returns [`TvlgDynamics`] for LQR-type trajectory optimizers.
+//! * Data helpers: [`TransitionsBuilder`], [`Transitions::from_episode`],
+//!   [`Transitions::validate`], holdout splits.
+//!
+//! Conventions shared by the learned models: inputs and targets are standardized inside the model
+//! (statistics of the latest fit's training rows); networks are `tandem_nn::Mlp` in `f32`, data
+//! and predictions `f64`. Weight initialization comes from the config's `seed`, shuffling,
+//! dropout, bootstraps and the holdout split from [`FitConfig::seed`]: the same seeds give
+//! bit-identical fits. Each fit continues from the current weights and optimizer state. Bad data
+//! (wrong widths, empty, non-finite: the array and row are named) and a loss that turns
+//! non-finite ([`ModelError::Diverged`], with epoch and step) are errors, and a failed fit leaves
+//! the model exactly as it was.
+//!
+//! # Example: p0's difference model over a known plant
+//!
+//! ```
+//! use nalgebra::{dvector, DVector};
+//! use ndarray::array;
+//! use tandem_core::seeding::rng_from_seed;
+//! use tandem_dynamics::Plant;
+//! use tandem_models::{
+//!     DynamicsModel, FitConfig, ModelInput, OptimizerConfig, PlantModel, ResidualModel,
+//!     ResidualModelConfig, TransitionsBuilder,
+//! };
+//!
+//! /// `x' = x + 0.1 u`, with a gain the real system does not quite have.
+//! struct Integrator(f64);
+//! impl Plant for Integrator {
+//!     fn state_dim(&self) -> usize { 1 }
+//!     fn action_dim(&self) -> usize { 1 }
+//!     fn dt(&self) -> f64 { 0.1 }
+//!     fn step(&self, x: &DVector<f64>, u: &DVector<f64>) -> DVector<f64> {
+//!         dvector![x[0] + self.0 * u[0]]
+//!     }
+//! }
+//!
+//! // Real transitions from the "true" system (gain 0.13).
+//! let real = Integrator(0.13);
+//! let mut data = TransitionsBuilder::new(1, 1);
+//! for i in 0..400 {
+//!     let (x, u) = ((i % 20) as f64 / 10.0 - 1.0, (i / 20) as f64 / 10.0 - 1.0);
+//!     let next = real.step(&dvector![x], &dvector![u]);
+//!     data.push([x], &[u], next.as_slice(), 0.0, false).unwrap();
+//! }
+//! let data = data.build();
+//!
+//! let cfg = ResidualModelConfig {
+//!     hidden: vec![32, 32],
+//!     dropout: 0.0,
+//!     optimizer: OptimizerConfig::adam(3e-3),
+//!     ..ResidualModelConfig::default()
+//! };
+//! let mut model = ResidualModel::new(Integrator(0.1), cfg).unwrap();
+//! let report = model
+//!     .fit(&data, &FitConfig { epochs: 100, batch_size: 32, ..FitConfig::default() })
+//!     .unwrap();
+//! assert_eq!(report.train_loss.len(), 100);
+//!
+//! // A planner sees only `&dyn DynamicsModel`: the idealized plant and the corrected model are
+//! // interchangeable.
+//! let idealized = PlantModel::new(Integrator(0.1));
+//! let (x, u) = (array![[0.0]], array![[1.0]]);
+//! let input = ModelInput::new(x.view(), u.view());
+//! let mut rng = rng_from_seed(0);
+//! for (m, expected) in [(&idealized as &dyn DynamicsModel, 0.1), (&model, 0.13)] {
+//!     let p = m.predict(&input, &mut rng).unwrap();
+//!     assert!((p.next_states[[0, 0]] - expected).abs() < 0.005);
+//! }
+//! ```
+//!
+//! Dependencies: `tandem-dynamics` (the plants residual and plant models wrap), `tandem-nn`
+//! (networks and optimizers), `ndarray` (batched data), `nalgebra` (plant states and the small
+//! matrices of the TVLG fit and its GMM: at most `2 dX + dU` square, where faer has no advantage,
+//! so faer is not used), `rand`/`rand_distr` (seeded sampling), `serde`, `thiserror`.
 
 mod data;
 mod ensemble;

@@ -105,6 +105,7 @@ pub struct Prediction {
 
 /// Settings of one fit.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct FitConfig {
     /// Passes over the training data.
     pub epochs: usize,
@@ -138,6 +139,15 @@ pub struct FitReport {
 
 /// A dynamics model: batched prediction of the next state (and, where learned, its variance,
 /// the reward and termination), fitted on transitions.
+///
+/// * Rows of a [`ModelInput`] are independent samples (a planner's population); a model that
+///   needs the previous action (the incremental model) reads [`ModelInput::prev_actions`] and
+///   returns [`ModelError::MissingInput`] without it; others ignore it.
+/// * Stochastic behaviour (the ensemble's member choice and sampling) draws from the `rng`
+///   argument only; its mode is a setting of the model
+///   (`ProbabilisticEnsemble::set_propagation`), so planners stay model-agnostic.
+/// * Object-safe: planners and pipelines hold `&dyn DynamicsModel` or `Box<dyn DynamicsModel>`
+///   (which implements the trait too).
 pub trait DynamicsModel {
     /// Length of the state vector.
     fn state_dim(&self) -> usize;
@@ -152,3 +162,24 @@ pub trait DynamicsModel {
     /// Fits the model on `data`. On error the model is left as it was.
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError>;
 }
+
+impl<M: DynamicsModel + ?Sized> DynamicsModel for Box<M> {
+    fn state_dim(&self) -> usize {
+        (**self).state_dim()
+    }
+
+    fn action_dim(&self) -> usize {
+        (**self).action_dim()
+    }
+
+    fn predict(&self, input: &ModelInput<'_>, rng: &mut Rng) -> Result<Prediction, ModelError> {
+        (**self).predict(input, rng)
+    }
+
+    fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
+        (**self).fit(data, cfg)
+    }
+}
+
+/// Compile-time check that the trait stays object-safe.
+const _: Option<&dyn DynamicsModel> = None;
