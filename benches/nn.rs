@@ -8,8 +8,8 @@ use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use rand::Rng as _;
 use tandem_core::seeding::{rng_from_seed, Rng};
 use tandem_nn::{
-    AdaGrad, AdaGradConfig, Adam, AdamConfig, Mlp, MlpConfig, MlpWorkspace, Optimizer,
-    TanhGaussian, TanhGaussianSample,
+    fill_standard_normal, AdaGrad, AdaGradConfig, Adam, AdamConfig, Mlp, MlpConfig, MlpWorkspace,
+    Optimizer, TanhGaussian, TanhGaussianSample,
 };
 
 fn random(n: usize, rng: &mut Rng) -> Vec<f32> {
@@ -351,11 +351,187 @@ impl Sac {
     }
 }
 
+/// The same SAC update with the two critics' work on two threads (`tandem_nn::join`): target
+/// critics, critic steps and the actor-loss passes through each critic run side by side; the
+/// policy samples at `s` and `s'` too. Noise is drawn up front in a fixed order, so the numbers do
+/// not depend on thread timing.
+struct SacPar {
+    inner: Sac,
+    ws_actor_next: MlpWorkspace,
+    ws_target2: MlpWorkspace,
+    eps: Vec<f32>,
+    eps_next: Vec<f32>,
+    sa_next: Vec<f32>,
+    sa_pi: Vec<f32>,
+    q_next: [Vec<f32>; 2],
+    q_pi: [Vec<f32>; 2],
+    d_q2: [Vec<f32>; 2],
+    grads_critic2: Vec<f32>,
+}
+
+type CriticRefs<'a> = (
+    &'a mut Mlp,
+    &'a mut Adam,
+    &'a mut MlpWorkspace,
+    &'a mut Vec<f32>,
+    &'a mut Vec<f32>,
+    &'a mut Vec<f32>,
+);
+
+impl SacPar {
+    fn new(seed: u64) -> Self {
+        let inner = Sac::new(seed);
+        let (b, w) = (inner.batch, inner.obs_dim + inner.act_dim);
+        Self {
+            ws_actor_next: MlpWorkspace::default(),
+            ws_target2: MlpWorkspace::default(),
+            eps: vec![0.0; b * inner.act_dim],
+            eps_next: vec![0.0; b * inner.act_dim],
+            sa_next: vec![0.0; b * w],
+            sa_pi: vec![0.0; b * w],
+            q_next: [vec![0.0; b], vec![0.0; b]],
+            q_pi: [vec![0.0; b], vec![0.0; b]],
+            d_q2: [vec![0.0; b], vec![0.0; b]],
+            grads_critic2: vec![0.0; inner.grads_critic.len()],
+            inner,
+        }
+    }
+
+    fn update(&mut self) {
+        let Self {
+            inner: s,
+            ws_actor_next,
+            ws_target2,
+            eps,
+            eps_next,
+            sa_next,
+            sa_pi,
+            q_next,
+            q_pi,
+            d_q2,
+            grads_critic2,
+        } = self;
+        let (b, od, ad) = (s.batch, s.obs_dim, s.act_dim);
+        let bf = b as f32;
+        fill_standard_normal(&mut s.rng, eps);
+        fill_standard_normal(&mut s.rng, eps_next);
+        // Policy at s (training pass) and at s' (inference) side by side.
+        {
+            let (actor, head) = (&s.actor, s.head);
+            let (ws_a, pi, pi_next) = (&mut s.ws_actor, &mut s.pi, &mut s.pi_next);
+            let (obs, next_obs, eps, eps_next) = (&s.obs, &s.next_obs, &*eps, &*eps_next);
+            tandem_nn::join(
+                || {
+                    let out = actor.forward_train(obs, b, ws_a, None).unwrap();
+                    head.sample_with_noise(out, b, eps, pi).unwrap();
+                },
+                || {
+                    let out = actor.forward(next_obs, b, ws_actor_next).unwrap();
+                    head.sample_with_noise(out, b, eps_next, pi_next).unwrap();
+                },
+            );
+        }
+        let alpha = s.log_alpha.exp();
+        let g_log_alpha = -s
+            .pi
+            .log_prob
+            .iter()
+            .map(|lp| lp + s.target_entropy)
+            .sum::<f32>()
+            / bf;
+        let mut la = [s.log_alpha];
+        s.alpha_opt.step(&mut la, &[g_log_alpha]).unwrap();
+        s.log_alpha = la[0];
+
+        concat_rows(&s.next_obs, od, &s.pi_next.action, ad, sa_next);
+        {
+            let [t0, t1] = &s.targets;
+            let [q0, q1] = q_next;
+            let (w0, w1) = (&mut s.ws_target, ws_target2);
+            let sa_next = &*sa_next;
+            tandem_nn::join(
+                || q0.copy_from_slice(t0.forward(sa_next, b, w0).unwrap()),
+                || q1.copy_from_slice(t1.forward(sa_next, b, w1).unwrap()),
+            );
+        }
+        for i in 0..b {
+            let soft = q_next[0][i].min(q_next[1][i]) - alpha * s.pi_next.log_prob[i];
+            s.q_target[i] = s.rew[i] + 0.99 * (1.0 - s.done[i]) * soft;
+        }
+
+        // Critic steps, then each critic's forward at (s, a_pi), on two threads.
+        concat_rows(&s.obs, od, &s.act, ad, &mut s.sa);
+        concat_rows(&s.obs, od, &s.pi.action, ad, sa_pi);
+        {
+            let [c0, c1] = &mut s.critics;
+            let [o0, o1] = &mut s.critic_opts;
+            let [w0, w1] = &mut s.ws_critic;
+            let [p0, p1] = q_pi;
+            let [d0, d1] = d_q2;
+            let (g0, g1) = (&mut s.grads_critic, grads_critic2);
+            let (sa, sa_pi, y) = (&s.sa, &*sa_pi, &s.q_target);
+            let critic_job = |(c, o, w, g, d, qp): CriticRefs| {
+                let q = c.forward_train(sa, b, w, None).unwrap();
+                for ((dv, qv), yv) in d.iter_mut().zip(q).zip(y) {
+                    *dv = (qv - yv) / bf;
+                }
+                c.backward(w, d, Some(g), None).unwrap();
+                o.step(c.params_mut(), g).unwrap();
+                qp.copy_from_slice(c.forward_train(sa_pi, b, w, None).unwrap());
+            };
+            tandem_nn::join(
+                || critic_job((c0, o0, w0, g0, d0, p0)),
+                || critic_job((c1, o1, w1, g1, d1, p1)),
+            );
+        }
+        for i in 0..b {
+            let first = q_pi[0][i] <= q_pi[1][i];
+            d_q2[0][i] = if first { -1.0 / bf } else { 0.0 };
+            d_q2[1][i] = if first { 0.0 } else { -1.0 / bf };
+        }
+        {
+            let [c0, c1] = &s.critics;
+            let [w0, w1] = &mut s.ws_critic;
+            let [x0, x1] = &mut s.d_sa;
+            let [d0, d1] = &*d_q2;
+            tandem_nn::join(
+                || c0.backward(w0, d0, None, Some(x0)).unwrap(),
+                || c1.backward(w1, d1, None, Some(x1)).unwrap(),
+            );
+        }
+        for i in 0..b {
+            for j in 0..ad {
+                let c = i * (od + ad) + od + j;
+                s.d_act[i * ad + j] = s.d_sa[0][c] + s.d_sa[1][c];
+            }
+        }
+        s.d_logp.fill(alpha / bf);
+        s.head
+            .backward(&s.pi, Some(&s.d_act), Some(&s.d_logp), &mut s.d_head)
+            .unwrap();
+        s.actor
+            .backward(&mut s.ws_actor, &s.d_head, Some(&mut s.grads_actor), None)
+            .unwrap();
+        s.actor_opt
+            .step(s.actor.params_mut(), &s.grads_actor)
+            .unwrap();
+        for k in 0..2 {
+            tandem_nn::polyak_update(s.targets[k].params_mut(), s.critics[k].params(), 0.005)
+                .unwrap();
+        }
+    }
+}
+
 fn sac_update(c: &mut Criterion) {
     let mut sac = Sac::new(7);
     c.bench_function("sac update pendulum-shaped b256 2x256", |b| {
         b.iter(|| sac.update())
     });
+    let mut par = SacPar::new(7);
+    c.bench_function(
+        "sac update pendulum-shaped b256 2x256, critics on 2 threads",
+        |b| b.iter(|| par.update()),
+    );
 }
 
 criterion_group!(

@@ -30,6 +30,15 @@ pub fn log1m_tanh_sq(u: f32) -> f32 {
 
 const HALF_LN_2PI: f32 = 0.918_938_5;
 
+/// Fills `out` with standard-normal draws from `rng`, in order (the noise [`TanhGaussian::sample`]
+/// uses; draw it yourself and call [`TanhGaussian::sample_with_noise`] to fix the order of draws
+/// independently of how the work is scheduled).
+pub fn fill_standard_normal(rng: &mut Rng, out: &mut [f32]) {
+    for e in out.iter_mut() {
+        *e = rng.sample(rand_distr::StandardNormal);
+    }
+}
+
 /// Mean and log-variance from a network output of `2·dim` values per sample: the first `dim` are
 /// the mean, the next `dim` a raw log-variance that is softly bounded to `[min, max]` as in PETS:
 /// `lv = max - softplus(max - raw)`, then `lv = min + softplus(lv - min)` (soft: `lv` can exceed
@@ -224,9 +233,7 @@ impl TanhGaussian {
         s: &mut TanhGaussianSample,
     ) -> Result<()> {
         s.eps.resize(batch * self.dim, 0.0);
-        for e in s.eps.iter_mut() {
-            *e = rng.sample(rand_distr::StandardNormal);
-        }
+        fill_standard_normal(rng, &mut s.eps);
         self.fill(net_out, batch, s)
     }
 

@@ -12,7 +12,9 @@ static GEMM_THREADS: AtomicUsize = AtomicUsize::new(1);
 ///
 /// On the 2-core machines this project targets, one thread per training loop was measured to be
 /// best (`notes/candle-on-cpu.md`: a second thread never helped and collapses when another process
-/// is busy). Values above 1 use `gemm`'s rayon parallelism.
+/// is busy) for training-sized products; large batched predictions (a planner's population of
+/// 500 through 400-wide layers) can gain from 2. Values above 1 use `gemm`'s rayon parallelism
+/// for products of at least 2^21 multiply-adds. Global to the process.
 pub fn set_gemm_threads(n: usize) {
     GEMM_THREADS.store(n.max(1), Ordering::Relaxed);
 }
@@ -22,11 +24,16 @@ pub fn gemm_threads() -> usize {
     GEMM_THREADS.load(Ordering::Relaxed)
 }
 
+/// Products smaller than this many multiply-adds always run on one thread: below it, waking a
+/// second thread costs more than it saves (a 256×256×256 product is 16.8M).
+const PARALLEL_MIN_MACS: usize = 1 << 21;
+
 #[inline]
-fn parallelism() -> gemm::Parallelism {
+fn parallelism(m: usize, n: usize, k: usize) -> gemm::Parallelism {
     match GEMM_THREADS.load(Ordering::Relaxed) {
         0 | 1 => gemm::Parallelism::None,
-        n => gemm::Parallelism::Rayon(n),
+        _ if m * n * k < PARALLEL_MIN_MACS => gemm::Parallelism::None,
+        t => gemm::Parallelism::Rayon(t),
     }
 }
 
@@ -87,7 +94,7 @@ fn gemm_raw(
             false,
             false,
             false,
-            parallelism(),
+            parallelism(m, n, k),
         );
     }
 }
@@ -201,6 +208,24 @@ mod tests {
             }
         }
         c
+    }
+
+    #[test]
+    fn two_thread_products_match_naive_loops() {
+        // Large enough to cross the parallel threshold. (Only products this large are affected by
+        // the global setting, and no other test uses one.)
+        let (m, n, k) = (256, 160, 128);
+        let a: Vec<f32> = (0..m * k).map(|i| (i as f32 * 0.013).sin()).collect();
+        let b: Vec<f32> = (0..n * k).map(|i| (i as f32 * 0.007).cos()).collect();
+        let want = naive(m, n, k, |i, p| a[i * k + p], |p, j| b[j * k + p]);
+        set_gemm_threads(2);
+        assert_eq!(gemm_threads(), 2);
+        let mut c = vec![0.0; m * n];
+        gemm_nt(m, n, k, &a, &b, &mut c, false);
+        set_gemm_threads(1);
+        for (x, y) in c.iter().zip(&want) {
+            assert!((x - y).abs() < 1e-3);
+        }
     }
 
     #[test]

@@ -77,8 +77,8 @@ pub use rayon::join;
 pub use checkpoint::{Checkpoint, Checkpointable};
 pub use error::{check_finite, NnError, Result};
 pub use heads::{
-    log1m_tanh_sq, softplus, Categorical, GaussianHead, GaussianOutput, TanhGaussian,
-    TanhGaussianSample,
+    fill_standard_normal, log1m_tanh_sq, softplus, Categorical, GaussianHead, GaussianOutput,
+    TanhGaussian, TanhGaussianSample,
 };
 pub use kernels::{gemm_threads, set_gemm_threads};
 pub use loss::{bce_with_logits, gaussian_nll, huber, mse};

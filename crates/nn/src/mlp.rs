@@ -1233,6 +1233,32 @@ mod tests {
     }
 
     #[test]
+    fn same_seed_gives_bit_identical_training_with_dropout() {
+        let run = |seed: u64| -> Vec<f32> {
+            let mut rng = rng_from_seed(seed);
+            let mut net = Mlp::new(MlpConfig::new(&[6, 32, 32, 3]).dropout(0.3), &mut rng).unwrap();
+            let mut opt =
+                crate::optim::Adam::new(crate::optim::AdamConfig::with_lr(1e-3), net.num_params())
+                    .unwrap();
+            let mut ws = net.workspace();
+            let mut g = net.zero_grads();
+            let mut d = vec![0.0; 16 * 3];
+            for _ in 0..20 {
+                let x = random_vec(16 * 6, &mut rng);
+                let y = random_vec(16 * 3, &mut rng);
+                let p = net.forward_train(&x, 16, &mut ws, Some(&mut rng)).unwrap();
+                crate::loss::mse(p, &y, Some(&mut d)).unwrap();
+                net.backward(&mut ws, &d, Some(&mut g), None).unwrap();
+                crate::optim::Optimizer::step(&mut opt, net.params_mut(), &g).unwrap();
+            }
+            net.params().to_vec()
+        };
+        let (a, b, c) = (run(1), run(1), run(2));
+        assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()));
+        assert_ne!(a, c);
+    }
+
+    #[test]
     fn bad_inputs_are_errors() {
         let mut rng = rng_from_seed(0);
         assert!(Mlp::new(MlpConfig::new(&[3]), &mut rng).is_err());
