@@ -218,6 +218,8 @@ pub struct BipedTestPolicy {
     pub kd_torso: f64,
     /// Target torso pitch (rad, positive = leaning forward).
     pub lean: f64,
+    /// Swing-foot placement gain on the forward speed (rad per m/s).
+    pub cv: f64,
 }
 
 impl BipedTestPolicy {
@@ -232,49 +234,61 @@ impl BipedTestPolicy {
             kp_torso: 4.0,
             kd_torso: 0.2,
             lean: 0.0,
+            cv: 0.0,
         }
     }
 
     /// A slow walking gait.
     pub fn walk() -> Self {
         Self {
-            stride: 0.15,
-            knee_lift: 0.5,
+            stride: 0.1,
+            knee_lift: 0.6,
             period: 0.6,
-            kp_torso: 8.0,
-            kd_torso: 0.4,
+            kp_torso: 15.0,
+            kd_torso: 0.2,
             lean: 0.0,
+            cv: 0.0,
             ..Self::stand()
         }
     }
 
-    /// Voltages for the six motors at time `t` in state `x` of the plant from [`leo_plant`].
+    /// Voltages for the six motors at time `t` in state `x` of the plant from [`leo_plant`]:
+    /// desired joint torques converted at the motor's stall gain, `U = τ R / (G K)`, clipped.
     pub fn act(&self, plant: &RigidBodyPlant, t: f64, x: &DVector<f64>) -> DVector<f64> {
         let m = plant.model();
         let n = m.nv();
         let idx = |name: &str| m.joint_index(name).expect("biped joint");
         let (pitch, dpitch) = (x[idx("torso_pitch")], x[n + idx("torso_pitch")]);
-        let phase = 2.0 * std::f64::consts::PI * t / self.period;
         let motor = DcMotor::default();
         let mut u = DVector::zeros(6);
-        let walking = if self.stride > 0.0 { 1.0 } else { 0.0 };
+        let walking = self.stride > 0.0;
+        // SIMBICON-like state machine (Yin et al. 2007): the legs alternate every half period;
+        // the swing thigh is placed at `stride + cv · ẋ` ahead (balance feedback on the forward
+        // speed), the swing knee flexes during the first 60 % of the swing.
+        let half = 0.5 * self.period;
+        let step = (t / half).floor();
+        let frac = t / half - step;
+        let swing_leg = (step as usize) % 2;
+        let vx = x[n + idx("boom_x")];
         let mut tau = [[0.0; 3]; 2];
-        let mut joints = [[0usize; 3]; 2];
         let mut swinging = [false; 2];
         for (s, side) in ["left", "right"].iter().enumerate() {
-            // The right leg runs half a period behind the left.
-            let phi = phase + s as f64 * std::f64::consts::PI;
-            // World thigh angle target (negative = foot ahead); the leg swings forward while
-            // cos(phi) > 0, and that is when its knee flexes.
-            let thigh_des = -self.stride * phi.sin();
-            swinging[s] = walking > 0.0 && phi.cos() > 0.0;
-            let knee_des = walking * self.knee_lift * phi.cos().max(0.0);
             let (h, k, a) = (
                 idx(&format!("{side}_hip")),
                 idx(&format!("{side}_knee")),
                 idx(&format!("{side}_ankle")),
             );
-            joints[s] = [h, k, a];
+            swinging[s] = walking && s == swing_leg;
+            // World thigh angle target (negative = foot ahead of the hip).
+            let (thigh_des, knee_des) = if !walking {
+                (0.0, 0.0)
+            } else if swinging[s] {
+                let lift = if frac < 0.6 { self.knee_lift } else { 0.0 };
+                (-(self.stride + self.cv * vx), lift)
+            } else {
+                // Stance thigh: not tracked (its hip balances the torso); foot kept flat.
+                (pitch + x[h], 0.0)
+            };
             let hip_des = thigh_des - pitch;
             let ankle_des = -(pitch + hip_des + knee_des);
             tau[s] = [
@@ -297,9 +311,10 @@ impl BipedTestPolicy {
         }
         for s in 0..2 {
             for c in 0..3 {
-                let j = joints[s][c];
+                // Stall-torque voltage: the motor's back-EMF then adds its own damping
+                // (G² K² / R ≈ 0.37 N m s/rad), which a 30 ms control period needs.
                 u[3 * s + c] = motor
-                    .voltage_for(tau[s][c], x[n + j])
+                    .voltage_for(tau[s][c], 0.0)
                     .clamp(-motor.voltage_max, motor.voltage_max);
             }
         }
