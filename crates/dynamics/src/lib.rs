@@ -8,10 +8,16 @@
 //! - the [`Plant`] trait and its finite-difference [`Plant::linearize`] default,
 //! - [`integrate`]: fixed-step integrators (explicit Euler, RK4) for continuous-time dynamics,
 //! - classic plants (cart-pole, gymnasium pendulum, the DC-motor pendulum of paper p0),
-//! - rigid bodies from URDF (kinematics, RNEA, CRBA, ABA, derivatives), actuators and contact.
+//! - [`rigid`]: rigid bodies from URDF (kinematics, Jacobians, RNEA, CRBA, ABA, analytical
+//!   derivatives, COM, energies) in Pinocchio's Model/Data style; [`actuators`] (DC motor, joint
+//!   friction, PD), [`contact`] (compliant ground contact), [`rigid_plant::RigidBodyPlant`] (a URDF
+//!   robot as a [`Plant`], with idealized/true overrides) and [`biped`] (a planar Leo-like biped).
 //!
 //! Dependencies: `nalgebra` (states, small matrices and spatial algebra), `serde` (plant
-//! parameters are readable from configs), `thiserror` (error types).
+//! parameters are readable from configs), `thiserror` (error types), `urdf-rs` (the only reader of
+//! robot files), `quick-xml` (already under urdf-rs: a light pre-pass over the XML so that an
+//! unknown joint type or an `<inertial>` without `<mass>`/`<inertia>` is reported with the
+//! element's name, which urdf-rs's serde errors do not give).
 
 pub mod actuators;
 pub mod biped;
