@@ -164,6 +164,9 @@ pub struct JointModel {
     /// Reflected rotor inertia added to `M[i][i]` (0 from URDF; set for geared motors). RNEA,
     /// CRBA and ABA include it, as Pinocchio's `armature` does.
     pub armature: f64,
+    /// `Some(k)` when `axis` is exactly the unit vector `e_k`: the joint rotation then touches
+    /// two columns only (Pinocchio's `JointModelRX/RY/RZ`).
+    pub(crate) aligned: Option<usize>,
 }
 
 impl JointModel {
@@ -194,10 +197,20 @@ impl JointModel {
         match self.kind {
             JointKind::Revolute => {
                 let (s, c) = q.sin_cos();
-                Se3::new(
-                    self.placement.rot * axis_rotation(&self.axis, s, c),
-                    self.placement.trans,
-                )
+                let r = &self.placement.rot;
+                let rot = match self.aligned {
+                    Some(k) => {
+                        // R · Rot(e_k, q) only mixes the two columns other than k.
+                        let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+                        let (ci, cj) = (r.column(i), r.column(j));
+                        let mut out = *r;
+                        out.set_column(i, &(ci * c + cj * s));
+                        out.set_column(j, &(cj * c - ci * s));
+                        out
+                    }
+                    None => r * axis_rotation(&self.axis, s, c),
+                };
+                Se3::new(rot, self.placement.trans)
             }
             JointKind::Prismatic => Se3::new(
                 self.placement.rot,
@@ -725,6 +738,7 @@ impl Tree<'_> {
                 damping,
                 friction,
                 armature: 0.0,
+                aligned: (0..3).find(|&k| a / n == Vector3::ith(k, 1.0)),
             });
             model.frames.push(Frame {
                 name: child.name.clone(),

@@ -264,14 +264,23 @@ impl Se3 {
     /// A spatial inertia given in child coordinates, expressed in parent coordinates.
     #[inline]
     pub fn act_inertia(&self, y: &Inertia) -> Inertia {
+        // Ī' = R Ī Rᵀ − ([Rh][p] + [p][Rh]) − m [p]², with [a][b] = b aᵀ − (a·b) I.
         let hr = self.rot * y.h;
+        let p = &self.trans;
         let ir = self.rot * y.ibar * self.rot.transpose();
-        let p = skew(&self.trans);
-        let hx = skew(&hr);
+        let m = y.mass;
+        let diag = 2.0 * hr.dot(p) + m * p.norm_squared();
+        let mut out = ir;
+        for c in 0..3 {
+            for r in 0..3 {
+                out[(r, c)] -= p[r] * hr[c] + hr[r] * p[c] + m * p[r] * p[c];
+            }
+            out[(c, c)] += diag;
+        }
         Inertia {
-            mass: y.mass,
-            h: hr + self.trans * y.mass,
-            ibar: ir - (hx * p + p * hx) - p * p * y.mass,
+            mass: m,
+            h: hr + p * m,
+            ibar: out,
         }
     }
 
