@@ -36,6 +36,9 @@ enum Command {
     Env(cli::env::EnvCommand),
     /// Train a model-free agent (ddpg, sac, dqn, reinforce) and write a run directory.
     Train(cli::train::TrainArgs),
+    /// Rigid-body dynamics of a URDF robot (inspect its joints; evaluate RNEA/CRBA/ABA/...).
+    #[command(subcommand)]
+    Urdf(cli::urdf::UrdfCommand),
 }
 
 /// Runs one parsed command.
@@ -45,6 +48,7 @@ fn run(command: Command) -> cli::Result<()> {
         Command::Rollout(args) => cli::rollout::run(&args),
         Command::Env(cmd) => cli::env::run(cmd),
         Command::Train(args) => cli::train::run(&args),
+        Command::Urdf(cmd) => cli::urdf::run(cmd),
     }
 }
 

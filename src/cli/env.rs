@@ -52,8 +52,7 @@ pub fn run(cmd: EnvCommand) -> Result<()> {
     match cmd {
         EnvCommand::Replay(args) => {
             let out = replay(&args)?;
-            println!("{out}");
-            Ok(())
+            super::emit(&out.to_string())
         }
     }
 }

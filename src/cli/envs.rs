@@ -5,11 +5,14 @@ use tandem_envs::registered;
 /// Prints one block per registered environment: id, description, episode limit, spaces.
 pub fn run() -> super::Result<()> {
     for spec in registered() {
-        println!("{}", spec.id);
-        println!("  {}", spec.description);
-        println!("  max episode steps: {}", spec.max_episode_steps);
-        println!("  observation space: {}", spec.observation_space.describe());
-        println!("  action space:      {}", spec.action_space.describe());
+        super::emit(&format!(
+            "{}\n  {}\n  max episode steps: {}\n  observation space: {}\n  action space:      {}",
+            spec.id,
+            spec.description,
+            spec.max_episode_steps,
+            spec.observation_space.describe(),
+            spec.action_space.describe()
+        ))?;
     }
     Ok(())
 }

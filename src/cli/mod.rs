@@ -55,3 +55,15 @@ impl CliError {
 
 /// The result of a command.
 pub type Result<T> = std::result::Result<T, CliError>;
+
+/// Writes `text` and a newline to stdout. A closed pipe (`tandem ... | head`) ends the program
+/// quietly with status 0, as a Unix tool stopped by SIGPIPE would, instead of panicking.
+pub fn emit(text: &str) -> Result<()> {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{text}").and_then(|()| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
+        Err(e) => Err(CliError::Other(format!("cannot write to stdout: {e}"))),
+    }
+}

@@ -86,18 +86,17 @@ pub fn run(args: &RolloutArgs) -> Result<()> {
                 break;
             }
         }
-        bar.suspend(|| println!("episode {episode}: return {ret:.6} length {len}"));
+        bar.suspend(|| super::emit(&format!("episode {episode}: return {ret:.6} length {len}")))?;
         returns.push(ret);
     }
     bar.finish_and_clear();
     let n = returns.len() as f64;
     let mean = returns.iter().sum::<f64>() / n;
     let std = (returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
-    println!(
+    super::emit(&format!(
         "{}: mean return {mean:.6} (std {std:.6}) over {} episodes, {} real samples",
         env.id(),
         returns.len(),
         count.get()
-    );
-    Ok(())
+    ))
 }
