@@ -11,7 +11,7 @@
 //! | [`TimeLimit`], [`SampleCounter`], [`ClipAction`], [`RescaleAction`], [`TransformObservation`] | wrappers |
 //!
 //! Dependencies: `tandem-core` (spaces, actions, seeding), `tandem-dynamics` (the plants tasks
-//! run on), `nalgebra` (plant states), `rand`/`rand_distr` (seeded resets), `serde`, `thiserror`.
+//! run on), `rand` (seeded resets), `serde` (configs), `thiserror` (errors).
 
 mod cartpole;
 mod dc_motor;
