@@ -59,6 +59,8 @@ pub struct Data {
     pub ddq_dv: DMatrix<f64>,
     /// ∂q̈/∂τ = M⁻¹.
     pub minv: DMatrix<f64>,
+    /// Body momenta `Y v` (RNEA; reused by the derivatives).
+    pub(crate) hv: Vec<Force>,
     /// Tangent velocities (derivatives scratch).
     pub(crate) dv: Vec<Motion>,
     /// Tangent accelerations (derivatives scratch).
@@ -99,6 +101,7 @@ impl Data {
             ddq_dq: DMatrix::zeros(n, n),
             ddq_dv: DMatrix::zeros(n, n),
             minv: DMatrix::zeros(n, n),
+            hv: vec![Force::zero(); n],
             dv: vec![Motion::zero(); n],
             da: vec![Motion::zero(); n],
             df: vec![Force::zero(); n],

@@ -75,7 +75,7 @@ pub fn rnea_derivatives(model: &Model, data: &mut Data, q: &[f64], v: &[f64], a:
                 let y = &j.inertia;
                 let vi = &data.v[jj];
                 data.df[jj] = y.mul_motion(&da)
-                    + dv.cross_force(&y.mul_motion(vi))
+                    + dv.cross_force(&data.hv[jj])
                     + vi.cross_force(&y.mul_motion(&dv));
                 data.dv[jj] = dv;
                 data.da[jj] = da;

@@ -31,7 +31,9 @@ pub fn rnea<'d>(
         let vi = vp + vj;
         let ai = ap + s.scale(a[i]) + vi.cross(&vj);
         let y = &j.inertia;
-        data.f[i] = y.mul_motion(&ai) + vi.cross_force(&y.mul_motion(&vi));
+        let hv = y.mul_motion(&vi);
+        data.f[i] = y.mul_motion(&ai) + vi.cross_force(&hv);
+        data.hv[i] = hv;
         data.v[i] = vi;
         data.a[i] = ai;
     }
