@@ -5,6 +5,7 @@ pub mod envs;
 pub mod json;
 pub mod rollout;
 pub mod train;
+pub mod urdf;
 
 use std::path::PathBuf;
 
