@@ -213,6 +213,39 @@ fn replay_reads_the_state_from_a_file_and_continuous_actions() {
 }
 
 #[test]
+fn replay_reads_actions_from_stdin() {
+    use std::io::Write as _;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tandem"))
+        .args([
+            "env",
+            "replay",
+            "--env",
+            "DcMotorPendulum-idealized-v0",
+            "--state",
+            "[3.14, 0]",
+            "--actions",
+            "-",
+        ])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(b"[[3.0], [3.0]]")
+        .unwrap();
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(out["states"].as_array().unwrap().len(), 2);
+    // +3 V from hanging accelerates φ upwards.
+    assert!(out["states"][1][1].as_f64().unwrap() > 0.0);
+}
+
+#[test]
 fn unknown_environment_is_an_error() {
     assert_fails_with(
         &replay("CartPole-v0", "[0,0,0,0]", "[0]", "unknown"),
