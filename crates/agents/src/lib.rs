@@ -1,9 +1,34 @@
 //! Model-free agents: DDPG, SAC, REINFORCE and DQN, replay buffers (including the mixed
-//! real/model sampler of p1 and p3), and checkpoints. Off-policy agents update from any batch, so
-//! a pipeline decides whether it holds real data, model data, or a mix.
+//! real/model sampler of p1 and p3), the training loop with its checkpoints, and the
+//! configurations. Off-policy agents update from any [`Batch`], so a pipeline decides whether it
+//! holds real data, model data, or a mix; REINFORCE updates from any list of [`Episode`]s.
 //!
-//! Dependencies: `tandem-nn` (networks and optimizers), `ndarray` (replay storage and
-//! minibatches), `rand`/`rand_distr` (seeded exploration and sampling), `serde`, `thiserror`.
+//! | item | what |
+//! |---|---|
+//! | [`Agent`], [`OffPolicyAgent`], [`EpisodicAgent`], [`Mode`] | acting and the two ways of learning |
+//! | [`ReplayBuffer`], [`MixedSampler`], [`Batch`], [`Episode`] | data (ring buffer in `ndarray`, keeps the previous action) |
+//! | [`Ddpg`], [`Sac`], [`Dqn`], [`Reinforce`] and their `*Config` | the agents; each `Default` cites its source |
+//! | [`Noise`], [`NoiseConfig`] | Ornstein–Uhlenbeck and Gaussian exploration |
+//! | [`Learner`], [`Algo`], [`AlgoConfig`] | "one of the four", chosen by name |
+//! | [`Trainer`], [`TrainSettings`], [`RunLog`] | the loop (stable-baselines3's off-policy schedule), evaluation, save/resume |
+//!
+//! Networks are `tandem-nn`'s hand-derived [`tandem_nn::Mlp`]s with in-place Adam; the actor
+//! gradients (DDPG through the critic's input gradient, SAC's reparametrized tanh-Gaussian) are
+//! derived in the agents' module docs and tested against finite differences. Actions are `[-1, 1]`
+//! inside the networks and environment units in batches and replay, so model-based pipelines see
+//! real actions.
+//!
+//! Every random number comes from seeded [`tandem_core::Rng`] streams derived from one run seed;
+//! checkpoints ([`tandem_nn::Checkpoint`], safetensors) hold networks, optimizer states, noise
+//! state, generators, replay and the in-progress episode, so a resumed run continues bit-for-bit.
+//!
+//! Not written yet: the convolutional Q-network for p2's 16x16 RGB maze (DQN takes flat
+//! observations only) and a Gaussian-policy REINFORCE for continuous actions.
+//!
+//! Dependencies: `tandem-nn` (networks, optimizers, checkpoints), `tandem-envs` (the `Env` trait
+//! the training loop drives), `ndarray` (replay storage and minibatches), `rand`/`rand_distr`
+//! (seeded exploration and sampling), `serde`/`serde_json`/`toml` (configs, checkpoint payloads),
+//! `thiserror`.
 
 // Index loops over several parallel columns read closer to the equations than zipped iterators.
 #![allow(clippy::needless_range_loop)]

@@ -61,17 +61,25 @@ struct Scratch {
     next_act: Vec<f32>,
     next_logp: Vec<f32>,
     actor_out: Vec<f32>,
+    eps_next: Vec<f32>,
+    q_pi1: Vec<f32>,
+    q_pi2: Vec<f32>,
 }
 
-/// Samples `a = tanh(mean + std ε)` for each row of `out` (`n x 2ad`: mean then log-std) and its
-/// log-probability; clamps log-std in place. Writes `eps`, `act` (`n x ad`), `logp` (`n`).
-#[allow(clippy::too_many_arguments)]
-fn sample_squashed(
+/// Draws `ε ~ N(0, I)` into `eps` from `rng`.
+fn draw_noise(rng: &mut Rng, eps: &mut [f32]) {
+    for e in eps.iter_mut() {
+        *e = StandardNormal.sample(rng);
+    }
+}
+
+/// `a = tanh(mean + std ε)` for each row of `out` (`n x 2ad`: mean then log-std) with the given
+/// noise, and its log-probability; clamps log-std in place. Writes `act` (`n x ad`), `logp` (`n`).
+fn squash(
     out: &mut [f32],
     ad: usize,
     (lo, hi): (f32, f32),
-    rng: &mut Rng,
-    eps: &mut [f32],
+    eps: &[f32],
     act: &mut [f32],
     logp: &mut [f32],
 ) {
@@ -80,9 +88,8 @@ fn sample_squashed(
         for j in 0..ad {
             let ls = row[ad + j].clamp(lo, hi);
             row[ad + j] = ls;
-            let e: f32 = StandardNormal.sample(rng);
+            let e = eps[i * ad + j];
             let a = (row[j] + ls.exp() * e).tanh();
-            eps[i * ad + j] = e;
             act[i * ad + j] = a;
             lp += -0.5 * e * e - ls - LOG_2PI_HALF - (1.0 - a * a + SQUASH_EPS).ln();
         }
@@ -225,7 +232,8 @@ impl Agent for Sac {
                 let (mut e, mut a, mut lp) = (vec![0.0; ad], vec![0.0; ad], [0.0f32]);
                 let c = &self.config;
                 let lims = (c.log_std_min as f32, c.log_std_max as f32);
-                sample_squashed(&mut out, ad, lims, &mut self.rng, &mut e, &mut a, &mut lp);
+                draw_noise(&mut self.rng, &mut e);
+                squash(&mut out, ad, lims, &e, &mut a, &mut lp);
                 a
             }
         };
@@ -259,25 +267,43 @@ impl OffPolicyAgent for Sac {
         fit(&mut s.next_act, n * ad);
         fit(&mut s.next_logp, n);
         fit(&mut s.actor_out, n * 2 * ad);
+        fit(&mut s.eps_next, n * ad);
+        fit(&mut s.q_pi1, n);
+        fit(&mut s.q_pi2, n);
         self.scale.normalize_rows(
             batch.actions.as_slice().expect("standard layout"),
             &mut s.a_norm,
         );
 
-        // 1. Current policy on s (kept on the actor's tape for the actor step).
-        let out = self
-            .actor
-            .mlp
-            .forward_train(obs, n, &mut self.actor.ws, None)?;
-        s.actor_out.copy_from_slice(out);
-        sample_squashed(
-            &mut s.actor_out,
+        // 1. The policy at s (kept on the actor's tape for the actor step) and at s' (second
+        //    workspace), side by side. Noise is drawn first, in a fixed order (s, then s'), so the
+        //    numbers do not depend on threads.
+        draw_noise(&mut self.rng, &mut s.eps);
+        draw_noise(&mut self.rng, &mut s.eps_next);
+        {
+            let (actor, ws, next_ws) = (&self.actor.mlp, &mut self.actor.ws, &mut self.next_ws);
+            let (out_s, out_n) = (&mut s.actor_out, &mut s.d_out);
+            let (r1, r2) = tandem_nn::join(
+                || -> Result<()> {
+                    out_s.copy_from_slice(actor.forward_train(obs, n, ws, None)?);
+                    Ok(())
+                },
+                || -> Result<()> {
+                    out_n.copy_from_slice(actor.forward(next_obs, n, next_ws)?);
+                    Ok(())
+                },
+            );
+            r1?;
+            r2?;
+        }
+        squash(&mut s.actor_out, ad, lims, &s.eps, &mut s.act, &mut s.logp);
+        squash(
+            &mut s.d_out,
             ad,
             lims,
-            &mut self.rng,
-            &mut s.eps,
-            &mut s.act,
-            &mut s.logp,
+            &s.eps_next,
+            &mut s.next_act,
+            &mut s.next_logp,
         );
 
         // 2. Entropy coefficient: loss = -log α · mean(log π + H_target); α used below is the
@@ -289,42 +315,50 @@ impl OffPolicyAgent for Sac {
             self.alpha_opt.step(&mut self.log_alpha, &g)?;
         }
 
-        // 3. Critic targets with the current policy on s'.
-        // The actor's pass on s' uses a second workspace so that the tape on s survives.
-        let next_out = self.actor.mlp.forward(next_obs, n, &mut self.next_ws)?;
-        s.d_out.copy_from_slice(next_out);
-        sample_squashed(
-            &mut s.d_out,
-            ad,
-            lims,
-            &mut self.rng,
-            &mut s.d_x2[..n * ad],
-            &mut s.next_act,
-            &mut s.next_logp,
-        );
+        // 3. Critic targets with the policy at s', both target critics side by side.
         concat_rows(next_obs, od, &s.next_act, ad, &mut s.x);
-        let q1n = self.q1_t.mlp.forward(&s.x, n, &mut self.q1_t.ws)?;
-        let q2n = self.q2_t.mlp.forward(&s.x, n, &mut self.q2_t.ws)?;
+        {
+            let (t1, t2) = (&mut self.q1_t, &mut self.q2_t);
+            let (x, o1, o2) = (&s.x, &mut s.d_q, &mut s.d_q2);
+            let (r1, r2) = tandem_nn::join(
+                || -> Result<()> {
+                    o1.copy_from_slice(t1.mlp.forward(x, n, &mut t1.ws)?);
+                    Ok(())
+                },
+                || -> Result<()> {
+                    o2.copy_from_slice(t2.mlp.forward(x, n, &mut t2.ws)?);
+                    Ok(())
+                },
+            );
+            r1?;
+            r2?;
+        }
         let gamma = self.config.gamma as f32;
         for i in 0..n {
-            let v = q1n[i].min(q2n[i]) - alpha * s.next_logp[i];
+            let v = s.d_q[i].min(s.d_q2[i]) - alpha * s.next_logp[i];
             s.y[i] = batch.rewards[i] + gamma * (1.0 - batch.terminated[i]) * v;
         }
 
-        // 4. Critics: loss = ½ Σ_k mean (Q_k - y)².
+        // 4. Critics: loss = ½ Σ_k mean (Q_k - y)², one critic per thread.
         concat_rows(obs, od, &s.a_norm, ad, &mut s.x);
-        let mut critic_loss = 0.0f64;
-        for q in [&mut self.q1, &mut self.q2] {
-            let qv = q.mlp.forward_train(&s.x, n, &mut q.ws, None)?;
+        let critic_step = |q: &mut Net, x: &[f32], y: &[f32], d_q: &mut [f32]| -> Result<f64> {
+            let qv = q.mlp.forward_train(x, n, &mut q.ws, None)?;
+            let mut loss = 0.0f64;
             for i in 0..n {
-                let e = qv[i] - s.y[i];
-                critic_loss += 0.5 * f64::from(e * e) / n as f64;
-                s.d_q[i] = e / n as f32;
+                let e = qv[i] - y[i];
+                loss += 0.5 * f64::from(e * e) / n as f64;
+                d_q[i] = e / n as f32;
             }
-            q.mlp
-                .backward(&mut q.ws, &s.d_q, Some(&mut q.grads), None)?;
+            q.mlp.backward(&mut q.ws, d_q, Some(&mut q.grads), None)?;
             q.step()?;
-        }
+            Ok(loss)
+        };
+        let (l1, l2) = {
+            let (q1, q2) = (&mut self.q1, &mut self.q2);
+            let (x, y, d1, d2) = (&s.x, &s.y, &mut s.d_q, &mut s.d_q2);
+            tandem_nn::join(|| critic_step(q1, x, y, d1), || critic_step(q2, x, y, d2))
+        };
+        let critic_loss = l1? + l2?;
         if !critic_loss.is_finite() {
             return Err(AgentError::NonFinite {
                 what: "sac critic loss",
@@ -334,22 +368,40 @@ impl OffPolicyAgent for Sac {
 
         // 5. Actor through the updated critics: dQmin/da from the smaller critic of each row.
         concat_rows(obs, od, &s.act, ad, &mut s.x);
-        let q1p = self.q1.mlp.forward_train(&s.x, n, &mut self.q1.ws, None)?;
-        let q2p = self.q2.mlp.forward_train(&s.x, n, &mut self.q2.ws, None)?;
+        {
+            let (q1, q2) = (&mut self.q1, &mut self.q2);
+            let (x, o1, o2) = (&s.x, &mut s.q_pi1, &mut s.q_pi2);
+            let (r1, r2) = tandem_nn::join(
+                || -> Result<()> {
+                    o1.copy_from_slice(q1.mlp.forward_train(x, n, &mut q1.ws, None)?);
+                    Ok(())
+                },
+                || -> Result<()> {
+                    o2.copy_from_slice(q2.mlp.forward_train(x, n, &mut q2.ws, None)?);
+                    Ok(())
+                },
+            );
+            r1?;
+            r2?;
+        }
         let mut min_q = 0.0f64;
         for i in 0..n {
-            let first = q1p[i] <= q2p[i];
-            min_q += f64::from(q1p[i].min(q2p[i]));
+            let first = s.q_pi1[i] <= s.q_pi2[i];
+            min_q += f64::from(s.q_pi1[i].min(s.q_pi2[i]));
             s.d_q[i] = if first { 1.0 } else { 0.0 };
             s.d_q2[i] = if first { 0.0 } else { 1.0 };
         }
         let actor_loss = (f64::from(alpha) * mean_logp) - min_q / n as f64;
-        self.q1
-            .mlp
-            .backward(&mut self.q1.ws, &s.d_q, None, Some(&mut s.d_x))?;
-        self.q2
-            .mlp
-            .backward(&mut self.q2.ws, &s.d_q2, None, Some(&mut s.d_x2))?;
+        {
+            let (q1, q2) = (&mut self.q1, &mut self.q2);
+            let (d1, d2, dx1, dx2) = (&s.d_q, &s.d_q2, &mut s.d_x, &mut s.d_x2);
+            let (r1, r2) = tandem_nn::join(
+                || q1.mlp.backward(&mut q1.ws, d1, None, Some(dx1)),
+                || q2.mlp.backward(&mut q2.ws, d2, None, Some(dx2)),
+            );
+            r1?;
+            r2?;
+        }
         // dQmin/da into d_q-sized rows of `next_act` (reused as scratch).
         for i in 0..n {
             for j in 0..ad {
