@@ -4,7 +4,9 @@
 //! sample `N` sequences from `N(μ, σ²)`, clamp them into the bounds, roll them out through the
 //! model, refit `μ, σ` to the elites with smoothing `α` (`μ ← αμ + (1−α)μ_elite`), and keep
 //! `σ ≥ min_std`. Sample 0 of every round is the current mean itself, so the mean is always
-//! evaluated. The plan is the final mean.
+//! evaluated. The plan is the cheapest sequence sampled over all rounds (mbrl-lib's default,
+//! `return_mean_elites = false`), or the final mean with `return_mean`; the warm start of the next
+//! call is the final mean either way.
 
 use ndarray::{s, Array2, Array3, Axis};
 use tandem_core::{seeding::rng_from_seed, Rng};
@@ -12,8 +14,8 @@ use tandem_models::DynamicsModel;
 
 use crate::error::Result;
 use crate::mpc::{
-    check_problem, clamp_opt, fill_normal, fraction, lowest_k, nonzero, plan_from_actions,
-    positive, rollout_population, shift_plan, Bounds, Plan, Planner,
+    check_problem, clamp_opt, fraction, lowest_k, nonzero, plan_from_actions, positive,
+    rollout_population, shift_plan, Bounds, Plan, Planner,
 };
 use crate::objective::Objective;
 
@@ -35,10 +37,15 @@ pub struct CemConfig {
     /// Initial standard deviation per action component; `None`: a quarter of the bound range
     /// (PETS: variance `(high − low)² / 16`), or 1 where unbounded.
     pub init_std: Option<Vec<f64>>,
+    /// Correlation `β ∈ [0, 1)` of the sampling noise between consecutive steps (AR(1); 0 is
+    /// white noise, the original algorithm).
+    pub correlation: f64,
     /// Floor on the standard deviation.
     pub min_std: f64,
     /// Action bounds; samples are clamped into them.
     pub bounds: Option<Bounds>,
+    /// Return the final mean instead of the cheapest sampled sequence.
+    pub return_mean: bool,
     /// Seed of the sampling stream.
     pub seed: u64,
 }
@@ -53,7 +60,9 @@ impl Default for CemConfig {
             alpha: 0.1,
             init_std: None,
             min_std: 1e-3,
+            correlation: 0.0,
             bounds: None,
+            return_mean: false,
             seed: 0,
         }
     }
@@ -73,6 +82,7 @@ impl Cem {
         nonzero("horizon", cfg.horizon)?;
         nonzero("population", cfg.population)?;
         nonzero("iterations", cfg.iterations)?;
+        crate::mpc::correlation(cfg.correlation)?;
         fraction("elite fraction", cfg.elite_fraction)?;
         if !(0.0..1.0).contains(&cfg.alpha) {
             return Err(crate::PlanError::Config(format!(
@@ -154,8 +164,9 @@ impl Planner for Cem {
         };
         let mut std = Array2::from_shape_fn((h, a), |(_, j)| std0[j]);
         let mut acts = Array3::zeros((h, n, a));
+        let mut best: Option<(f64, Array2<f64>)> = None;
         for _ in 0..self.cfg.iterations {
-            fill_normal(&mut self.rng, acts.as_slice_mut().expect("standard layout"));
+            crate::mpc::fill_correlated_normal(&mut self.rng, &mut acts, self.cfg.correlation);
             for t in 0..h {
                 for i in 0..n {
                     for j in 0..a {
@@ -176,6 +187,12 @@ impl Planner for Cem {
                 None,
             )?;
             let elites = lowest_k(&costs, n_elite);
+            if best.as_ref().is_none_or(|(c, _)| costs[elites[0]] < *c) {
+                best = Some((
+                    costs[elites[0]],
+                    acts.index_axis(Axis(1), elites[0]).to_owned(),
+                ));
+            }
             let el = acts.select(Axis(1), &elites);
             let em = el.mean_axis(Axis(1)).expect("at least one elite");
             let ev = el.var_axis(Axis(1), 0.0);
@@ -188,7 +205,11 @@ impl Planner for Cem {
             });
         }
         clamp_opt(&self.cfg.bounds, mean.view_mut());
-        let plan = plan_from_actions(x0, model, objective, &mut self.rng, &mean)?;
+        let chosen = match best {
+            Some((_, seq)) if !self.cfg.return_mean => seq,
+            _ => mean.clone(),
+        };
+        let plan = plan_from_actions(x0, model, objective, &mut self.rng, &chosen)?;
         self.mean = Some(mean);
         Ok(plan)
     }

@@ -23,8 +23,8 @@ use tandem_models::DynamicsModel;
 
 use crate::error::{check_len, PlanError, Result};
 use crate::mpc::{
-    check_problem, clamp_opt, fill_normal, fraction, lowest_k, nonzero, plan_from_actions,
-    positive, rollout_population, shift_plan, Bounds, Noise, Plan, Planner,
+    check_problem, clamp_opt, fraction, lowest_k, nonzero, plan_from_actions, positive,
+    rollout_population, shift_plan, Bounds, Noise, Plan, Planner,
 };
 use crate::objective::Objective;
 
@@ -70,6 +70,9 @@ pub struct DmdMpcConfig {
     pub utility: Utility,
     /// Covariance `Σ` of the control distribution at each step.
     pub noise: Noise,
+    /// Correlation `β ∈ [0, 1)` of the sampling noise between consecutive steps (AR(1); 0 is
+    /// white noise, the original algorithm).
+    pub correlation: f64,
     /// Rounds per call (the first uses the shift operator; later ones re-sample around `μ`).
     pub iterations: usize,
     /// Also take the mirror-descent step on the second moment (the Gaussian's other expectation
@@ -100,6 +103,7 @@ impl Default for DmdMpcConfig {
             iterations: 1,
             adapt_covariance: false,
             min_std: 0.05,
+            correlation: 0.0,
             bounds: None,
             seed: 0,
         }
@@ -129,6 +133,7 @@ impl DmdMpc {
         nonzero("horizon", cfg.horizon)?;
         nonzero("samples", cfg.samples)?;
         nonzero("iterations", cfg.iterations)?;
+        crate::mpc::correlation(cfg.correlation)?;
         fraction("step size alpha", cfg.step_size)?;
         if cfg.adapt_covariance {
             positive("min_std", cfg.min_std)?;
@@ -209,7 +214,7 @@ impl DmdMpc {
         let mut z = Array3::zeros((h, n, a));
         let mut acts = Array3::zeros((h, n, a));
         for it in 0..self.cfg.iterations {
-            fill_normal(&mut self.rng, z.as_slice_mut().expect("standard layout"));
+            crate::mpc::fill_correlated_normal(&mut self.rng, &mut z, self.cfg.correlation);
             // Sample 0 carries no noise: it is the shifted mean μ̃ itself.
             z.slice_mut(s![.., 0, ..]).fill(0.0);
             let bounds = self.cfg.bounds.clone();

@@ -7,6 +7,11 @@
 //!   (analytic or finite differences);
 //! - [`Planner`] and its implementations [`Cem`], [`Mppi`], [`DmdMpc`], all batched over the
 //!   population (one `predict` call per time step), warm-started by shifting, bounded;
+//! - [`Ilqr`] (also a [`Planner`]) on any [`Dynamics`]: a [`PlantDynamics`] (the plant's own
+//!   Jacobians) or a [`ModelDynamics`] (finite differences of a model);
+//! - TVLG controllers ([`TvlgController`], sampled with stored noise) and their optimizers
+//!   [`LqrFlm`], [`pi2_update`] and [`Pilqr`] (p4), on dynamics fitted by
+//!   `tandem_models::TvlgFit`.
 //!
 //! Dependencies: `tandem-models` (the models planned through), `tandem-dynamics` (plants),
 //! `ndarray` (populations, horizon x samples x dim), `nalgebra` (gains and small matrices),
@@ -17,16 +22,31 @@
 
 mod cem;
 mod dmd;
+mod dynamics;
 mod error;
+mod ilqr;
+mod lqr_flm;
 mod mpc;
 mod mppi;
 mod objective;
+mod pi2;
+mod pilqr;
+mod tvlg;
 
 pub use cem::{Cem, CemConfig};
 pub use dmd::{DmdMpc, DmdMpcConfig, Proposal, ProposalFn, Utility};
+pub use dynamics::{Dynamics, ModelDynamics, PlantDynamics};
 pub use error::{PlanError, Result};
+pub use ilqr::{backward_pass, BackwardPass, Ilqr, IlqrConfig, IlqrSolution};
+pub use lqr_flm::{LqrFlm, LqrFlmConfig, LqrFlmStep};
 pub use mpc::{Bounds, Noise, Plan, Planner};
 pub use mppi::{Mppi, MppiConfig};
 pub use objective::{
     CostFn, Objective, QuadCost, QuadTerminal, RunningDerivFn, TerminalDerivFn, TerminalFn, ValueFn,
+};
+pub use pi2::{pi2_update, pi2_weights, Pi2Config, Pi2Step};
+pub use pilqr::{model_cost_to_go, reparametrize, Pilqr, PilqrConfig, PilqrStep};
+pub use tvlg::{
+    expected_cost, forward_moments, policy_kl, quadratize_cost, sample_trajectories, QuadraticCost,
+    SampleConfig, TrajectoryMoments, TrajectorySamples, TvlgController,
 };

@@ -260,6 +260,33 @@ pub(crate) fn fill_normal(rng: &mut Rng, out: &mut [f64]) {
     }
 }
 
+/// Fills `z` (`H x N x A`) with standard normal sequences that are AR(1)-correlated along the
+/// horizon, `z_t = β z_{t−1} + √(1 − β²) w_t` (unit marginal variance; `β = 0`: white noise).
+/// Smooth perturbations explore long manoeuvres (a swing-up) far better than white noise, the
+/// point of iCEM's coloured noise (Pinneri et al. 2020).
+pub(crate) fn fill_correlated_normal(rng: &mut Rng, z: &mut Array3<f64>, beta: f64) {
+    fill_normal(rng, z.as_slice_mut().expect("standard layout"));
+    if beta != 0.0 {
+        let c = (1.0 - beta * beta).sqrt();
+        for t in 1..z.shape()[0] {
+            let (prev, mut cur) = z.view_mut().split_at(ndarray::Axis(0), t);
+            let prev = prev.index_axis(ndarray::Axis(0), t - 1);
+            cur.index_axis_mut(ndarray::Axis(0), 0)
+                .zip_mut_with(&prev, |v, p| *v = beta * p + c * *v);
+        }
+    }
+}
+
+pub(crate) fn correlation(v: f64) -> Result<()> {
+    if (0.0..1.0).contains(&v) {
+        Ok(())
+    } else {
+        Err(PlanError::Config(format!(
+            "noise correlation must be in [0, 1), got {v}"
+        )))
+    }
+}
+
 /// Shifts a `H x A` plan one step earlier, repeating the last action.
 pub(crate) fn shift_plan(mean: &mut Array2<f64>) {
     let h = mean.nrows();

@@ -13,8 +13,8 @@ use tandem_models::DynamicsModel;
 
 use crate::error::Result;
 use crate::mpc::{
-    check_problem, clamp_opt, fill_normal, nonzero, plan_from_actions, positive,
-    rollout_population, shift_plan, Bounds, Noise, Plan, Planner,
+    check_problem, clamp_opt, nonzero, plan_from_actions, positive, rollout_population, shift_plan,
+    Bounds, Noise, Plan, Planner,
 };
 use crate::objective::Objective;
 
@@ -31,6 +31,9 @@ pub struct MppiConfig {
     pub lambda: f64,
     /// Perturbation covariance `Σ`.
     pub noise: Noise,
+    /// Correlation `β ∈ [0, 1)` of the sampling noise between consecutive steps (AR(1); 0 is
+    /// white noise, the original algorithm).
+    pub correlation: f64,
     /// Updates per call.
     pub iterations: usize,
     /// Whether to add the control-cost term `λ μᵀ Σ⁻¹ ε` to each sample's cost.
@@ -50,6 +53,7 @@ impl Default for MppiConfig {
             noise: Noise::Isotropic(1.0),
             iterations: 1,
             control_cost: false,
+            correlation: 0.0,
             bounds: None,
             seed: 0,
         }
@@ -70,6 +74,7 @@ impl Mppi {
         nonzero("horizon", cfg.horizon)?;
         nonzero("samples", cfg.samples)?;
         nonzero("iterations", cfg.iterations)?;
+        crate::mpc::correlation(cfg.correlation)?;
         positive("lambda", cfg.lambda)?;
         let rng = rng_from_seed(cfg.seed);
         Ok(Self {
@@ -118,7 +123,7 @@ impl Planner for Mppi {
         let mut z = Array3::zeros((h, n, a));
         let mut acts = Array3::zeros((h, n, a));
         for _ in 0..self.cfg.iterations {
-            fill_normal(&mut self.rng, z.as_slice_mut().expect("standard layout"));
+            crate::mpc::fill_correlated_normal(&mut self.rng, &mut z, self.cfg.correlation);
             for t in 0..h {
                 for i in 0..n {
                     for j in 0..a {

@@ -1,0 +1,420 @@
+//! Time-varying linear-Gaussian (TVLG) controllers `u = K_t x + k_t + chol(Σ_t) ξ` (p4 §II,
+//! eq. 6), sampling with stored noise (the reparametrization of p4 §III-C), and the pieces the
+//! TVLG optimizers share: trajectory samples with costs-to-go, quadratic cost approximations, and
+//! moments of a controller under fitted TVLG dynamics.
+
+use nalgebra::{DMatrix, DVector};
+use ndarray::{s, Array2, Array3};
+use tandem_core::Rng;
+use tandem_models::TvlgDynamics;
+
+use crate::dynamics::Dynamics;
+use crate::error::{check_len, PlanError, Result};
+use crate::mpc::fill_normal;
+use crate::objective::{Objective, QuadCost};
+
+/// A TVLG controller `p(u_t | x_t) = N(K_t x_t + k_t, Σ_t)`, `t = 0..T`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TvlgController {
+    /// Gains `K_t` (`A x S`).
+    pub gains: Vec<DMatrix<f64>>,
+    /// Offsets `k_t` (`A`).
+    pub offsets: Vec<DVector<f64>>,
+    /// Covariances `Σ_t` (`A x A`).
+    pub cov: Vec<DMatrix<f64>>,
+    chol: Vec<DMatrix<f64>>,
+    inv_cov: Vec<DMatrix<f64>>,
+}
+
+impl TvlgController {
+    /// A controller from its parts; every `Σ_t` must be symmetric positive definite.
+    pub fn new(
+        gains: Vec<DMatrix<f64>>,
+        offsets: Vec<DVector<f64>>,
+        cov: Vec<DMatrix<f64>>,
+    ) -> Result<Self> {
+        let t_len = gains.len();
+        if t_len == 0 {
+            return Err(PlanError::Config(
+                "a TVLG controller needs at least one step".into(),
+            ));
+        }
+        check_len("controller offsets", t_len, offsets.len())?;
+        check_len("controller covariances", t_len, cov.len())?;
+        let (m, n) = gains[0].shape();
+        let mut chol = Vec::with_capacity(t_len);
+        let mut inv_cov = Vec::with_capacity(t_len);
+        for t in 0..t_len {
+            check_len("gain rows", m, gains[t].nrows())?;
+            check_len("gain columns", n, gains[t].ncols())?;
+            check_len("offset length", m, offsets[t].len())?;
+            check_len("covariance size", m * m, cov[t].len())?;
+            if gains[t]
+                .iter()
+                .chain(offsets[t].iter())
+                .chain(cov[t].iter())
+                .any(|v| !v.is_finite())
+            {
+                return Err(PlanError::NonFinite(format!(
+                    "controller parameters at step {t}"
+                )));
+            }
+            let sym = (&cov[t] + cov[t].transpose()) * 0.5;
+            let c = sym.clone().cholesky().ok_or_else(|| {
+                PlanError::Numerical(format!(
+                    "controller covariance at step {t} is not positive definite"
+                ))
+            })?;
+            inv_cov.push(c.inverse());
+            chol.push(c.l());
+        }
+        let cov = cov.iter().map(|c| (c + c.transpose()) * 0.5).collect();
+        Ok(Self {
+            gains,
+            offsets,
+            cov,
+            chol,
+            inv_cov,
+        })
+    }
+
+    /// `K = 0`, `k = k0`, `Σ = variance · I` for `horizon` steps: the usual initial controller.
+    pub fn constant(horizon: usize, state_dim: usize, k0: &[f64], variance: f64) -> Result<Self> {
+        crate::mpc::positive("initial variance", variance)?;
+        let m = k0.len();
+        Self::new(
+            vec![DMatrix::zeros(m, state_dim); horizon],
+            vec![DVector::from_column_slice(k0); horizon],
+            vec![DMatrix::identity(m, m) * variance; horizon],
+        )
+    }
+
+    /// Horizon `T`.
+    pub fn horizon(&self) -> usize {
+        self.gains.len()
+    }
+    /// Length of the state.
+    pub fn state_dim(&self) -> usize {
+        self.gains[0].ncols()
+    }
+    /// Length of the action.
+    pub fn action_dim(&self) -> usize {
+        self.gains[0].nrows()
+    }
+    /// Lower Cholesky factor of `Σ_t`.
+    pub fn chol(&self, t: usize) -> &DMatrix<f64> {
+        &self.chol[t]
+    }
+    /// `Σ_t⁻¹`.
+    pub fn inv_cov(&self, t: usize) -> &DMatrix<f64> {
+        &self.inv_cov[t]
+    }
+    /// Mean action `K_t x + k_t`.
+    pub fn mean(&self, t: usize, x: &DVector<f64>) -> DVector<f64> {
+        &self.gains[t] * x + &self.offsets[t]
+    }
+    /// The action for noise `ξ ~ N(0, I)`: `K_t x + k_t + chol(Σ_t) ξ` (p4 eq. 6).
+    pub fn act(&self, t: usize, x: &DVector<f64>, xi: &DVector<f64>) -> DVector<f64> {
+        self.mean(t, x) + &self.chol[t] * xi
+    }
+}
+
+/// `N` sampled trajectories of a TVLG controller with the noise that produced them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrajectorySamples {
+    /// States, `N x (T+1) x S`.
+    pub states: Array3<f64>,
+    /// Actions, `N x T x A`.
+    pub actions: Array3<f64>,
+    /// Standard normal noise `ξ` behind each action, `N x T x A`.
+    pub noise: Array3<f64>,
+    /// Costs `c(x_t, u_t)` and, in the last column, the terminal cost: `N x (T+1)`.
+    pub costs: Array2<f64>,
+}
+
+impl TrajectorySamples {
+    /// Number of trajectories.
+    pub fn len(&self) -> usize {
+        self.states.shape()[0]
+    }
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Costs-to-go `S_{i,t} = Σ_{j ≥ t} c_{i,j}` including the terminal cost, `N x T` (p4 §II-B).
+    pub fn cost_to_go(&self) -> Array2<f64> {
+        let (n, t1) = self.costs.dim();
+        let mut s = Array2::zeros((n, t1 - 1));
+        for i in 0..n {
+            let mut acc = self.costs[(i, t1 - 1)];
+            for t in (0..t1 - 1).rev() {
+                acc += self.costs[(i, t)];
+                s[(i, t)] = acc;
+            }
+        }
+        s
+    }
+    /// Mean total cost over the trajectories.
+    pub fn mean_cost(&self) -> f64 {
+        self.costs.sum() / self.len() as f64
+    }
+}
+
+/// How [`sample_trajectories`] draws initial states and process noise.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SampleConfig {
+    /// Trajectories per batch.
+    pub samples: usize,
+    /// Standard deviation of Gaussian noise on the initial state.
+    pub x0_std: f64,
+    /// Standard deviation of Gaussian noise added to each next state (a linear-Gaussian system).
+    pub process_std: f64,
+}
+
+impl Default for SampleConfig {
+    fn default() -> Self {
+        Self {
+            samples: 20,
+            x0_std: 0.0,
+            process_std: 0.0,
+        }
+    }
+}
+
+/// Runs `controller` on `system` from `x0` (`N` trajectories batched, one step call per time step),
+/// storing the noise of every action.
+pub fn sample_trajectories(
+    controller: &TvlgController,
+    system: &dyn Dynamics,
+    objective: &Objective,
+    x0: &[f64],
+    cfg: &SampleConfig,
+    rng: &mut Rng,
+) -> Result<TrajectorySamples> {
+    let (n, m, t_len) = (
+        controller.state_dim(),
+        controller.action_dim(),
+        controller.horizon(),
+    );
+    check_len(
+        "system state dimension vs controller",
+        n,
+        system.state_dim(),
+    )?;
+    check_len(
+        "system action dimension vs controller",
+        m,
+        system.action_dim(),
+    )?;
+    check_len("initial state", n, x0.len())?;
+    crate::mpc::nonzero("samples", cfg.samples)?;
+    let ns = cfg.samples;
+    let mut noise = Array3::zeros((ns, t_len, m));
+    fill_normal(rng, noise.as_slice_mut().expect("standard layout"));
+    let mut states = Array3::zeros((ns, t_len + 1, n));
+    let mut actions = Array3::zeros((ns, t_len, m));
+    let mut costs = Array2::zeros((ns, t_len + 1));
+    let mut cur = Array2::zeros((ns, n));
+    let mut z = vec![0.0; ns * n];
+    fill_normal(rng, &mut z);
+    for i in 0..ns {
+        for j in 0..n {
+            cur[(i, j)] = x0[j] + cfg.x0_std * z[i * n + j];
+        }
+    }
+    let mut act = Array2::zeros((ns, m));
+    let mut c = vec![0.0; ns];
+    for t in 0..t_len {
+        states.slice_mut(s![.., t, ..]).assign(&cur);
+        for i in 0..ns {
+            let x = DVector::from_iterator(n, cur.row(i).iter().copied());
+            let xi = DVector::from_iterator(m, noise.slice(s![i, t, ..]).iter().copied());
+            let u = controller.act(t, &x, &xi);
+            act.row_mut(i)
+                .iter_mut()
+                .zip(u.iter())
+                .for_each(|(a, v)| *a = *v);
+        }
+        actions.slice_mut(s![.., t, ..]).assign(&act);
+        objective.running_batch(cur.view(), act.view(), t, &mut c)?;
+        costs
+            .column_mut(t)
+            .iter_mut()
+            .zip(&c)
+            .for_each(|(o, v)| *o = *v);
+        cur = system.step_batch(cur.view(), act.view())?;
+        if cfg.process_std > 0.0 {
+            fill_normal(rng, &mut z);
+            cur.iter_mut()
+                .zip(&z)
+                .for_each(|(v, e)| *v += cfg.process_std * e);
+        }
+    }
+    states.slice_mut(s![.., t_len, ..]).assign(&cur);
+    objective.terminal_batch(cur.view(), t_len, &mut c)?;
+    costs
+        .column_mut(t_len)
+        .iter_mut()
+        .zip(&c)
+        .for_each(|(o, v)| *o = *v);
+    Ok(TrajectorySamples {
+        states,
+        actions,
+        noise,
+        costs,
+    })
+}
+
+/// A quadratic cost in absolute coordinates, `c(z) ≈ ½ zᵀ C z + cᵀ z + c₀` with `z = [x; u]`
+/// (for the terminal step `z = x`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct QuadraticCost {
+    /// `C_t`, `(S+A) x (S+A)` (terminal: `S x S`).
+    pub hess: DMatrix<f64>,
+    /// `c_t`.
+    pub grad: DVector<f64>,
+    /// `c₀`.
+    pub constant: f64,
+}
+
+impl QuadraticCost {
+    /// Value at `z`.
+    pub fn eval(&self, z: &DVector<f64>) -> f64 {
+        0.5 * (z.transpose() * &self.hess * z)[0] + self.grad.dot(z) + self.constant
+    }
+}
+
+/// Expands the objective to second order around the mean trajectory of `samples` (`T` running
+/// costs, then the terminal cost), as LQR-FLM needs it (p4 §II-A: "a twice-differentiable cost").
+pub fn quadratize_cost(
+    objective: &Objective,
+    samples: &TrajectorySamples,
+) -> Result<Vec<QuadraticCost>> {
+    let xbar = samples.states.mean_axis(ndarray::Axis(0)).expect("samples");
+    let ubar = samples
+        .actions
+        .mean_axis(ndarray::Axis(0))
+        .expect("samples");
+    let t_len = ubar.nrows();
+    let mut out = Vec::with_capacity(t_len + 1);
+    for t in 0..=t_len {
+        let x = DVector::from_iterator(xbar.ncols(), xbar.row(t).iter().copied());
+        if t < t_len {
+            let u = DVector::from_iterator(ubar.ncols(), ubar.row(t).iter().copied());
+            let q = objective.running_quadratic(x.as_slice(), u.as_slice())?;
+            out.push(absolute(&q, &x, &u));
+        } else {
+            let q = objective.terminal_quadratic(x.as_slice())?;
+            let g = &q.cx - &q.cxx * &x;
+            let constant = q.c - q.cx.dot(&x) + 0.5 * (x.transpose() * &q.cxx * &x)[0];
+            out.push(QuadraticCost {
+                hess: q.cxx,
+                grad: g,
+                constant,
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// Turns an expansion around `(x̄, ū)` into absolute coordinates.
+pub(crate) fn absolute(q: &QuadCost, x: &DVector<f64>, u: &DVector<f64>) -> QuadraticCost {
+    let (n, m) = (x.len(), u.len());
+    let mut h = DMatrix::zeros(n + m, n + m);
+    h.view_mut((0, 0), (n, n)).copy_from(&q.cxx);
+    h.view_mut((n, n), (m, m)).copy_from(&q.cuu);
+    h.view_mut((n, 0), (m, n)).copy_from(&q.cux);
+    h.view_mut((0, n), (n, m)).copy_from(&q.cux.transpose());
+    let mut g0 = DVector::zeros(n + m);
+    g0.rows_mut(0, n).copy_from(&q.cx);
+    g0.rows_mut(n, m).copy_from(&q.cu);
+    let mut z = DVector::zeros(n + m);
+    z.rows_mut(0, n).copy_from(x);
+    z.rows_mut(n, m).copy_from(u);
+    let hz = &h * &z;
+    QuadraticCost {
+        grad: &g0 - &hz,
+        constant: q.c - g0.dot(&z) + 0.5 * z.dot(&hz),
+        hess: h,
+    }
+}
+
+/// Means and covariances of `(x_t, u_t)` (and the final state) when `controller` runs on the
+/// fitted `dynamics` from its initial-state distribution.
+#[derive(Debug, Clone)]
+pub struct TrajectoryMoments {
+    /// Means of `[x_t; u_t]`, `t < T`, then of `x_T`.
+    pub mu: Vec<DVector<f64>>,
+    /// Covariances of `[x_t; u_t]`, then of `x_T`.
+    pub sigma: Vec<DMatrix<f64>>,
+}
+
+/// Propagates the moments of a controller through TVLG dynamics (the LQR-FLM forward pass).
+pub fn forward_moments(
+    controller: &TvlgController,
+    dynamics: &TvlgDynamics,
+) -> Result<TrajectoryMoments> {
+    let t_len = controller.horizon();
+    check_len("fitted dynamics horizon", t_len, dynamics.horizon())?;
+    let (n, m) = (controller.state_dim(), controller.action_dim());
+    let mut mx = dynamics.x0_mean.clone();
+    let mut sx = dynamics.x0_cov.clone();
+    check_len("fitted dynamics state", n, mx.len())?;
+    let mut mu = Vec::with_capacity(t_len + 1);
+    let mut sigma = Vec::with_capacity(t_len + 1);
+    for t in 0..t_len {
+        let k = &controller.gains[t];
+        let mu_u = k * &mx + &controller.offsets[t];
+        let sxu = &sx * k.transpose();
+        let suu = k * &sxu + &controller.cov[t];
+        let mut s_joint = DMatrix::zeros(n + m, n + m);
+        s_joint.view_mut((0, 0), (n, n)).copy_from(&sx);
+        s_joint.view_mut((0, n), (n, m)).copy_from(&sxu);
+        s_joint.view_mut((n, 0), (m, n)).copy_from(&sxu.transpose());
+        s_joint.view_mut((n, n), (m, m)).copy_from(&suu);
+        let mut m_joint = DVector::zeros(n + m);
+        m_joint.rows_mut(0, n).copy_from(&mx);
+        m_joint.rows_mut(n, m).copy_from(&mu_u);
+        let mut f = DMatrix::zeros(n, n + m);
+        f.view_mut((0, 0), (n, n)).copy_from(&dynamics.fx[t]);
+        f.view_mut((0, n), (n, m)).copy_from(&dynamics.fu[t]);
+        mx = &f * &m_joint + &dynamics.fc[t];
+        sx = &f * &s_joint * f.transpose() + &dynamics.cov[t];
+        sx = (&sx + sx.transpose()) * 0.5;
+        mu.push(m_joint);
+        sigma.push(s_joint);
+    }
+    mu.push(mx);
+    sigma.push(sx);
+    Ok(TrajectoryMoments { mu, sigma })
+}
+
+/// Expected quadratic cost `Σ_t E[c_t]` of trajectory moments.
+pub fn expected_cost(moments: &TrajectoryMoments, cost: &[QuadraticCost]) -> f64 {
+    moments
+        .mu
+        .iter()
+        .zip(&moments.sigma)
+        .zip(cost)
+        .map(|((m, s), c)| c.eval(m) + 0.5 * (&c.hess * s).trace())
+        .sum()
+}
+
+/// `E_x[KL(p(·|x) ‖ q(·|x))]` at step `t` for two linear-Gaussian policies, with `x ~ N(μ_x, Σ_x)`.
+pub fn policy_kl(
+    p: &TvlgController,
+    q: &TvlgController,
+    t: usize,
+    mu_x: &DVector<f64>,
+    sigma_x: &DMatrix<f64>,
+) -> f64 {
+    let m = p.action_dim() as f64;
+    let qinv = q.inv_cov(t);
+    let dk = &p.gains[t] - &q.gains[t];
+    let dmean = &dk * mu_x + (&p.offsets[t] - &q.offsets[t]);
+    let logdet = |c: &DMatrix<f64>| 2.0 * c.diagonal().iter().map(|v| v.ln()).sum::<f64>();
+    let quad =
+        (dmean.transpose() * qinv * &dmean)[0] + (dk.transpose() * qinv * &dk * sigma_x).trace();
+    0.5 * ((qinv * &p.cov[t]).trace() - m + logdet(q.chol(t)) - logdet(p.chol(t)) + quad)
+}
