@@ -228,3 +228,37 @@ fn rk4_conserves_energy_without_damping() {
         assert!(d < 1e-6, "{}: relative energy drift {d:.3e}", model.name);
     }
 }
+
+/// The world-frame derivatives and the tangent-propagation twin are two independent derivations:
+/// they agree to round-off.
+#[test]
+fn world_frame_and_tangent_rnea_derivatives_agree() {
+    for model in models() {
+        let n = model.nv();
+        let mut data = Data::new(&model);
+        for s in 0..5 {
+            let seed: Vec<f64> = (0..3 * n)
+                .map(|i| ((i * 31 + s * 17) % 23) as f64 / 11.5 - 1.0)
+                .collect();
+            let (q, v, a) = (
+                state(n, &seed, 0, 3.0),
+                state(n, &seed, 1, 3.0),
+                state(n, &seed, 2, 10.0),
+            );
+            rnea_derivatives(&model, &mut data, &q, &v, &a);
+            let (dq, dv) = (data.dtau_dq.clone(), data.dtau_dv.clone());
+            rnea_derivatives_tangent(&model, &mut data, &q, &v, &a);
+            let scale = 1.0 + dq.abs().max() + dv.abs().max();
+            assert!(
+                (&dq - &data.dtau_dq).abs().max() < 1e-12 * scale,
+                "{} dq",
+                model.name
+            );
+            assert!(
+                (&dv - &data.dtau_dv).abs().max() < 1e-12 * scale,
+                "{} dv",
+                model.name
+            );
+        }
+    }
+}

@@ -61,6 +61,17 @@ pub struct Data {
     pub minv: DMatrix<f64>,
     /// Body momenta `Y v` (RNEA; reused by the derivatives).
     pub(crate) hv: Vec<Force>,
+    /// World-frame joint axes, velocities, accelerations, composite inertias, momenta, inertia
+    /// variations, forces and the per-joint `u`, `w` vectors of [`super::rnea_derivatives`].
+    pub(crate) jw: Vec<Motion>,
+    pub(crate) ov: Vec<Motion>,
+    pub(crate) oa: Vec<Motion>,
+    pub(crate) oycrb: Vec<Inertia>,
+    pub(crate) oh: Vec<Force>,
+    pub(crate) doycrb: Vec<Matrix6<f64>>,
+    pub(crate) of: Vec<Force>,
+    pub(crate) du: Vec<Motion>,
+    pub(crate) dw: Vec<Motion>,
     /// Tangent velocities (derivatives scratch).
     pub(crate) dv: Vec<Motion>,
     /// Tangent accelerations (derivatives scratch).
@@ -102,6 +113,15 @@ impl Data {
             ddq_dv: DMatrix::zeros(n, n),
             minv: DMatrix::zeros(n, n),
             hv: vec![Force::zero(); n],
+            jw: vec![Motion::zero(); n],
+            ov: vec![Motion::zero(); n],
+            oa: vec![Motion::zero(); n],
+            oycrb: vec![Inertia::zero(); n],
+            oh: vec![Force::zero(); n],
+            doycrb: vec![Matrix6::zeros(); n],
+            of: vec![Force::zero(); n],
+            du: vec![Motion::zero(); n],
+            dw: vec![Motion::zero(); n],
             dv: vec![Motion::zero(); n],
             da: vec![Motion::zero(); n],
             df: vec![Force::zero(); n],

@@ -8,9 +8,9 @@
 //! Forward dynamics follows from `∂q̈/∂x = -M⁻¹ ∂τ/∂x|_{a = q̈}` and `∂q̈/∂τ = M⁻¹`.
 //! [`aba_derivatives_fd`] is the finite-difference twin used as the test oracle.
 
-use super::spatial::Motion;
+use super::spatial::{skew, Force, Motion};
 use super::{aba, crba, rnea, Data, Model};
-use nalgebra::{DMatrix, Vector3};
+use nalgebra::{DMatrix, Matrix6, Vector3, Vector6};
 
 /// Last index (exclusive) of the subtree rooted at joint `k`: depth-first order makes every
 /// subtree a contiguous range `k..end`.
@@ -37,9 +37,126 @@ fn is_descendant(model: &Model, mut j: usize, k: usize) -> bool {
     false
 }
 
+#[inline]
+fn m6(m: &Motion) -> Vector6<f64> {
+    Vector6::new(m.v.x, m.v.y, m.v.z, m.w.x, m.w.y, m.w.z)
+}
+
+#[inline]
+fn f6(f: &Force) -> Vector6<f64> {
+    Vector6::new(f.f.x, f.f.y, f.f.z, f.n.x, f.n.y, f.n.z)
+}
+
+/// `v ×* Y − Y (v ×) = −(M + Mᵀ)` with `M = Y (v ×)`, computed block-wise: with
+/// `Y = [[m I, −[h]], [[h], Ī]]` and `v × = [[[w], [v]], [0, [w]]]`,
+/// `M = [[m [w], m [v] − [h][w]], [[h][w], [h][v] + Ī [w]]]`.
+#[inline]
+fn inertia_variation(y: &super::Inertia, m: &Motion) -> Matrix6<f64> {
+    let w = skew(&m.w);
+    let vx = skew(&m.v);
+    let hx = skew(&y.h);
+    let hw = hx * w;
+    let m11 = w * y.mass;
+    let m12 = vx * y.mass - hw;
+    let m21 = hw;
+    let m22 = hx * vx + y.ibar * w;
+    let mut out = Matrix6::zeros();
+    out.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&(-(m11 + m11.transpose())));
+    let off = -(m12 + m21.transpose());
+    out.fixed_view_mut::<3, 3>(0, 3).copy_from(&off);
+    out.fixed_view_mut::<3, 3>(3, 0).copy_from(&off.transpose());
+    out.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&(-(m22 + m22.transpose())));
+    out
+}
+
 /// `∂τ/∂q` and `∂τ/∂v` of `rnea(q, v, a)` into `data.dtau_dq`, `data.dtau_dv` (and `data.tau`).
+///
+/// World-frame algorithm in the spirit of Carpentier & Mansard (RSS 2018). With `J_k` the world
+/// motion axis of joint `k`, `p(k)` its parent, `Y^c_i`, `H_i`, `F_i` the composite inertia,
+/// momentum and force of the subtree of `i`, and `Ẏ^c_i = Σ_j (v_j ×* Y_j − Y_j v_j ×)`:
+/// `u_k = J_k × v_p(k)`, `w_k = u_k × v_p(k) − J_k × a_p(k)`, and for `k ⪯ i`
+/// `∂τ_i/∂q_k = Jᵢ·(Y^c_i w_k − Ẏ^c_i u_k − u_k ×* H_i)`,
+/// `∂τ_i/∂q̇_k = Jᵢ·(Ẏ^c_i J_k − 2 Y^c_i u_k + J_k ×* H_i)`; for an ancestor `i ≺ k` the same
+/// brackets taken at `k` (plus `J_k ×* F_k` for `q`) are projected on `J_i`. Each entry is a few
+/// 6-vector dot products after an O(n) pass.
 #[allow(clippy::needless_range_loop)] // indices address several per-joint arrays and the tree
 pub fn rnea_derivatives(model: &Model, data: &mut Data, q: &[f64], v: &[f64], a: &[f64]) {
+    rnea(model, data, q, v, a);
+    let n = model.nv();
+    let a0 = Motion::new(-model.gravity, Vector3::zeros());
+    // Forward: world axes, velocities, accelerations; per-body inertias and their variations.
+    for i in 0..n {
+        let om = data.o_m_i[i];
+        let j = &model.joints[i];
+        let jw = om.act_motion(&j.subspace());
+        let ov = om.act_motion(&data.v[i]);
+        let (ovp, oap) = match j.parent {
+            Some(p) => (data.ov[p], data.oa[p]),
+            None => (Motion::zero(), a0),
+        };
+        data.ov[i] = ov;
+        data.oa[i] = om.act_motion(&data.a[i]);
+        data.jw[i] = jw;
+        let u = jw.cross(&ovp);
+        data.du[i] = u;
+        data.dw[i] = u.cross(&ovp) - jw.cross(&oap);
+        let oy = om.act_inertia(&j.inertia);
+        data.oycrb[i] = oy;
+        data.oh[i] = oy.mul_motion(&ov);
+        data.doycrb[i] = inertia_variation(&oy, &ov);
+        data.of[i] = om.act_force(&data.f[i]); // composite (RNEA backward pass done)
+    }
+    // Backward: composites.
+    for i in (0..n).rev() {
+        if let Some(p) = model.joints[i].parent {
+            let (y, h, d) = (data.oycrb[i], data.oh[i], data.doycrb[i]);
+            data.oycrb[p] += y;
+            data.oh[p] += h;
+            data.doycrb[p] += d;
+        }
+    }
+    data.dtau_dq.fill(0.0);
+    data.dtau_dv.fill(0.0);
+    for i in 0..n {
+        let ji = data.jw[i];
+        let pi = f6(&data.oycrb[i].mul_motion(&ji));
+        let qi = data.doycrb[i].tr_mul(&m6(&ji));
+        let ri = f6(&ji.cross_force(&data.oh[i]));
+        // Row i, columns k ⪯ i.
+        let mut k = Some(i);
+        while let Some(kk) = k {
+            let (jk, uk, wk) = (m6(&data.jw[kk]), m6(&data.du[kk]), m6(&data.dw[kk]));
+            data.dtau_dq[(i, kk)] = pi.dot(&wk) - qi.dot(&uk) + ri.dot(&uk);
+            data.dtau_dv[(i, kk)] = qi.dot(&jk) - 2.0 * pi.dot(&uk) - ri.dot(&jk);
+            k = model.joints[kk].parent;
+        }
+        // Column i, rows of the strict ancestors of i.
+        if model.joints[i].parent.is_some() {
+            let (u, w) = (data.du[i], data.dw[i]);
+            let y = &data.oycrb[i];
+            let h = &data.oh[i];
+            let tq = f6(&(ji.cross_force(&data.of[i]) + y.mul_motion(&w) - u.cross_force(h)))
+                - data.doycrb[i] * m6(&u);
+            let tv =
+                data.doycrb[i] * m6(&ji) + f6(&(ji.cross_force(h) - y.mul_motion(&u).scale(2.0)));
+            let mut r = model.joints[i].parent;
+            while let Some(rr) = r {
+                let jr = m6(&data.jw[rr]);
+                data.dtau_dq[(rr, i)] = jr.dot(&tq);
+                data.dtau_dv[(rr, i)] = jr.dot(&tv);
+                r = model.joints[rr].parent;
+            }
+        }
+    }
+}
+
+/// The tangent-propagation twin of [`rnea_derivatives`]: one forward-mode sweep per coordinate
+/// (O(n · depth) spatial operations). Exact like the world-frame algorithm, slower; kept as a
+/// second, independent derivation for the tests.
+#[allow(clippy::needless_range_loop)] // indices address several per-joint arrays and the tree
+pub fn rnea_derivatives_tangent(model: &Model, data: &mut Data, q: &[f64], v: &[f64], a: &[f64]) {
     rnea(model, data, q, v, a);
     let n = model.nv();
     let a0 = Motion::new(-model.gravity, Vector3::zeros());

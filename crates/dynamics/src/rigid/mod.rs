@@ -32,7 +32,10 @@ pub mod spatial;
 pub use aba::aba;
 pub use crba::crba;
 pub use data::Data;
-pub use derivatives::{aba_derivatives, aba_derivatives_fd, compute_minverse, rnea_derivatives};
+pub use derivatives::{
+    aba_derivatives, aba_derivatives_fd, compute_minverse, rnea_derivatives,
+    rnea_derivatives_tangent,
+};
 pub use energy::{center_of_mass, kinetic_energy, potential_energy};
 pub use kinematics::{
     forward_kinematics, forward_kinematics_velocity, frame_jacobian, update_frame_placements,
