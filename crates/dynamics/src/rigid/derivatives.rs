@@ -1,12 +1,13 @@
 //! Analytical derivatives of inverse and forward dynamics.
 //!
-//! Inverse dynamics is differentiated exactly by propagating tangents through RNEA (one
-//! forward-mode sweep per coordinate, touching only the subtree of that joint on the way out and
-//! its ancestors on the way back): with `X_J(q)` the joint transform,
-//! `∂(X_J⁻¹ m)/∂q = -S × (X_J⁻¹ m)` and `∂(X_J f)/∂q = X_J (S ×* f)`. This is the structure of
-//! Carpentier & Mansard (RSS 2018) without its world-frame bookkeeping; it costs O(n · depth).
-//! Forward dynamics follows from `∂q̈/∂x = -M⁻¹ ∂τ/∂x|_{a = q̈}` and `∂q̈/∂τ = M⁻¹`.
-//! [`aba_derivatives_fd`] is the finite-difference twin used as the test oracle.
+//! [`rnea_derivatives`] is a world-frame algorithm in the spirit of Carpentier & Mansard (RSS
+//! 2018): one O(n) pass gathers world axes, velocities, accelerations, composite inertias and
+//! their variations, then every entry of `∂τ/∂q`, `∂τ/∂q̇` is a few 6-vector dot products.
+//! [`rnea_derivatives_tangent`] derives the same matrices independently, by propagating tangents
+//! through RNEA (`∂(X_J⁻¹ m)/∂q = −S × (X_J⁻¹ m)`, `∂(X_J f)/∂q = X_J (S ×* f)`), one sweep per
+//! coordinate. Forward dynamics follows from `∂q̈/∂x = −M⁻¹ ∂τ/∂x|_{a = q̈}` and `∂q̈/∂τ = M⁻¹`
+//! ([`aba_derivatives`]); [`aba_derivatives_fd`] is the finite-difference twin used as the test
+//! oracle.
 
 use super::spatial::{skew, Force, Motion};
 use super::{aba, crba, rnea, Data, Model};
