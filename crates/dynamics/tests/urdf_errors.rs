@@ -35,6 +35,10 @@ fn malformed_xml() {
     assert!(matches!(e, UrdfError::Malformed(_)), "{e}");
     let e = err("not xml at all <<");
     assert!(matches!(e, UrdfError::Malformed(_)), "{e}");
+    let e = err(r#"<robot name="empty"></robot>"#);
+    assert!(matches!(e, UrdfError::Malformed(_)), "{e}");
+    let e = err(r#"<model name="r"><link name="a"/></model>"#);
+    assert!(e.to_string().contains("<model>"), "{e}");
 }
 
 #[test]
@@ -203,4 +207,34 @@ fn sibling_order_is_alphabetical_by_joint_name_depth_first() {
     assert_eq!(m.joints[2].parent, Some(1));
     assert!(m.joints[0].upper.is_infinite());
     assert_eq!((m.joints[0].damping, m.joints[0].friction), (0.5, 0.1));
+}
+
+/// Truncated or corrupted versions of a real URDF are rejected or accepted, never a panic.
+#[test]
+fn corrupted_urdfs_never_panic() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../tests/fixtures/pinocchio/arm7.urdf"
+    ))
+    .unwrap();
+    let bytes = text.as_bytes();
+    let mut state = 0x2545F4914F6CDD1Du64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let replacements = [b'<', b'>', b'"', b'/', b'0', b'-', b' ', b'x', b'e'];
+    for _ in 0..300 {
+        let cut = (next() % bytes.len() as u64) as usize;
+        let mut corrupted = bytes.to_vec();
+        let pos = (next() % bytes.len() as u64) as usize;
+        corrupted[pos] = replacements[(next() % replacements.len() as u64) as usize];
+        for candidate in [&bytes[..cut], &corrupted[..]] {
+            let s = String::from_utf8_lossy(candidate).into_owned();
+            let r = std::panic::catch_unwind(|| Model::from_urdf_str(&s).map(|m| m.nv()));
+            assert!(r.is_ok(), "panicked on input cut at {cut} / byte {pos}");
+        }
+    }
 }

@@ -434,6 +434,12 @@ impl Model {
 
     /// Builds the model from a parsed urdf-rs robot.
     pub fn from_robot(robot: &urdf_rs::Robot) -> Result<Model, UrdfError> {
+        if robot.links.is_empty() {
+            return Err(UrdfError::Malformed(format!(
+                "robot '{}' has no <link>",
+                robot.name
+            )));
+        }
         let mut links: HashMap<&str, &urdf_rs::Link> = HashMap::new();
         for l in &robot.links {
             if links.insert(l.name.as_str(), l).is_some() {
