@@ -36,6 +36,9 @@ enum Command {
     Env(cli::env::EnvCommand),
     /// Train a model-free agent (ddpg, sac, dqn, reinforce) and write a run directory.
     Train(cli::train::TrainArgs),
+    /// Reproduce a paper end to end (p0-pendulum: Table II and Fig. 5 of p0).
+    #[command(subcommand)]
+    Reproduce(cli::reproduce::ReproduceCommand),
     /// Rigid-body dynamics of a URDF robot (inspect its joints; evaluate RNEA/CRBA/ABA/...).
     #[command(subcommand)]
     Urdf(cli::urdf::UrdfCommand),
@@ -48,6 +51,7 @@ fn run(command: Command) -> cli::Result<()> {
         Command::Rollout(args) => cli::rollout::run(&args),
         Command::Env(cmd) => cli::env::run(cmd),
         Command::Train(args) => cli::train::run(&args),
+        Command::Reproduce(cmd) => cli::reproduce::run(cmd),
         Command::Urdf(cmd) => cli::urdf::run(cmd),
     }
 }

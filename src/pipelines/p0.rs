@@ -1,0 +1,710 @@
+//! Paper p0 (Rastogi, Koryakovskiy and Kober): iterative difference-model learning, with the
+//! cold-start and warm-start baselines it is compared against (Sec. III, Fig. 2, Table II).
+//!
+//! Generic over the idealized [`Plant`], the [`Task`] (reward, termination, episode length), the
+//! true system (any [`Env`], wrapped here in a [`SampleCounter`]) and the off-policy agent (any
+//! [`OffPolicyAgent`], DDPG in the paper). The three methods share every code path:
+//!
+//! - **pre-training** ([`pretrain`]): the agent learns on the idealized plant, as a
+//!   [`ModelEnv`] over [`PlantModel`];
+//! - **cold start** ([`Method::Cold`]): a fresh agent learns on the true system;
+//! - **warm start** ([`Method::Warm`]): the pre-trained agent learns on the true system (fresh
+//!   replay buffer);
+//! - **difference model** ([`Method::Difference`]): from the pre-trained agent, repeat: collect
+//!   [`P0Config::real_batch`] true samples with the previous policy plus exploration noise, fit the
+//!   [`ResidualModel`] on all true samples so far, retrain the agent for
+//!   [`P0Config::model_steps`] steps on the idealized plant plus the difference model, keeping
+//!   actor, critic and replay buffer from the previous iteration.
+//!
+//! True-system samples are counted exactly by a [`SampleCounter`] around the training
+//! environment. The deterministic policy is evaluated on a separate, uncounted copy of the true
+//! system; those evaluation episodes are not training samples (p0's Fig. 5 plots exactly this:
+//! the return on the true system against the true samples used for learning).
+
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+use tandem_agents::{
+    AgentError, Batch, Ddpg, DdpgConfig, Mode, NoiseConfig, OffPolicyAgent, ReplayBuffer,
+    TransitionRef,
+};
+use tandem_core::{Rng, SeedStream};
+use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
+use tandem_dynamics::Plant;
+use tandem_envs::{DcMotorPendulumEnv, Env, EnvError, SampleCounter};
+use tandem_models::{
+    DynamicsModel, FitConfig, FitReport, ModelError, PlantModel, ResidualModel,
+    ResidualModelConfig, Transitions, TransitionsBuilder,
+};
+
+use super::adapter::{feature_dim, Adapted, Feature};
+use super::model_env::{clip_to, DcMotorPendulumTask, ModelEnv, Task};
+
+/// Why a pipeline stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// The agent failed (bad configuration, non-finite loss, ...).
+    #[error("agent: {0}")]
+    Agent(#[from] AgentError),
+    /// An environment failed.
+    #[error("environment: {0}")]
+    Env(#[from] EnvError),
+    /// The difference model failed to fit.
+    #[error("difference model: {0}")]
+    Model(#[from] ModelError),
+    /// A configuration value out of range.
+    #[error("configuration: {0}")]
+    Config(String),
+}
+
+/// Result of this module.
+pub type Result<T> = std::result::Result<T, PipelineError>;
+
+/// One of the three methods of p0's Table II.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// DDPG on the true system from scratch.
+    Cold,
+    /// DDPG pre-trained on the idealized plant, then on the true system.
+    Warm,
+    /// Pre-trained on the idealized plant, then iterated difference-model learning.
+    Difference,
+}
+
+impl Method {
+    /// All three, in Table II's order.
+    pub const ALL: [Method; 3] = [Method::Cold, Method::Warm, Method::Difference];
+
+    /// `"cold"`, `"warm"` or `"difference"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Cold => "cold",
+            Method::Warm => "warm",
+            Method::Difference => "difference",
+        }
+    }
+}
+
+/// Settings of a p0 run. `Default` follows p0 where it gives a figure (cited per field) and says
+/// where a figure is ours.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct P0Config {
+    /// The agent (p0 Sec. IV-C: DDPG 400/300, learning rates 1e-3/1e-4, τ = 0.001, γ = 0.99,
+    /// OU σ = 0.12, θ = 0.15).
+    pub ddpg: DdpgConfig,
+    /// What the agent sees of the observation ([`Adapted`]; p0 gives no normalization; ours for
+    /// the pendulum: `(cos φ, sin φ, φ̇/20)`, inputs of order one without the ±π seam).
+    pub features: Vec<Feature>,
+    /// What the agent learns from: `reward * reward_scale` ([`Adapted`]; ours). Reported returns
+    /// are always unscaled.
+    pub reward_scale: f64,
+    /// Exploration noise when learning from scratch: cold start and pre-training on the
+    /// idealized plant. p0 says only "slightly higher" than the σ = 0.12 of `ddpg.noise` (which
+    /// warm start and the difference method use). Ours: OU σ = 0.3, θ = 0.15.
+    pub cold_noise: NoiseConfig,
+    /// Steps of pre-training on the idealized plant (p0 trains to convergence; ours).
+    pub pretrain_steps: u64,
+    /// True samples collected before each difference-model update (p0 Sec. IV-C: 3750).
+    pub real_batch: u64,
+    /// True samples the difference method may use in all (Table II's fixed budget: 15000).
+    pub real_budget: u64,
+    /// True samples the cold and warm starts may use at most.
+    pub baseline_max_samples: u64,
+    /// Stop a cold or warm run once it has reached [`Self::target_return`] and used
+    /// [`Self::real_budget`] samples (both Table II figures are known by then).
+    pub baseline_stop_early: bool,
+    /// Agent steps on the model environment after each difference-model update (ours).
+    pub model_steps: u64,
+    /// Evaluate cold and warm runs every this many true samples.
+    pub eval_interval: u64,
+    /// Deterministic evaluation episodes on the true system (the pendulum always starts at
+    /// `(π, 0)` and has no noise, so one episode is exact).
+    pub eval_episodes: usize,
+    /// Table II's fixed return (p0: −1000).
+    pub target_return: f64,
+    /// The difference network (p0 Sec. IV-C: 3×400 ReLU, dropout 0.3, AdaGrad).
+    pub residual: ResidualModelConfig,
+    /// Each fit of the difference model (on all true samples so far).
+    pub fit: FitConfig,
+}
+
+impl Default for P0Config {
+    fn default() -> Self {
+        Self {
+            ddpg: DdpgConfig::default(),
+            features: vec![
+                Feature::CosSin { index: 0 },
+                Feature::Linear {
+                    index: 1,
+                    scale: 0.05,
+                },
+            ],
+            reward_scale: 0.01,
+            cold_noise: NoiseConfig::OrnsteinUhlenbeck {
+                theta: 0.15,
+                sigma: 0.3,
+                dt: 1.0,
+            },
+            pretrain_steps: 16_000,
+            real_batch: 3750,
+            real_budget: 15_000,
+            baseline_max_samples: 30_000,
+            baseline_stop_early: true,
+            model_steps: 5_000,
+            eval_interval: 1250,
+            eval_episodes: 1,
+            target_return: -1000.0,
+            residual: ResidualModelConfig::default(),
+            fit: FitConfig {
+                epochs: 10,
+                batch_size: 128,
+                holdout_fraction: 0.1,
+                seed: 0,
+            },
+        }
+    }
+}
+
+impl P0Config {
+    /// Checks the ranges the loop relies on.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: &str| Err(PipelineError::Config(m.to_string()));
+        if self.real_batch == 0 || self.real_budget < self.real_batch {
+            return bad("need 0 < real_batch <= real_budget");
+        }
+        if !(self.reward_scale > 0.0 && self.reward_scale.is_finite()) || self.features.is_empty() {
+            return bad("reward_scale must be positive and features non-empty");
+        }
+        if self.eval_interval == 0 || self.eval_episodes == 0 {
+            return bad("eval_interval and eval_episodes must be >= 1");
+        }
+        if self.fit.epochs == 0 || self.fit.batch_size == 0 {
+            return bad("fit.epochs and fit.batch_size must be >= 1");
+        }
+        self.ddpg.validate()?;
+        Ok(())
+    }
+}
+
+/// A problem p0 applies to: an idealized plant, the task over it, and a way to build the true
+/// system.
+pub struct Problem<P, T, F> {
+    /// The idealized model `f_idl`.
+    pub idealized: P,
+    /// Start, observation, reward, termination and episode length, shared by all environments.
+    pub task: T,
+    /// Builds a fresh true system (with its episode limit).
+    pub true_env: F,
+}
+
+/// One point of a learning curve: the deterministic policy's return on the true system after
+/// `true_samples` training samples from it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CurvePoint {
+    /// True-system training samples used so far (evaluation episodes excluded).
+    pub true_samples: u64,
+    /// Mean undiscounted return of the deterministic policy on the true system.
+    pub eval_return: f64,
+}
+
+/// What one run of one method reports.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunRecord {
+    /// The method.
+    pub method: Method,
+    /// The seed.
+    pub seed: u64,
+    /// Learning curve on the true system.
+    pub curve: Vec<CurvePoint>,
+    /// True-system training samples used, counted by the [`SampleCounter`].
+    pub true_samples: u64,
+    /// Simulated steps (idealized plant or model environment) the agent trained on, pre-training
+    /// excluded.
+    pub simulated_steps: u64,
+    /// Gradient updates of the agent, pre-training excluded.
+    pub updates: u64,
+    /// Last held-out loss of each difference-model fit (difference method only).
+    pub fit_holdout_loss: Vec<f64>,
+    /// Wall time of the run, pre-training excluded, seconds.
+    pub wall_seconds: f64,
+}
+
+impl RunRecord {
+    /// The return at the last evaluation with at most `budget` true samples.
+    pub fn return_at(&self, budget: u64) -> Option<f64> {
+        self.curve
+            .iter()
+            .rfind(|p| p.true_samples <= budget)
+            .map(|p| p.eval_return)
+    }
+
+    /// True samples at the first evaluation whose return reached `target`.
+    pub fn samples_to(&self, target: f64) -> Option<u64> {
+        self.curve
+            .iter()
+            .find(|p| p.eval_return >= target)
+            .map(|p| p.true_samples)
+    }
+}
+
+/// An agent in training: its replay buffer, minibatch scratch, sampling generator and
+/// schedule. [`Trainee::train`] is the one loop every phase of every method uses.
+#[derive(Debug, Clone)]
+pub struct Trainee<A> {
+    /// The agent.
+    pub agent: A,
+    /// Its replay buffer.
+    pub replay: ReplayBuffer,
+    batch: Batch,
+    rng: Rng,
+    learning_starts: usize,
+    train_freq: usize,
+    gradient_steps: usize,
+    /// Gradient updates so far.
+    pub updates: u64,
+    /// Environment steps trained on so far.
+    pub steps: u64,
+}
+
+impl<A: OffPolicyAgent> Trainee<A> {
+    /// `agent` with an empty replay buffer, scheduled as `cfg` says (minibatch size, updates
+    /// begin once `learning_starts` transitions are stored, `gradient_steps` updates every
+    /// `train_freq` steps).
+    pub fn new(
+        agent: A,
+        cfg: &DdpgConfig,
+        obs_dim: usize,
+        act_dim: usize,
+        rng: Rng,
+    ) -> Result<Self> {
+        Ok(Self {
+            agent,
+            replay: ReplayBuffer::new(cfg.buffer_size, obs_dim, act_dim)?,
+            batch: Batch::zeros(cfg.batch_size, obs_dim, act_dim),
+            rng,
+            learning_starts: cfg.learning_starts.max(cfg.batch_size),
+            train_freq: cfg.train_freq,
+            gradient_steps: cfg.gradient_steps,
+            updates: 0,
+            steps: 0,
+        })
+    }
+
+    /// Empties the replay buffer (a new environment whose old transitions should not be reused).
+    pub fn clear_replay(&mut self) -> Result<()> {
+        self.replay = ReplayBuffer::new(
+            self.replay.capacity(),
+            self.replay.obs_dim(),
+            self.replay.act_dim(),
+        )?;
+        Ok(())
+    }
+
+    /// Takes `steps` exploring steps in `env` (continuing the episode in `rollout`), stores every
+    /// transition and updates the agent on the schedule; `tick` is called after every step.
+    pub fn train(
+        &mut self,
+        env: &mut dyn Env,
+        rollout: &mut Rollout,
+        steps: u64,
+        tick: &mut dyn FnMut(),
+    ) -> Result<()> {
+        for _ in 0..steps {
+            let obs = rollout.current(env, &mut self.agent);
+            let action = self.agent.act(&obs, Mode::Explore)?;
+            let a = action.as_continuous().unwrap_or_default().to_vec();
+            let st = env.step(&action)?;
+            self.replay.push(TransitionRef {
+                obs: &obs,
+                action: &a,
+                prev_action: &rollout.prev_action,
+                reward: st.reward,
+                next_obs: &st.observation,
+                terminated: st.terminated,
+            })?;
+            rollout.advance(a, st.observation, st.terminated || st.truncated);
+            self.steps += 1;
+            if self.replay.len() >= self.learning_starts && self.steps % self.train_freq as u64 == 0
+            {
+                for _ in 0..self.gradient_steps {
+                    let n = self.batch.len();
+                    self.replay
+                        .sample_into(&mut self.rng, &mut self.batch, 0..n)?;
+                    self.agent.update(&self.batch)?;
+                    self.updates += 1;
+                }
+            }
+            tick();
+        }
+        Ok(())
+    }
+}
+
+/// An episode in progress on one environment, so that training can stop and resume mid-episode.
+#[derive(Debug, Clone, Default)]
+pub struct Rollout {
+    obs: Option<Vec<f64>>,
+    prev_action: Vec<f64>,
+    episode: u64,
+    seed: u64,
+}
+
+impl Rollout {
+    /// No episode started yet; episode `k` is reset with a seed derived from `seed` and `k`.
+    pub fn new(seed: u64) -> Self {
+        Self {
+            seed,
+            ..Self::default()
+        }
+    }
+
+    fn current<A: OffPolicyAgent>(&mut self, env: &mut dyn Env, agent: &mut A) -> Vec<f64> {
+        if let Some(o) = self.obs.take() {
+            return o;
+        }
+        let o = env.reset(Some(
+            SeedStream::new(self.seed).derive(&format!("ep{}", self.episode)),
+        ));
+        self.episode += 1;
+        agent.reset_episode();
+        self.prev_action = vec![0.0; env.action_space().flat_dim()];
+        o
+    }
+
+    fn advance(&mut self, action: Vec<f64>, next_obs: Vec<f64>, done: bool) {
+        self.prev_action = action;
+        self.obs = (!done).then_some(next_obs);
+    }
+}
+
+/// Runs the agent with exploration on the (counted) true system for `n` steps, starting fresh
+/// episodes, and returns the transitions in the task's canonical state coordinates:
+/// `s = canon(x_t)`, `s' = s + (x_{t+1} − x_t)` from the environment's internal state, so that a
+/// wrapped angle never makes a difference jump by 2π.
+pub fn collect<A: OffPolicyAgent, T: Task>(
+    agent: &mut A,
+    env: &mut dyn Env,
+    task: &T,
+    n: u64,
+    seed: u64,
+    tick: &mut dyn FnMut(),
+) -> Result<Transitions> {
+    let sd = env.state().len();
+    let ad = env.action_space().flat_dim();
+    let mut b = TransitionsBuilder::new(sd, ad);
+    let mut rollout = Rollout::new(seed);
+    for _ in 0..n {
+        let obs = rollout.current(env, agent);
+        let x = env.state();
+        let action = agent.act(&obs, Mode::Explore)?;
+        let a = clip_to(
+            task.action_space(),
+            action.as_continuous().unwrap_or_default(),
+        );
+        let st = env.step(&action)?;
+        let x1 = env.state();
+        let mut s = x.clone();
+        task.canonicalize(&mut s);
+        let s1: Vec<f64> = s
+            .iter()
+            .zip(x1.iter().zip(&x))
+            .map(|(s, (a, b))| s + (a - b))
+            .collect();
+        b.push(&s, &a, &s1, st.reward, st.terminated)?;
+        let done = st.terminated || st.truncated;
+        if done {
+            b.end_episode();
+        }
+        rollout.advance(a, st.observation, done);
+        tick();
+    }
+    Ok(b.build())
+}
+
+/// Mean return of `episodes` deterministic episodes of `agent` on `env` (episodes end at
+/// termination or the environment's time limit).
+pub fn evaluate<A: OffPolicyAgent>(
+    agent: &mut A,
+    env: &mut dyn Env,
+    episodes: usize,
+) -> Result<f64> {
+    let limit = env.max_episode_steps().unwrap_or(usize::MAX);
+    let mut total = 0.0;
+    for i in 0..episodes {
+        let mut obs = env.reset(Some(i as u64));
+        agent.reset_episode();
+        for _ in 0..limit {
+            let a = agent.act(&obs, Mode::Deterministic)?;
+            let st = env.step(&a)?;
+            total += st.reward;
+            if st.terminated || st.truncated {
+                break;
+            }
+            obs = st.observation;
+        }
+    }
+    Ok(total / episodes as f64)
+}
+
+/// Pre-trains `trainee` for `steps` steps on the idealized plant (a [`ModelEnv`] over
+/// [`PlantModel`]); the replay buffer is emptied afterwards (its transitions are idealized).
+pub fn pretrain<A, P, T>(
+    trainee: &mut Trainee<A>,
+    idealized: P,
+    task: T,
+    steps: u64,
+    seed: u64,
+    tick: &mut dyn FnMut(),
+) -> Result<()>
+where
+    A: OffPolicyAgent,
+    P: Plant,
+    T: Task,
+{
+    let mut env = ModelEnv::new(PlantModel::new(idealized), task)?;
+    trainee.train(&mut env, &mut Rollout::new(seed), steps, tick)?;
+    trainee.clear_replay()
+}
+
+/// Adds `new` to `all`.
+fn append(all: &mut Option<Transitions>, new: Transitions) -> Result<()> {
+    match all {
+        Some(a) => a.extend(&new)?,
+        None => *all = Some(new),
+    }
+    Ok(())
+}
+
+/// Runs one method from `start` (a fresh agent for [`Method::Cold`], the pre-trained one
+/// otherwise) and returns its record. `tick(true_samples)` is called after every true-system
+/// step, for progress bars.
+pub fn run_method<A, P, T, F>(
+    method: Method,
+    problem: &Problem<P, T, F>,
+    cfg: &P0Config,
+    mut start: Trainee<A>,
+    seed: u64,
+    tick: &mut dyn FnMut(u64),
+) -> Result<RunRecord>
+where
+    A: OffPolicyAgent,
+    P: Plant + Clone,
+    T: Task + Clone,
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    cfg.validate()?;
+    let t0 = Instant::now();
+    let seeds = SeedStream::new(seed);
+    let (mut env, count) = SampleCounter::new((problem.true_env)()?);
+    let mut eval_env = (problem.true_env)()?;
+    let updates0 = start.updates;
+    let mut curve = vec![CurvePoint {
+        true_samples: 0,
+        eval_return: evaluate(&mut start.agent, &mut eval_env, cfg.eval_episodes)?,
+    }];
+    let mut fit_losses = Vec::new();
+    let mut simulated = 0;
+    match method {
+        Method::Cold | Method::Warm => {
+            start.clear_replay()?;
+            let mut rollout = Rollout::new(seeds.derive("true-episodes"));
+            let mut reached = false;
+            while count.get() < cfg.baseline_max_samples {
+                let n = cfg
+                    .eval_interval
+                    .min(cfg.baseline_max_samples - count.get());
+                let c = count.clone();
+                start.train(&mut env, &mut rollout, n, &mut || tick(c.get()))?;
+                let r = evaluate(&mut start.agent, &mut eval_env, cfg.eval_episodes)?;
+                curve.push(CurvePoint {
+                    true_samples: count.get(),
+                    eval_return: r,
+                });
+                reached |= r >= cfg.target_return;
+                if cfg.baseline_stop_early && reached && count.get() >= cfg.real_budget {
+                    break;
+                }
+            }
+        }
+        Method::Difference => {
+            let mut model_env = ModelEnv::new(
+                ResidualModel::new(problem.idealized.clone(), cfg.residual.clone())?,
+                problem.task.clone(),
+            )?;
+            start.clear_replay()?;
+            let mut all: Option<Transitions> = None;
+            let mut rollout = Rollout::new(seeds.derive("model-episodes"));
+            let mut k = 0u64;
+            while count.get() + cfg.real_batch <= cfg.real_budget {
+                // 1. True samples with the previous policy plus exploration noise.
+                let c = count.clone();
+                let batch = collect(
+                    &mut start.agent,
+                    &mut env,
+                    &problem.task,
+                    cfg.real_batch,
+                    seeds.derive(&format!("collect-{k}")),
+                    &mut || tick(c.get()),
+                )?;
+                append(&mut all, batch)?;
+                // 2. The difference model on all true samples so far.
+                let fit = FitConfig {
+                    seed: seeds.derive(&format!("fit-{k}")),
+                    ..cfg.fit.clone()
+                };
+                let report: FitReport = model_env
+                    .model_mut()
+                    .fit(all.as_ref().expect("appended"), &fit)?;
+                fit_losses.push(report.holdout_loss.last().copied().unwrap_or(f64::NAN));
+                // 3. DDPG on the idealized plant plus the difference model, bootstrapped.
+                start.train(&mut model_env, &mut rollout, cfg.model_steps, &mut || {})?;
+                simulated += cfg.model_steps;
+                curve.push(CurvePoint {
+                    true_samples: count.get(),
+                    eval_return: evaluate(&mut start.agent, &mut eval_env, cfg.eval_episodes)?,
+                });
+                k += 1;
+            }
+        }
+    }
+    Ok(RunRecord {
+        method,
+        seed,
+        curve,
+        true_samples: count.get(),
+        simulated_steps: simulated,
+        updates: start.updates - updates0,
+        fit_holdout_loss: fit_losses,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// Observation and action widths of the task.
+pub fn task_dims<T: Task>(task: &T) -> (usize, usize) {
+    (
+        task.observation_space().flat_dim(),
+        task.action_space().flat_dim(),
+    )
+}
+
+/// Runs `methods` for one seed. The agent is pre-trained once on the idealized plant (if a
+/// method needs it) and cloned for warm start and the difference method; cold start gets a fresh
+/// agent from `make_agent(Method::Cold, ..)`. `tick` reports progress.
+pub fn run_seed<A, P, T, F>(
+    problem: &Problem<P, T, F>,
+    cfg: &P0Config,
+    methods: &[Method],
+    seed: u64,
+    make_agent: &dyn Fn(Method, u64) -> std::result::Result<A, AgentError>,
+    tick: &mut dyn FnMut(Tick),
+) -> Result<Vec<RunRecord>>
+where
+    A: OffPolicyAgent + Exploring + Clone,
+    P: Plant + Clone,
+    T: Task + Clone,
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    cfg.validate()?;
+    let seeds = SeedStream::new(seed);
+    let (od, ad) = task_dims(&problem.task);
+    let trainee = |m: Method| -> Result<Trainee<A>> {
+        let agent = make_agent(m, seeds.derive("agent"))?;
+        Trainee::new(agent, &cfg.ddpg, od, ad, seeds.rng("minibatches"))
+    };
+    let pretrained = if methods.iter().any(|m| *m != Method::Cold) {
+        let mut t = trainee(Method::Warm)?;
+        let mut k = 0u64;
+        pretrain(
+            &mut t,
+            problem.idealized.clone(),
+            problem.task.clone(),
+            cfg.pretrain_steps,
+            seeds.derive("idealized-episodes"),
+            &mut || {
+                k += 1;
+                tick(Tick::Pretrain(k));
+            },
+        )?;
+        // Fine-tuning explores with p0's σ = 0.12.
+        t.agent.set_noise(cfg.ddpg.noise)?;
+        Some(t)
+    } else {
+        None
+    };
+    let mut out = Vec::new();
+    for &m in methods {
+        let start = match (m, &pretrained) {
+            (Method::Cold, _) | (_, None) => trainee(Method::Cold)?,
+            (_, Some(p)) => p.clone(),
+        };
+        out.push(run_method(m, problem, cfg, start, seed, &mut |n| {
+            tick(Tick::True(m, n))
+        })?);
+    }
+    Ok(out)
+}
+
+/// A constructor of the true system.
+pub type MakeEnv = fn() -> std::result::Result<Box<dyn Env>, EnvError>;
+
+/// Progress of [`run_seed`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Tick {
+    /// Pre-training steps on the idealized plant so far.
+    Pretrain(u64),
+    /// True-system training samples so far of a method's run.
+    True(Method, u64),
+}
+
+/// p0's pendulum (Sec. IV-A, Table I): the idealized DC-motor pendulum (m = 0.055 kg) as the
+/// plant, the swing-up task, and `DcMotorPendulum-real-v0` (m = 0.090 kg) as the true system.
+pub fn pendulum_problem() -> Problem<DcMotorPendulum, DcMotorPendulumTask, MakeEnv> {
+    let params = DcMotorPendulumParams::idealized();
+    Problem {
+        idealized: DcMotorPendulum::new(params),
+        task: DcMotorPendulumTask::new(&params),
+        true_env: || tandem_envs::make(DcMotorPendulumEnv::ID_REAL),
+    }
+}
+
+/// An agent whose exploration noise the pipeline can change between phases.
+pub trait Exploring {
+    /// Replaces the exploration noise.
+    fn set_noise(&mut self, noise: NoiseConfig) -> std::result::Result<(), AgentError>;
+}
+
+impl<A> Exploring for Adapted<A> {
+    fn set_noise(&mut self, noise: NoiseConfig) -> std::result::Result<(), AgentError> {
+        Adapted::set_noise(self, noise)
+    }
+}
+
+/// DDPG agents for `task` as p0 configures them (`cfg.ddpg`), behind `cfg.features` and
+/// `cfg.reward_scale`, exploring with `cfg.cold_noise` (the pipeline switches warm start and the
+/// difference method to `cfg.ddpg.noise` after pre-training).
+pub fn ddpg_agent<T: Task>(
+    cfg: &P0Config,
+    task: &T,
+    _method: Method,
+    seed: u64,
+) -> std::result::Result<Adapted<Ddpg>, AgentError> {
+    let seeds = SeedStream::new(seed);
+    let fd = feature_dim(&cfg.features);
+    let obs = tandem_core::Space::boxed(vec![f64::NEG_INFINITY; fd], vec![f64::INFINITY; fd]);
+    let agent = Ddpg::new(
+        cfg.ddpg.clone(),
+        &obs,
+        task.action_space(),
+        seeds.derive("ddpg"),
+    )?;
+    Adapted::new(
+        agent,
+        cfg.features.clone(),
+        cfg.reward_scale,
+        task.action_space(),
+        cfg.cold_noise,
+        seeds.rng("exploration"),
+    )
+}
