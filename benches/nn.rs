@@ -4,6 +4,8 @@
 //!
 //! Run: `cargo bench --bench nn` (medians are what the notes quote).
 
+#![allow(clippy::needless_range_loop)]
+
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use rand::Rng as _;
 use tandem_core::seeding::{rng_from_seed, Rng};

@@ -64,6 +64,7 @@
 pub mod candle_ext;
 pub mod checkpoint;
 pub mod error;
+pub mod fastmath;
 pub mod heads;
 mod kernels;
 pub mod loss;

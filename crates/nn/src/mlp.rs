@@ -18,6 +18,7 @@ use tandem_core::seeding::Rng;
 
 use crate::checkpoint::{Checkpoint, Checkpointable};
 use crate::error::{check_finite, check_len, NnError, Result};
+use crate::fastmath;
 use crate::kernels::{gemm_nn, gemm_nt, gemm_tn};
 
 /// Element-wise activation of a layer.
@@ -40,22 +41,22 @@ pub enum Activation {
 }
 
 impl Activation {
-    /// The activation of a scalar.
-    #[inline]
+    /// The activation of a scalar (through [`crate::fastmath`], as in the batched passes).
+    #[inline(always)]
     pub fn apply(self, x: f32) -> f32 {
         match self {
             Activation::Identity => x,
             Activation::Relu => x.max(0.0),
-            Activation::Tanh => x.tanh(),
-            Activation::Sigmoid => sigmoid(x),
+            Activation::Tanh => fastmath::tanh(x),
+            Activation::Sigmoid => fastmath::sigmoid(x),
             Activation::Elu => {
                 if x > 0.0 {
                     x
                 } else {
-                    x.exp_m1()
+                    fastmath::exp_m1(x)
                 }
             }
-            Activation::Silu => x * sigmoid(x),
+            Activation::Silu => x * fastmath::sigmoid(x),
         }
     }
 
@@ -601,10 +602,10 @@ fn bias_activation(y: &mut [f32], b: &[f32], act: Activation, z: Option<&mut [f3
     match act {
         Activation::Identity => rows!(|v: f32| v),
         Activation::Relu => rows!(|v: f32| v.max(0.0)),
-        Activation::Tanh => rows!(|v: f32| v.tanh()),
-        Activation::Sigmoid => rows!(sigmoid),
-        Activation::Elu => rows!(|v: f32| if v > 0.0 { v } else { v.exp_m1() }),
-        Activation::Silu => rows!(|v: f32| v * sigmoid(v)),
+        Activation::Tanh => rows!(fastmath::tanh),
+        Activation::Sigmoid => rows!(fastmath::sigmoid),
+        Activation::Elu => rows!(|v: f32| if v > 0.0 { v } else { fastmath::exp_m1(v) }),
+        Activation::Silu => rows!(|v: f32| v * fastmath::sigmoid(v)),
     }
 }
 
@@ -638,7 +639,7 @@ fn activation_backward(act: Activation, g: &mut [f32], y: &[f32], z: &[f32]) {
         }
         Activation::Silu => {
             for (gv, zv) in g.iter_mut().zip(z) {
-                let s = sigmoid(*zv);
+                let s = fastmath::sigmoid(*zv);
                 *gv *= s * (1.0 + zv * (1.0 - s));
             }
         }
