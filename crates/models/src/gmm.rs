@@ -126,7 +126,7 @@ impl Gmm {
                     "GMM log-likelihood became non-finite during EM".into(),
                 ));
             }
-            if ll < prev_ll || (ll - prev_ll).abs() < 1e-9 * ll.abs() {
+            if ll < prev_ll || (ll - prev_ll).abs() < 1e-7 * ll.abs() {
                 break;
             }
             prev_ll = ll;
@@ -148,15 +148,15 @@ impl Gmm {
                         }
                     })
                     .collect();
-                let mut mu = DVector::zeros(d);
-                for (i, wi) in w.iter().enumerate() {
-                    mu.axpy(*wi, &data.row(i).transpose(), 1.0);
+                // Weighted moments as matrix products: μ = Xᵀw, S = (√w X)ᵀ(√w X) − μμᵀ.
+                let wv = DVector::from_vec(w);
+                let mu = data.transpose() * &wv;
+                let sw = wv.map(f64::sqrt);
+                let mut wx = data.clone();
+                for mut col in wx.column_iter_mut() {
+                    col.component_mul_assign(&sw);
                 }
-                let mut s = DMatrix::zeros(d, d);
-                for (i, wi) in w.iter().enumerate() {
-                    let x = data.row(i).transpose();
-                    s.ger(*wi, &x, &x, 1.0);
-                }
+                let mut s = wx.transpose() * &wx;
                 s.ger(-1.0, &mu, &mu, 1.0);
                 let s = (&s + s.transpose()) * 0.5 + DMatrix::identity(d, d) * 1e-6;
                 gmm.means[c] = mu;
@@ -185,13 +185,18 @@ impl Gmm {
             })?;
             let l = chol.l();
             let half_logdet: f64 = l.diagonal().iter().map(|v| v.ln()).sum();
+            // L⁻¹ once, then one matrix product for all points (faster than a triangular solve
+            // with many right-hand sides in nalgebra).
+            let linv = l
+                .solve_lower_triangular(&DMatrix::identity(d, d))
+                .ok_or_else(|| {
+                    ModelError::Other(format!("GMM cluster {c}: singular Cholesky factor"))
+                })?;
             let mut diff = data.transpose();
             for mut col in diff.column_iter_mut() {
                 col -= &self.means[c];
             }
-            let sol = l.solve_lower_triangular(&diff).ok_or_else(|| {
-                ModelError::Other(format!("GMM cluster {c}: singular Cholesky factor"))
-            })?;
+            let sol = &linv * &diff;
             for i in 0..n {
                 out[(i, c)] += -half_logdet - 0.5 * sol.column(i).norm_squared() + self.log_mass[c];
             }

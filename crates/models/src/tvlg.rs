@@ -549,6 +549,40 @@ mod tests {
     }
 
     #[test]
+    fn ill_conditioned_data_gives_finite_dynamics_and_seeded_fits_repeat() {
+        // No excitation (u = 0) and two identical state components: the [x; u] covariance is
+        // singular; regularization keeps the fit finite and the mean prediction exact on data.
+        let (n, steps) = (8, 10);
+        let mut xs = Array3::zeros((n, steps + 1, 3));
+        let us = Array3::zeros((n, steps, 2));
+        for i in 0..n {
+            let x0 = i as f64 * 0.3 - 1.0;
+            for t in 0..=steps {
+                let v = x0 * 0.9f64.powi(t as i32);
+                xs[[i, t, 0]] = v;
+                xs[[i, t, 1]] = v;
+                xs[[i, t, 2]] = 1.0;
+            }
+        }
+        for prior in [None, Some(GmmPriorConfig::default())] {
+            let cfg = TvlgConfig {
+                prior,
+                ..TvlgConfig::default()
+            };
+            let d = TvlgFit::new(cfg.clone()).fit(xs.view(), us.view()).unwrap();
+            let again = TvlgFit::new(cfg).fit(xs.view(), us.view()).unwrap();
+            assert_eq!(d, again, "same seed, same fit");
+            for t in 0..steps {
+                assert!(d.fx[t].iter().chain(d.cov[t].iter()).all(|v| v.is_finite()));
+                let x = DVector::from_fn(3, |j, _| xs[[2, t, j]]);
+                let u = DVector::zeros(2);
+                let y = DVector::from_fn(3, |j, _| xs[[2, t + 1, j]]);
+                assert!((d.mean_next(t, &x, &u) - y).abs().max() < 1e-3, "t={t}");
+            }
+        }
+    }
+
+    #[test]
     fn bad_data_is_an_error_and_leaves_the_prior_unchanged() {
         let sys = System::new(2, 1, 5, 0.01);
         let (xs, us) = sys.rollouts(10, &mut rng_from_seed(5));
