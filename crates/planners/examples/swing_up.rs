@@ -5,6 +5,15 @@
 //! `cargo run --release -p tandem-planners --example swing_up [-- cem|mppi|dmd|ilqr ...]`
 //! prints each planner's episode return (p0: about −660 for its best learned policy; the issue
 //! asks for ≥ −800), the largest |φ| over the last 100 steps, and the wall time.
+//!
+//! Defaults: horizon 30 (iLQR 40), 100 samples, 3 iterations, noise std 1.5 with AR(1)
+//! correlation 0.8 between steps (white noise does not find the swing-up with these budgets).
+//! Override with the environment: `H`, `N`, `ITERS`, `STD`, `BETA`, `LAMBDA`, `ALPHA`, `ELITE`,
+//! `SEED`, `MAXIT`; `TRACE=1` prints the trajectory, `ONESHOT=1` one open-loop plan's cost.
+//!
+//! Measured (2 shared cores, seed 0 unless noted): iLQR −606 (|φ| < 1e-4 over the last 100
+//! steps, 0.9 s); CEM −761 (seeds 1, 2: −872, −1030); DMD-MPC −747 (seeds 1, 2: −1173, −736);
+//! MPPI fails to balance (best −2455 with λ = 20, 5 iterations, 200 samples).
 
 use std::f64::consts::PI;
 use std::time::Instant;
@@ -35,7 +44,7 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
 
 fn planner(name: &str) -> Box<dyn Planner> {
     let bounds = Some(Bounds::symmetric(1, 3.0));
-    let horizon = env_or("H", 30);
+    let horizon = env_or("H", if name == "ilqr" { 40 } else { 30 });
     let n = env_or("N", 100);
     let iterations = env_or("ITERS", 3);
     let std = env_or("STD", 1.5);
@@ -49,7 +58,7 @@ fn planner(name: &str) -> Box<dyn Planner> {
                 init_std: Some(vec![std]),
                 alpha: env_or("ALPHA", 0.1),
                 elite_fraction: env_or("ELITE", 0.1),
-                correlation: env_or("BETA", 0.0),
+                correlation: env_or("BETA", 0.8),
                 bounds,
                 seed,
                 ..CemConfig::default()
@@ -63,7 +72,7 @@ fn planner(name: &str) -> Box<dyn Planner> {
                 lambda: env_or("LAMBDA", 1.0),
                 noise: Noise::Isotropic(std),
                 iterations,
-                correlation: env_or("BETA", 0.0),
+                correlation: env_or("BETA", 0.8),
                 bounds,
                 seed,
                 ..MppiConfig::default()
@@ -76,7 +85,7 @@ fn planner(name: &str) -> Box<dyn Planner> {
                 samples: n,
                 iterations,
                 seed,
-                correlation: env_or("BETA", 0.0),
+                correlation: env_or("BETA", 0.8),
                 noise: Noise::Isotropic(std),
                 adapt_covariance: true,
                 utility: Utility::CemElite {
