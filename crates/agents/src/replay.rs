@@ -260,6 +260,84 @@ impl MixedSampler {
     }
 }
 
+impl ReplayBuffer {
+    /// Stores the buffer (only the filled rows) under `prefix`.
+    pub fn save_to(&self, prefix: &str, ckpt: &mut tandem_nn::Checkpoint) -> Result<()> {
+        let (n, od, ad) = (self.len, self.obs_dim(), self.act_dim());
+        let rows =
+            |a: &Array2<f32>, w: usize| a.as_slice().expect("standard layout")[..n * w].to_vec();
+        ckpt.put_u64(
+            &format!("{prefix}.counters"),
+            &[5],
+            &[
+                self.capacity as u64,
+                n as u64,
+                self.next as u64,
+                od as u64,
+                ad as u64,
+            ],
+        )?;
+        ckpt.put_f32(&format!("{prefix}.obs"), &[n, od], &rows(&self.obs, od))?;
+        ckpt.put_f32(
+            &format!("{prefix}.actions"),
+            &[n, ad],
+            &rows(&self.actions, ad),
+        )?;
+        ckpt.put_f32(
+            &format!("{prefix}.prev_actions"),
+            &[n, ad],
+            &rows(&self.prev_actions, ad),
+        )?;
+        ckpt.put_f32(
+            &format!("{prefix}.next_obs"),
+            &[n, od],
+            &rows(&self.next_obs, od),
+        )?;
+        ckpt.put_f32(
+            &format!("{prefix}.rewards"),
+            &[n],
+            &self.rewards.as_slice().expect("contiguous")[..n],
+        )?;
+        ckpt.put_f32(
+            &format!("{prefix}.terminated"),
+            &[n],
+            &self.terminated.as_slice().expect("contiguous")[..n],
+        )?;
+        Ok(())
+    }
+
+    /// Restores what [`ReplayBuffer::save_to`] stored; errors when capacity or widths differ.
+    pub fn load_from(&mut self, prefix: &str, ckpt: &tandem_nn::Checkpoint) -> Result<()> {
+        let c = ckpt.get_u64(&format!("{prefix}.counters"), Some(&[5]))?;
+        let (od, ad) = (self.obs_dim(), self.act_dim());
+        if c[0] as usize != self.capacity || c[3] as usize != od || c[4] as usize != ad {
+            return Err(AgentError::Checkpoint(format!(
+                "replay buffer of capacity {} and widths {}/{} cannot load one of capacity {} and widths {}/{}",
+                self.capacity, od, ad, c[0], c[3], c[4]
+            )));
+        }
+        let n = c[1] as usize;
+        let mut fresh = Self::new(self.capacity, od, ad)?;
+        let fill = |a: &mut Array2<f32>, name: &str, w: usize| -> Result<()> {
+            let v = ckpt.get_f32(&format!("{prefix}.{name}"), Some(&[n, w]))?;
+            a.as_slice_mut().expect("standard layout")[..n * w].copy_from_slice(&v);
+            Ok(())
+        };
+        fill(&mut fresh.obs, "obs", od)?;
+        fill(&mut fresh.actions, "actions", ad)?;
+        fill(&mut fresh.prev_actions, "prev_actions", ad)?;
+        fill(&mut fresh.next_obs, "next_obs", od)?;
+        let r = ckpt.get_f32(&format!("{prefix}.rewards"), Some(&[n]))?;
+        fresh.rewards.as_slice_mut().expect("contiguous")[..n].copy_from_slice(&r);
+        let t = ckpt.get_f32(&format!("{prefix}.terminated"), Some(&[n]))?;
+        fresh.terminated.as_slice_mut().expect("contiguous")[..n].copy_from_slice(&t);
+        fresh.len = n;
+        fresh.next = c[2] as usize;
+        *self = fresh;
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -362,83 +440,5 @@ mod tests {
         let b = s.sample(&real, &empty, 8, &mut rng_from_seed(3)).unwrap();
         assert!(b.rewards.iter().all(|r| *r < 50.0));
         assert!(MixedSampler::new(1.5).is_err());
-    }
-}
-
-impl ReplayBuffer {
-    /// Stores the buffer (only the filled rows) under `prefix`.
-    pub fn save_to(&self, prefix: &str, ckpt: &mut tandem_nn::Checkpoint) -> Result<()> {
-        let (n, od, ad) = (self.len, self.obs_dim(), self.act_dim());
-        let rows =
-            |a: &Array2<f32>, w: usize| a.as_slice().expect("standard layout")[..n * w].to_vec();
-        ckpt.put_u64(
-            &format!("{prefix}.counters"),
-            &[5],
-            &[
-                self.capacity as u64,
-                n as u64,
-                self.next as u64,
-                od as u64,
-                ad as u64,
-            ],
-        )?;
-        ckpt.put_f32(&format!("{prefix}.obs"), &[n, od], &rows(&self.obs, od))?;
-        ckpt.put_f32(
-            &format!("{prefix}.actions"),
-            &[n, ad],
-            &rows(&self.actions, ad),
-        )?;
-        ckpt.put_f32(
-            &format!("{prefix}.prev_actions"),
-            &[n, ad],
-            &rows(&self.prev_actions, ad),
-        )?;
-        ckpt.put_f32(
-            &format!("{prefix}.next_obs"),
-            &[n, od],
-            &rows(&self.next_obs, od),
-        )?;
-        ckpt.put_f32(
-            &format!("{prefix}.rewards"),
-            &[n],
-            &self.rewards.as_slice().expect("contiguous")[..n],
-        )?;
-        ckpt.put_f32(
-            &format!("{prefix}.terminated"),
-            &[n],
-            &self.terminated.as_slice().expect("contiguous")[..n],
-        )?;
-        Ok(())
-    }
-
-    /// Restores what [`ReplayBuffer::save_to`] stored; errors when capacity or widths differ.
-    pub fn load_from(&mut self, prefix: &str, ckpt: &tandem_nn::Checkpoint) -> Result<()> {
-        let c = ckpt.get_u64(&format!("{prefix}.counters"), Some(&[5]))?;
-        let (od, ad) = (self.obs_dim(), self.act_dim());
-        if c[0] as usize != self.capacity || c[3] as usize != od || c[4] as usize != ad {
-            return Err(AgentError::Checkpoint(format!(
-                "replay buffer of capacity {} and widths {}/{} cannot load one of capacity {} and widths {}/{}",
-                self.capacity, od, ad, c[0], c[3], c[4]
-            )));
-        }
-        let n = c[1] as usize;
-        let mut fresh = Self::new(self.capacity, od, ad)?;
-        let fill = |a: &mut Array2<f32>, name: &str, w: usize| -> Result<()> {
-            let v = ckpt.get_f32(&format!("{prefix}.{name}"), Some(&[n, w]))?;
-            a.as_slice_mut().expect("standard layout")[..n * w].copy_from_slice(&v);
-            Ok(())
-        };
-        fill(&mut fresh.obs, "obs", od)?;
-        fill(&mut fresh.actions, "actions", ad)?;
-        fill(&mut fresh.prev_actions, "prev_actions", ad)?;
-        fill(&mut fresh.next_obs, "next_obs", od)?;
-        let r = ckpt.get_f32(&format!("{prefix}.rewards"), Some(&[n]))?;
-        fresh.rewards.as_slice_mut().expect("contiguous")[..n].copy_from_slice(&r);
-        let t = ckpt.get_f32(&format!("{prefix}.terminated"), Some(&[n]))?;
-        fresh.terminated.as_slice_mut().expect("contiguous")[..n].copy_from_slice(&t);
-        fresh.len = n;
-        fresh.next = c[2] as usize;
-        *self = fresh;
-        Ok(())
     }
 }
