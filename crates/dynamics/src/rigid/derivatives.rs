@@ -82,8 +82,22 @@ fn inertia_variation(y: &super::Inertia, m: &Motion) -> Matrix6<f64> {
 /// `∂τ_i/∂q̇_k = Jᵢ·(Ẏ^c_i J_k − 2 Y^c_i u_k + J_k ×* H_i)`; for an ancestor `i ≺ k` the same
 /// brackets taken at `k` (plus `J_k ×* F_k` for `q`) are projected on `J_i`. Each entry is a few
 /// 6-vector dot products after an O(n) pass.
-#[allow(clippy::needless_range_loop)] // indices address several per-joint arrays and the tree
 pub fn rnea_derivatives(model: &Model, data: &mut Data, q: &[f64], v: &[f64], a: &[f64]) {
+    rnea_derivatives_impl(model, data, q, v, a, false);
+}
+
+/// [`rnea_derivatives`]; with `mass` it also writes the mass matrix `M[k][i] = J_k·(Y^c_i J_i)`
+/// (`k ⪯ i`, world frame as in Pinocchio's CRBA) into `data.mass_matrix` from the composite
+/// inertias it already has, so that [`aba_derivatives`] needs no separate [`crba`].
+#[allow(clippy::needless_range_loop)] // indices address several per-joint arrays and the tree
+fn rnea_derivatives_impl(
+    model: &Model,
+    data: &mut Data,
+    q: &[f64],
+    v: &[f64],
+    a: &[f64],
+    mass: bool,
+) {
     rnea(model, data, q, v, a);
     let n = model.nv();
     let a0 = Motion::new(-model.gravity, Vector3::zeros());
@@ -120,6 +134,9 @@ pub fn rnea_derivatives(model: &Model, data: &mut Data, q: &[f64], v: &[f64], a:
     }
     data.dtau_dq.fill(0.0);
     data.dtau_dv.fill(0.0);
+    if mass {
+        data.mass_matrix.fill(0.0);
+    }
     for i in 0..n {
         let ji = data.jw[i];
         let pi = f6(&data.oycrb[i].mul_motion(&ji));
@@ -131,7 +148,15 @@ pub fn rnea_derivatives(model: &Model, data: &mut Data, q: &[f64], v: &[f64], a:
             let (jk, uk, wk) = (m6(&data.jw[kk]), m6(&data.du[kk]), m6(&data.dw[kk]));
             data.dtau_dq[(i, kk)] = pi.dot(&wk) - qi.dot(&uk) + ri.dot(&uk);
             data.dtau_dv[(i, kk)] = qi.dot(&jk) - 2.0 * pi.dot(&uk) - ri.dot(&jk);
+            if mass {
+                let mki = pi.dot(&jk);
+                data.mass_matrix[(kk, i)] = mki;
+                data.mass_matrix[(i, kk)] = mki;
+            }
             k = model.joints[kk].parent;
+        }
+        if mass {
+            data.mass_matrix[(i, i)] += model.joints[i].armature;
         }
         // Column i, rows of the strict ancestors of i.
         if model.joints[i].parent.is_some() {
@@ -251,27 +276,72 @@ fn is_ancestor(model: &Model, r: usize, k: usize) -> bool {
     false
 }
 
-/// In-place Cholesky `A = L Lᵀ` (lower triangle of `a` overwritten). Returns `false` if `a` is
-/// not positive definite.
-fn cholesky_in_place(a: &mut DMatrix<f64>) -> bool {
-    let n = a.nrows();
+/// In-place Cholesky `A = L Lᵀ` of the column-major `n x n` matrix `a` (lower triangle
+/// overwritten with `L`, its diagonal with `1 / L_jj`). Returns `false` if `a` is not positive
+/// definite. Column-oriented (left-looking) so that the inner loops run over contiguous memory.
+fn cholesky_in_place(a: &mut [f64], n: usize) -> bool {
+    debug_assert_eq!(a.len(), n * n);
     for j in 0..n {
-        let mut d = a[(j, j)];
+        // Column j of L: a[j.., j] -= Σ_{k<j} L[j, k] L[j.., k].
         for k in 0..j {
-            d -= a[(j, k)] * a[(j, k)];
+            let ljk = a[j + k * n];
+            let (left, right) = a.split_at_mut(j * n);
+            let colk = &left[k * n + j..k * n + n];
+            let colj = &mut right[j..n];
+            for (x, y) in colj.iter_mut().zip(colk) {
+                *x -= ljk * y;
+            }
         }
+        let d = a[j + j * n];
         if d <= 0.0 || !d.is_finite() {
             return false;
         }
-        let d = d.sqrt();
-        a[(j, j)] = d;
-        for i in j + 1..n {
-            let mut s = a[(i, j)];
-            for k in 0..j {
-                s -= a[(i, k)] * a[(j, k)];
-            }
-            a[(i, j)] = s / d;
+        let inv = 1.0 / d.sqrt();
+        a[j + j * n] = inv;
+        for x in &mut a[j * n + j + 1..j * n + n] {
+            *x *= inv;
         }
+    }
+    true
+}
+
+/// Solves `L Lᵀ x = b` in place (`b` → `x`), `l` from [`cholesky_in_place`]; `first` is the index
+/// of the first nonzero of `b` (the forward substitution starts there).
+#[inline]
+fn cholesky_solve_in_place(l: &[f64], n: usize, x: &mut [f64], first: usize) {
+    // Forward: L y = b, column-oriented.
+    for k in first..n {
+        let col = &l[k * n..k * n + n];
+        let yk = x[k] * col[k];
+        x[k] = yk;
+        for (xi, lik) in x[k + 1..n].iter_mut().zip(&col[k + 1..n]) {
+            *xi -= lik * yk;
+        }
+    }
+    // Backward: Lᵀ x = y, row i of Lᵀ is column i of L.
+    for i in (0..n).rev() {
+        let col = &l[i * n..i * n + n];
+        let mut s = x[i];
+        for (xk, lki) in x[i + 1..n].iter().zip(&col[i + 1..n]) {
+            s -= lki * xk;
+        }
+        x[i] = s * col[i];
+    }
+}
+
+/// Factorizes `data.mass_matrix` into `data.chol` and writes `M⁻¹` into `data.minv`.
+fn minverse_from_mass_matrix(data: &mut Data, n: usize) -> bool {
+    data.chol.copy_from(&data.mass_matrix);
+    let l = data.chol.as_mut_slice();
+    if !cholesky_in_place(l, n) {
+        return false;
+    }
+    let minv = data.minv.as_mut_slice();
+    minv.fill(0.0);
+    for c in 0..n {
+        let col = &mut minv[c * n..c * n + n];
+        col[c] = 1.0;
+        cholesky_solve_in_place(l, n, col, c);
     }
     true
 }
@@ -280,40 +350,17 @@ fn cholesky_in_place(a: &mut DMatrix<f64>) -> bool {
 /// definite (a model error that [`Model`] construction rules out).
 pub fn compute_minverse(model: &Model, data: &mut Data, q: &[f64]) -> bool {
     crba(model, data, q);
-    data.chol.copy_from(&data.mass_matrix);
-    if !cholesky_in_place(&mut data.chol) {
-        return false;
-    }
-    let n = model.nv();
-    let l = &data.chol;
-    let minv = &mut data.minv;
-    minv.fill_with_identity();
-    for c in 0..n {
-        // Forward substitution L y = e_c, then back substitution Lᵀ x = y.
-        for i in 0..n {
-            let mut s = minv[(i, c)];
-            for k in 0..i {
-                s -= l[(i, k)] * minv[(k, c)];
-            }
-            minv[(i, c)] = s / l[(i, i)];
-        }
-        for i in (0..n).rev() {
-            let mut s = minv[(i, c)];
-            for k in i + 1..n {
-                s -= l[(k, i)] * minv[(k, c)];
-            }
-            minv[(i, c)] = s / l[(i, i)];
-        }
-    }
-    true
+    minverse_from_mass_matrix(data, model.nv())
 }
 
 /// Derivatives of forward dynamics `q̈ = aba(q, v, τ)`: `data.ddq_dq`, `data.ddq_dv`,
-/// `data.minv` (= ∂q̈/∂τ), and `data.ddq`.
+/// `data.minv` (= ∂q̈/∂τ), and `data.ddq`; also leaves `M(q)` in `data.mass_matrix` (built from
+/// the world-frame composite inertias of the inverse-dynamics derivatives, no separate CRBA).
+/// `∂q̈/∂x = −M⁻¹ ∂τ/∂x` is solved in place with the Cholesky factor, column by column.
 pub fn aba_derivatives(model: &Model, data: &mut Data, q: &[f64], v: &[f64], tau: &[f64]) {
     aba(model, data, q, v, tau);
     let n = model.nv();
-    // Reuse `chol`'s storage trick: copy ddq to a stack buffer when small.
+    // Copy ddq to a stack buffer when small.
     let mut buf = [0.0; 64];
     let ddq_heap;
     let ddq: &[f64] = if n <= 64 {
@@ -323,10 +370,16 @@ pub fn aba_derivatives(model: &Model, data: &mut Data, q: &[f64], v: &[f64], tau
         ddq_heap = data.ddq.as_slice().to_vec();
         &ddq_heap
     };
-    rnea_derivatives(model, data, q, v, ddq);
-    compute_minverse(model, data, q);
-    data.ddq_dq.gemm(-1.0, &data.minv, &data.dtau_dq, 0.0);
-    data.ddq_dv.gemm(-1.0, &data.minv, &data.dtau_dv, 0.0);
+    rnea_derivatives_impl(model, data, q, v, ddq, true);
+    if minverse_from_mass_matrix(data, n) {
+        data.ddq_dq.gemm(-1.0, &data.minv, &data.dtau_dq, 0.0);
+        data.ddq_dv.gemm(-1.0, &data.minv, &data.dtau_dv, 0.0);
+    } else {
+        // Not positive definite (ruled out by `Model` construction): NaN, never silent garbage.
+        data.minv.fill(f64::NAN);
+        data.ddq_dq.fill(f64::NAN);
+        data.ddq_dv.fill(f64::NAN);
+    }
     data.ddq.as_mut_slice().copy_from_slice(ddq);
 }
 
