@@ -43,6 +43,11 @@ pub trait Agent {
 
     /// Called at the start of every episode (resets temporally correlated noise).
     fn reset_episode(&mut self) {}
+
+    /// Called once after every real environment step, warm-up steps with actions not drawn from
+    /// the agent included (stable-baselines3's `_on_step`). DQN counts its ε schedule and its
+    /// target-network updates here; the default does nothing.
+    fn on_env_step(&mut self) {}
 }
 
 /// An agent that learns from minibatches of transitions, whatever produced them (real data, model

@@ -239,13 +239,15 @@ pub struct DqnConfig {
     pub learning_rate: f64,
     /// Discount γ.
     pub gamma: f64,
-    /// Copy the online network into the target network every this many gradient steps.
+    /// Copy the online network into the target network every this many environment steps
+    /// (stable-baselines3 counts it in `_on_step`, warm-up steps included).
     pub target_update_interval: usize,
     /// ε at the start of training.
     pub exploration_initial_eps: f64,
     /// ε after `exploration_steps` exploring steps (and from then on).
     pub exploration_final_eps: f64,
-    /// Length of the linear ε schedule, in environment steps.
+    /// Length of the linear ε schedule, in environment steps counted from the first step (warm-up
+    /// included, as stable-baselines3's `exploration_fraction × total_timesteps`).
     pub exploration_steps: usize,
     /// Use the online network to choose the next action and the target to evaluate it.
     pub double_dqn: bool,
@@ -269,15 +271,14 @@ impl Default for DqnConfig {
     /// rl-baselines3-zoo `dqn.yml`, CartPole-v1 (50k steps): learning rate 2.3e-3, minibatch 64,
     /// replay 10^5, 1000 warm-up steps, γ = 0.99, train every 256 steps with 128 gradient steps,
     /// hidden [256, 256], ε from 1 to 0.04 over 16% of the 50k steps (8000), gradient-norm clip 10
-    /// and Huber loss (stable-baselines3 `DQN` defaults). The zoo's target update every 10
-    /// environment steps happens between training bursts of 128 gradient steps, so it equals a
-    /// hard copy every 128 gradient steps, which is how this crate counts it.
+    /// counted from step 0, a hard target copy every 10 environment steps, Adam (ε = 1e-8),
+    /// gradient-norm clip 10 and Huber loss (stable-baselines3 `DQN` defaults).
     fn default() -> Self {
         Self {
             hidden: vec![256, 256],
             learning_rate: 2.3e-3,
             gamma: 0.99,
-            target_update_interval: 128,
+            target_update_interval: 10,
             exploration_initial_eps: 1.0,
             exploration_final_eps: 0.04,
             exploration_steps: 8000,
@@ -326,7 +327,7 @@ impl DqnConfig {
         self.schedule().validate()
     }
 
-    /// ε after `steps` exploring steps: linear from initial to final over `exploration_steps`.
+    /// ε after `steps` environment steps: linear from initial to final over `exploration_steps`.
     pub fn epsilon(&self, steps: u64) -> f64 {
         if self.exploration_steps == 0 {
             return self.exploration_final_eps;

@@ -1,6 +1,7 @@
-//! DQN (Mnih et al. 2015) with a target network copied every `target_update_interval` gradient
-//! steps, a linear ε-greedy schedule, Huber loss, gradient-norm clipping and the double-DQN target
-//! (van Hasselt et al. 2016) as an option. The Q-network is an MLP over flat observations; a
+//! DQN (Mnih et al. 2015) as stable-baselines3's `DQN`: a target network copied every
+//! `target_update_interval` environment steps and a linear ε-greedy schedule, both counted in
+//! environment steps from the first one (warm-up included) through [`Agent::on_env_step`]; Huber
+//! loss, gradient-norm clipping and the double-DQN target (van Hasselt et al. 2016) as an option. The Q-network is an MLP over flat observations; a
 //! convolutional Q-network for image observations is not written yet.
 
 use rand::Rng as _;
@@ -20,7 +21,7 @@ pub struct Dqn {
     n_actions: usize,
     q: Net,
     q_t: Target,
-    explore_steps: u64,
+    env_steps: u64,
     updates: u64,
     rng: Rng,
     next_ws: MlpWorkspace,
@@ -61,7 +62,7 @@ impl Dqn {
             od,
             n_actions,
             q,
-            explore_steps: 0,
+            env_steps: 0,
             updates: 0,
             next_ws: MlpWorkspace::default(),
             y: Vec::new(),
@@ -72,7 +73,21 @@ impl Dqn {
 
     /// The current exploration rate.
     pub fn epsilon(&self) -> f64 {
-        self.config.epsilon(self.explore_steps)
+        self.config.epsilon(self.env_steps)
+    }
+
+    /// Copies the online network into the target network.
+    pub fn sync_target(&mut self) {
+        // Same architecture by construction (`Target::of`), so the lengths match.
+        self.q_t
+            .mlp
+            .params_mut()
+            .copy_from_slice(self.q.mlp.params());
+    }
+
+    /// The target network's flat parameters.
+    pub fn target_params(&self) -> &[f32] {
+        self.q_t.mlp.params()
     }
 
     /// The Q-network's flat parameters.
@@ -91,7 +106,7 @@ impl Dqn {
         )?;
         self.q.save("q", ckpt)?;
         self.q_t.save("q_target", ckpt)?;
-        ckpt.put_u64("counters", &[2], &[self.explore_steps, self.updates])?;
+        ckpt.put_u64("counters", &[2], &[self.env_steps, self.updates])?;
         Ok(())
     }
 
@@ -101,7 +116,7 @@ impl Dqn {
         self.q.load("q", ckpt)?;
         self.q_t.load("q_target", ckpt)?;
         let c = ckpt.get_u64("counters", Some(&[2]))?;
-        self.explore_steps = c[0];
+        self.env_steps = c[0];
         self.updates = c[1];
         self.rng = rng;
         Ok(())
@@ -117,7 +132,6 @@ impl Agent for Dqn {
         check_obs(obs, self.od)?;
         if mode == Mode::Explore {
             let eps = self.epsilon();
-            self.explore_steps += 1;
             if self.rng.random::<f64>() < eps {
                 return Ok(Action::Discrete(self.rng.random_range(0..self.n_actions)));
             }
@@ -125,6 +139,15 @@ impl Agent for Dqn {
         let x: Vec<f32> = obs.iter().map(|v| *v as f32).collect();
         let q = self.q.mlp.forward(&x, 1, &mut self.q.ws)?;
         Ok(Action::Discrete(argmax(q)))
+    }
+
+    /// Advances the ε schedule and copies the online network into the target every
+    /// `target_update_interval` environment steps (stable-baselines3 `DQN._on_step`, τ = 1).
+    fn on_env_step(&mut self) {
+        self.env_steps += 1;
+        if self.env_steps % self.config.target_update_interval as u64 == 0 {
+            self.sync_target();
+        }
     }
 }
 
@@ -195,9 +218,6 @@ impl OffPolicyAgent for Dqn {
         clip_grad_norm(&mut self.q.grads, self.config.max_grad_norm as f32)?;
         self.q.step()?;
         self.updates += 1;
-        if self.updates % self.config.target_update_interval as u64 == 0 {
-            self.q_t.polyak(&self.q, 1.0)?;
-        }
         let mut m = Metrics::default();
         m.push("loss", loss);
         m.push("q_mean", q_mean / n as f64);

@@ -155,6 +155,59 @@ fn sac_actor_gradient_matches_finite_differences() {
     }
 }
 
+/// stable-baselines3 semantics: ε and the target copy count environment steps
+/// (`on_env_step`), not `act` calls or gradient steps.
+#[test]
+fn dqn_counts_epsilon_and_target_updates_in_env_steps() {
+    let os = Space::symmetric(1, 1.0);
+    let cfg = DqnConfig {
+        hidden: vec![8],
+        ..DqnConfig::default()
+    };
+    let mut agent = Dqn::new(cfg.clone(), &os, &Space::discrete(2), 0).unwrap();
+    for _ in 0..50 {
+        agent.act(&[0.3], Mode::Explore).unwrap();
+    }
+    assert_eq!(agent.epsilon(), 1.0, "act alone must not advance ε");
+    for _ in 0..1000 {
+        agent.on_env_step();
+    }
+    // SB3: 1 + (1000 / (0.16 · 50000)) · (0.04 - 1) = 0.88.
+    assert!(
+        (agent.epsilon() - 0.88).abs() < 1e-12,
+        "{}",
+        agent.epsilon()
+    );
+    assert_eq!(agent.q_params(), agent.target_params());
+    let mut rng = rng_from_seed(1);
+    let mut buf = ReplayBuffer::new(100, 1, 1).unwrap();
+    for i in 0..100 {
+        buf.push(TransitionRef {
+            obs: &[f64::from(i) / 100.0],
+            action: &[f64::from(i % 2)],
+            prev_action: &[0.0],
+            reward: 1.0,
+            next_obs: &[0.0],
+            terminated: false,
+        })
+        .unwrap();
+    }
+    for _ in 0..(cfg.target_update_interval + 3) {
+        agent.update(&buf.sample(16, &mut rng).unwrap()).unwrap();
+    }
+    assert_ne!(
+        agent.q_params(),
+        agent.target_params(),
+        "gradient steps must not copy"
+    );
+    for _ in 0..(cfg.target_update_interval - 1) {
+        agent.on_env_step();
+        assert_ne!(agent.q_params(), agent.target_params());
+    }
+    agent.on_env_step();
+    assert_eq!(agent.q_params(), agent.target_params());
+}
+
 /// Two actions, reward 1 for action `1{s > 0}`: the greedy policy must be right.
 #[test]
 fn dqn_learns_a_contextual_bandit_and_double_dqn_too() {

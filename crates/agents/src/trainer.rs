@@ -9,7 +9,10 @@
 //!
 //! The loop follows stable-baselines3's off-policy schedule: uniformly random actions for the
 //! first `learning_starts` steps, then `gradient_steps` updates every `train_freq` steps once more
-//! than `learning_starts` steps were taken. The episode length limit is enforced here as well as
+//! than `learning_starts` steps were taken; after every environment step (warm-up included) the
+//! agent's `on_env_step` runs, as `_on_step` does there. A time-limit truncation is stored as not
+//! terminated, so targets bootstrap through it (stable-baselines3's
+//! `handle_timeout_termination`). The episode length limit is enforced here as well as
 //! by any `TimeLimit` wrapper (so it survives a resume that restores the environment's state).
 
 use serde::{Deserialize, Serialize};
@@ -289,6 +292,7 @@ impl Trainer {
             };
             let st = env.step(&action).map_err(env_err)?;
             self.p.step += 1;
+            self.learner.agent().on_env_step();
             self.p.ep_len += 1;
             self.p.ep_return += st.reward;
             let truncated = st.truncated || limit.is_some_and(|m| self.p.ep_len >= m);

@@ -151,6 +151,22 @@ fn run(cfg: &AlgoConfig, discrete: bool, seed: u64, steps: u64) -> Trainer {
     t
 }
 
+/// The trainer reports every environment step, warm-up included, to DQN (SB3's `_on_step`).
+#[test]
+fn dqn_epsilon_follows_the_trainers_env_steps_from_step_zero() {
+    for (cfg, discrete) in configs() {
+        if let AlgoConfig::Dqn(c) = &cfg {
+            let mut t = run(&cfg, discrete, 5, 70);
+            let steps = t.steps();
+            match t.learner() {
+                Learner::Dqn(a) => assert_eq!(a.epsilon(), c.epsilon(steps)),
+                _ => unreachable!(),
+            }
+            assert!(c.epsilon(steps) < c.epsilon(steps - c.learning_starts as u64));
+        }
+    }
+}
+
 #[test]
 fn same_seed_gives_bit_identical_runs_and_another_seed_does_not() {
     for (cfg, discrete) in configs() {
