@@ -436,6 +436,7 @@ mod tests {
         let mut t = Transitions {
             states: Array2::zeros((n, s)),
             actions: Array2::zeros((n, a)),
+            prev_states: Array2::zeros((n, s)),
             prev_actions: Array2::zeros((n, a)),
             next_states: Array2::zeros((n, s)),
             rewards: Array1::zeros(n),
@@ -450,6 +451,7 @@ mod tests {
         for _ in 0..episodes {
             let mut prev: Vec<f64> = (0..a).map(|_| rng.random_range(-1.0..1.0)).collect();
             let mut x = step(&prev);
+            let mut prev_x = x.clone();
             for _ in 0..len {
                 let u: Vec<f64> = if rng.random::<f64>() < 0.2 {
                     prev.clone()
@@ -459,6 +461,7 @@ mod tests {
                 let next = step(&u);
                 for i in 0..s {
                     t.states[[row, i]] = x[i];
+                    t.prev_states[[row, i]] = prev_x[i];
                     t.next_states[[row, i]] = next[i];
                 }
                 for j in 0..a {
@@ -466,7 +469,7 @@ mod tests {
                     t.prev_actions[[row, j]] = prev[j];
                 }
                 row += 1;
-                x = next;
+                prev_x = std::mem::replace(&mut x, next);
                 prev = u;
             }
         }
@@ -559,6 +562,7 @@ mod tests {
         let data = Transitions {
             states: ndarray::array![[0.0, 0.0], [0.1, 0.1]],
             actions: ndarray::array![[0.5], [0.5]],
+            prev_states: ndarray::array![[0.0, 0.0], [0.0, 0.0]],
             prev_actions: ndarray::array![[0.5], [0.5]],
             next_states: ndarray::array![[0.1, 0.1], [0.2, 0.2]],
             rewards: ndarray::array![0.0, 0.0],

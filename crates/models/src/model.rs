@@ -43,14 +43,17 @@ pub enum ModelError {
     Other(String),
 }
 
-/// Transitions `(s, a, s', r, terminated)` with the previous action of each (p1 learns from
-/// one-step-back data), one row per transition.
+/// Transitions `(s, a, s', r, terminated)` with the previous state and action of each (p1 learns
+/// from the one-step-back data `{s_{t-1}, a_{t-1}, s_t, a_t}`), one row per transition.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Transitions {
     /// States `s_t`, `N x S`.
     pub states: Array2<f64>,
     /// Actions `a_t`, `N x A`.
     pub actions: Array2<f64>,
+    /// Previous states `s_{t-1}` (at the start of an episode, where there is none, `s_t`
+    /// itself), `N x S`.
+    pub prev_states: Array2<f64>,
     /// Previous actions `a_{t-1}` (zeros at the start of an episode), `N x A`.
     pub prev_actions: Array2<f64>,
     /// Next states `s_{t+1}`, `N x S`.

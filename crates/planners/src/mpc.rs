@@ -42,8 +42,8 @@ impl Plan {
     }
 
     /// The planned transitions `(x_h, u_h, r_h = −c_h, x_{h+1})` as a dataset a pipeline can add to
-    /// a replay buffer (p3 Algorithm 1, lines 14–15). Previous actions are the plan's own (zeros
-    /// at `h = 0`); nothing is terminal.
+    /// a replay buffer (p3 Algorithm 1, lines 14–15). Previous states and actions are the plan's
+    /// own (at `h = 0`: the start state and a zero action); nothing is terminal.
     pub fn transitions(&self) -> Transitions {
         let h = self.horizon();
         let a = self.actions.ncols();
@@ -52,9 +52,16 @@ impl Plan {
             prev.slice_mut(s![1.., ..])
                 .assign(&self.actions.slice(s![..h - 1, ..]));
         }
+        let mut prev_states = self.states.slice(s![..h, ..]).to_owned();
+        if h > 1 {
+            prev_states
+                .slice_mut(s![1.., ..])
+                .assign(&self.states.slice(s![..h - 1, ..]));
+        }
         Transitions {
             states: self.states.slice(s![..h, ..]).to_owned(),
             actions: self.actions.clone(),
+            prev_states,
             prev_actions: prev,
             next_states: self.states.slice(s![1.., ..]).to_owned(),
             rewards: self.costs.mapv(|c| -c),

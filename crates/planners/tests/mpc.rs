@@ -295,6 +295,15 @@ fn dmd_policy_proposal_and_transitions() {
             .running_cost(xs.as_slice(), &[tr.actions[(h, 0)]])
             .unwrap();
         assert!((tr.rewards[h] + c).abs() < 1e-12);
+        // One-step-back data: the previous row's state and action (the start state and a zero
+        // action at h = 0).
+        let (ps, pa) = if h == 0 {
+            (tr.states.row(0).to_owned(), 0.0)
+        } else {
+            (tr.states.row(h - 1).to_owned(), tr.actions[(h - 1, 0)])
+        };
+        assert_eq!(tr.prev_states.row(h), ps);
+        assert_eq!(tr.prev_actions[(h, 0)], pa);
     }
 
     // A full step with the exponential utility improves on the policy.
