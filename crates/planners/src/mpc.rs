@@ -47,19 +47,20 @@ impl Plan {
     pub fn transitions(&self) -> Transitions {
         let h = self.horizon();
         let a = self.actions.ncols();
+        let states = self.states.slice(s![..h, ..]).to_owned();
+        // Row t of the previous-step arrays is row t - 1 of the plan; row 0 keeps the start state
+        // and a zero action.
         let mut prev = Array2::zeros((h, a));
+        let mut prev_states = states.clone();
         if h > 1 {
             prev.slice_mut(s![1.., ..])
                 .assign(&self.actions.slice(s![..h - 1, ..]));
-        }
-        let mut prev_states = self.states.slice(s![..h, ..]).to_owned();
-        if h > 1 {
             prev_states
                 .slice_mut(s![1.., ..])
-                .assign(&self.states.slice(s![..h - 1, ..]));
+                .assign(&states.slice(s![..h - 1, ..]));
         }
         Transitions {
-            states: self.states.slice(s![..h, ..]).to_owned(),
+            states,
             actions: self.actions.clone(),
             prev_states,
             prev_actions: prev,
