@@ -181,6 +181,69 @@ pub fn table_json(records: &[RunRecord], cfg: &P0Config) -> Value {
             }),
         );
     }
+    // μ^true: the cold start's converged return after all of its samples.
+    let cold: Vec<&RunRecord> = records
+        .iter()
+        .filter(|r| r.method == Method::Cold)
+        .collect();
+    if !cold.is_empty() {
+        let per_seed: Vec<f64> = cold
+            .iter()
+            .map(|r| r.final_return(cfg.reference_evals))
+            .collect();
+        let (mean, se) = mean_stderr(&per_seed);
+        let gap = out
+            .get("difference")
+            .and_then(|d| d["return_at_budget"]["mean"].as_f64())
+            .map(|d| (d - mean).abs() / mean.abs());
+        out.insert(
+            "reference".into(),
+            json!({
+                "what": "cold start after all its true samples: mean of its last evaluations",
+                "true_samples": cold.iter().map(|r| r.true_samples).max().unwrap_or(0),
+                "last_evaluations": cfg.reference_evals,
+                "mean": mean,
+                "stderr": se,
+                "per_seed": per_seed,
+                "difference_relative_gap": gap,
+            }),
+        );
+    }
+    // How many times more true samples a baseline needed than the difference method. A seed
+    // that never reached the target counts with the samples it searched, so the ratio is then a
+    // lower bound.
+    let bounded = |m: &str| -> Option<(f64, bool)> {
+        let r = &out.get(m)?["samples_to_target"];
+        let searched = r["searched_up_to"].as_f64()?;
+        let v: Vec<(f64, bool)> = r["per_seed"]
+            .as_array()?
+            .iter()
+            .map(|x| x.as_f64().map_or((searched, true), |v| (v, false)))
+            .collect();
+        let mean = v.iter().map(|p| p.0).sum::<f64>() / v.len() as f64;
+        Some((mean, v.iter().any(|p| p.1)))
+    };
+    let found: Vec<(&str, Option<(f64, bool)>)> = ["difference", "cold", "warm"]
+        .into_iter()
+        .map(|m| (m, bounded(m)))
+        .collect();
+    if let Some((d, d_bound)) = found[0].1 {
+        for &(m, b) in &found[1..] {
+            if let Some((b, b_bound)) = b {
+                let ratio = if d > 0.0 { json!(b / d) } else { Value::Null };
+                out.insert(
+                    format!("{m}_over_difference"),
+                    json!({
+                        "ratio": ratio,
+                        "baseline_mean_samples": b,
+                        "difference_mean_samples": d,
+                        "lower_bound": b_bound && !d_bound,
+                        "note": "per-seed samples to the target, a seed that never reached it counted at the samples it used",
+                    }),
+                );
+            }
+        }
+    }
     Value::Object(out)
 }
 
@@ -248,10 +311,44 @@ pub fn table_md(t: &Value, cfg: &P0Config, n_seeds: u64, wall: f64) -> String {
             s.push_str(&format!("- {}: {}\n", label(m), per_seed(m).join(", ")));
         }
     }
+    let ratios: Vec<String> = ["warm", "cold"]
+        .iter()
+        .filter_map(|m| {
+            let r = t.get(format!("{m}_over_difference"))?;
+            let x = r["ratio"].as_f64()?;
+            let ge = if r["lower_bound"].as_bool() == Some(true) {
+                "≥ "
+            } else {
+                ""
+            };
+            Some(format!("{} {ge}{x:.1}×", label(m)))
+        })
+        .collect();
+    if !ratios.is_empty() {
+        s.push_str(&format!(
+            "\nTrue samples to the target relative to the difference method (means over seeds; a \
+             seed that never reached it counts at the samples it used): {}.\n",
+            ratios.join(", ")
+        ));
+    }
+    if let Some(r) = t.get("reference") {
+        s.push_str(&format!(
+            "\nReference μ^true (cold start after {} true samples, mean of its last {} \
+             evaluations): {:.1} ± {:.1}; the difference method at the budget is {} from it.\n",
+            r["true_samples"].as_u64().unwrap_or(0),
+            cfg.reference_evals,
+            r["mean"].as_f64().unwrap_or(f64::NAN),
+            r["stderr"].as_f64().unwrap_or(f64::NAN),
+            r["difference_relative_gap"]
+                .as_f64()
+                .map_or("n/a".to_string(), |g| format!("{:.1} %", 100.0 * g)),
+        ));
+    }
     s.push_str(&format!(
-        "\nCold and warm runs are evaluated every {} true samples (and stop once they have reached \
-         the target and used the budget: {}), at most {} true samples; the difference method is \
-         evaluated after each model update ({} true samples each, {} in all). Wall time {:.0} s.\n",
+        "\nCold and warm runs are evaluated every {} true samples; warm runs stop once they have \
+         reached the target and used the budget ({}), cold runs use all {} true samples; the \
+         difference method is evaluated after each model update ({} true samples each, {} in \
+         all). Wall time {:.0} s.\n",
         cfg.eval_interval,
         cfg.baseline_stop_early,
         cfg.baseline_max_samples,
@@ -463,4 +560,88 @@ fn p0_pendulum(args: &P0Args) -> Result<()> {
     println!("{md}");
     println!("wrote {}", dir.path().display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tandem::pipelines::p0::CurvePoint;
+
+    fn record(method: Method, seed: u64, curve: &[(u64, f64)]) -> RunRecord {
+        RunRecord {
+            method,
+            seed,
+            curve: curve
+                .iter()
+                .map(|&(true_samples, eval_return)| CurvePoint {
+                    true_samples,
+                    eval_return,
+                })
+                .collect(),
+            true_samples: curve.last().map_or(0, |p| p.0),
+            simulated_steps: 0,
+            updates: 0,
+            fit_holdout_loss: vec![],
+            wall_seconds: 0.0,
+        }
+    }
+
+    #[test]
+    fn table_has_ratios_lower_bounds_and_the_reference() {
+        let cfg = P0Config {
+            real_budget: 800,
+            reference_evals: 2,
+            ..P0Config::default()
+        };
+        let recs = [
+            // Cold: seed 0 reaches −1000 at 1200, seed 1 never within its 1600 samples.
+            record(
+                Method::Cold,
+                0,
+                &[(0, -9e3), (800, -2e3), (1200, -900.0), (1600, -700.0)],
+            ),
+            record(
+                Method::Cold,
+                1,
+                &[(0, -9e3), (800, -5e3), (1200, -3e3), (1600, -1500.0)],
+            ),
+            // Warm: 400 and 800.
+            record(Method::Warm, 0, &[(0, -4e3), (400, -990.0), (800, -800.0)]),
+            record(Method::Warm, 1, &[(0, -4e3), (400, -2e3), (800, -950.0)]),
+            // Difference: 400 in both seeds, −700 and −660 at the budget.
+            record(
+                Method::Difference,
+                0,
+                &[(0, -4e3), (400, -800.0), (800, -700.0)],
+            ),
+            record(
+                Method::Difference,
+                1,
+                &[(0, -4e3), (400, -900.0), (800, -660.0)],
+            ),
+        ];
+        let t = table_json(&recs, &cfg);
+        let close = |v: &Value, x: f64| (v.as_f64().unwrap() - x).abs() < 1e-12;
+        // Cold: (1200 + 1600) / 2 over 400, a lower bound (seed 1 never reached it).
+        assert!(close(&t["cold_over_difference"]["ratio"], 3.5));
+        assert_eq!(t["cold_over_difference"]["lower_bound"], json!(true));
+        assert!(close(&t["warm_over_difference"]["ratio"], 1.5));
+        assert_eq!(t["warm_over_difference"]["lower_bound"], json!(false));
+        assert_eq!(
+            t["cold"]["samples_to_target"]["per_seed"],
+            json!([1200, null])
+        );
+        // Reference: the mean of the cold runs' last two evaluations, per seed.
+        assert!(close(&t["reference"]["per_seed"][0], -800.0));
+        assert!(close(&t["reference"]["per_seed"][1], -2250.0));
+        let (r, d) = (-1525.0, -680.0);
+        assert!(close(&t["reference"]["mean"], r));
+        assert!(close(
+            &t["reference"]["difference_relative_gap"],
+            (d - r) / -r
+        ));
+        let md = table_md(&t, &cfg, 2, 1.0);
+        assert!(md.contains("Cold start ≥ 3.5×"), "{md}");
+        assert!(md.contains("Warm start 1.5×"), "{md}");
+    }
 }

@@ -110,14 +110,20 @@ pub struct P0Config {
     pub real_batch: u64,
     /// True samples the difference method may use in all (Table II's fixed budget: 15000).
     pub real_budget: u64,
-    /// True samples the cold and warm starts may use at most.
+    /// True samples the cold and warm starts may use at most. The cold start always uses all of
+    /// them: it doubles as the reference policy `μ^true` "trained with unlimited true samples"
+    /// that the difference method's return at the budget is compared against (p0 Sec. V-A).
     pub baseline_max_samples: u64,
-    /// Stop a cold or warm run once it has reached [`Self::target_return`] and used
+    /// Stop a warm run once it has reached [`Self::target_return`] and used
     /// [`Self::real_budget`] samples (both Table II figures are known by then).
     pub baseline_stop_early: bool,
+    /// The reference return `μ^true` is the mean of the cold start's last this many
+    /// evaluations (its converged performance, less sensitive to one evaluation's luck).
+    pub reference_evals: usize,
     /// Agent steps on the model environment after each difference-model update (ours).
     pub model_steps: u64,
-    /// Evaluate cold and warm runs every this many true samples.
+    /// Evaluate cold and warm runs every this many true samples (ours: 400, one episode, so
+    /// that samples-to-target is resolved to the episode).
     pub eval_interval: u64,
     /// Deterministic evaluation episodes on the true system (the pendulum always starts at
     /// `(π, 0)` and has no noise, so one episode is exact).
@@ -150,10 +156,11 @@ impl Default for P0Config {
             pretrain_steps: 16_000,
             real_batch: 3750,
             real_budget: 15_000,
-            baseline_max_samples: 30_000,
+            baseline_max_samples: 20_000,
             baseline_stop_early: true,
+            reference_evals: 5,
             model_steps: 5_000,
-            eval_interval: 1250,
+            eval_interval: 400,
             eval_episodes: 1,
             target_return: -1000.0,
             residual: ResidualModelConfig::default(),
@@ -177,8 +184,8 @@ impl P0Config {
         if !(self.reward_scale > 0.0 && self.reward_scale.is_finite()) || self.features.is_empty() {
             return bad("reward_scale must be positive and features non-empty");
         }
-        if self.eval_interval == 0 || self.eval_episodes == 0 {
-            return bad("eval_interval and eval_episodes must be >= 1");
+        if self.eval_interval == 0 || self.eval_episodes == 0 || self.reference_evals == 0 {
+            return bad("eval_interval, eval_episodes and reference_evals must be >= 1");
         }
         if self.fit.epochs == 0 || self.fit.batch_size == 0 {
             return bad("fit.epochs and fit.batch_size must be >= 1");
@@ -238,6 +245,12 @@ impl RunRecord {
             .iter()
             .rfind(|p| p.true_samples <= budget)
             .map(|p| p.eval_return)
+    }
+
+    /// Mean return of the last `k` evaluations (all of them if there are fewer).
+    pub fn final_return(&self, k: usize) -> f64 {
+        let tail = &self.curve[self.curve.len().saturating_sub(k.max(1))..];
+        tail.iter().map(|p| p.eval_return).sum::<f64>() / tail.len() as f64
     }
 
     /// True samples at the first evaluation whose return reached `target`.
@@ -523,7 +536,8 @@ where
                     eval_return: r,
                 });
                 reached |= r >= cfg.target_return;
-                if cfg.baseline_stop_early && reached && count.get() >= cfg.real_budget {
+                let stop_early = cfg.baseline_stop_early && method == Method::Warm;
+                if stop_early && reached && count.get() >= cfg.real_budget {
                     break;
                 }
             }
