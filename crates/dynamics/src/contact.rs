@@ -7,7 +7,7 @@
 //! The generalized force is `Jᵀ f` with `J` the point's world-frame linear Jacobian.
 
 use crate::rigid::{Data, JointKind, Model};
-use nalgebra::Vector3;
+use nalgebra::{DMatrix, Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// A point rigidly attached to a body of the model.
@@ -75,6 +75,49 @@ impl GroundContact {
         Vector3::new(ft.x, ft.y, fnorm)
     }
 
+    /// [`GroundContact::force`] and its Jacobians `(f, ∂f/∂p, ∂f/∂v)`; all zero off the ground or
+    /// when the normal spring-damper would pull (the branch where the force is identically zero).
+    ///
+    /// With `f_n = k d − c ż`, `s = sqrt(|v_t|² + v_s²)` and `f_t = −μ f_n v_t / s`:
+    /// `∂f_n/∂p = −k e_z`, `∂f_n/∂v = −c e_z`, and for the tangential rows `a ∈ {x, y}`
+    /// `∂f_a/∂v_b = −μ (v_a ∂f_n/∂v_b + f_n (δ_ab − v_a v_b / s²)) / s` (`b ∈ {x, y}`).
+    #[inline]
+    pub fn force_partials(
+        &self,
+        p: &Vector3<f64>,
+        v: &Vector3<f64>,
+    ) -> (Vector3<f64>, Matrix3<f64>, Matrix3<f64>) {
+        let zero = (Vector3::zeros(), Matrix3::zeros(), Matrix3::zeros());
+        let depth = self.height - p.z;
+        if depth <= 0.0 {
+            return zero;
+        }
+        let fnorm = self.stiffness * depth - self.damping * v.z;
+        if fnorm <= 0.0 {
+            return zero;
+        }
+        let s2 = v.x * v.x + v.y * v.y + self.slip_velocity * self.slip_velocity;
+        let s = s2.sqrt();
+        let g = -self.friction / s;
+        let vt = [v.x, v.y];
+        // Same operations as `force`, so that both give bit-identical forces.
+        let c = -self.friction * fnorm / s;
+        let f = Vector3::new(v.x * c, v.y * c, fnorm);
+        let mut fp = Matrix3::zeros();
+        let mut fv = Matrix3::zeros();
+        fp[(2, 2)] = -self.stiffness;
+        fv[(2, 2)] = -self.damping;
+        for a in 0..2 {
+            fp[(a, 2)] = -g * vt[a] * self.stiffness;
+            fv[(a, 2)] = -g * vt[a] * self.damping;
+            for b in 0..2 {
+                let delta = if a == b { 1.0 } else { 0.0 };
+                fv[(a, b)] = g * fnorm * (delta - vt[a] * vt[b] / s2);
+            }
+        }
+        (f, fp, fv)
+    }
+
     /// Adds `Jᵀ f` of every contact point's force to `tau` (length `nv`). Needs placements and
     /// body velocities in `data`.
     pub fn add_generalized_forces(
@@ -91,6 +134,82 @@ impl GroundContact {
                 continue;
             }
             add_point_force(model, data, c.joint, &p, &f, tau);
+        }
+    }
+}
+
+/// The contact forces' generalized force `Σ Jᵀ f` added to `tau` (as
+/// [`GroundContact::add_generalized_forces`]) and its partial derivatives added to `tq = ∂τ/∂q`
+/// and `tv = ∂τ/∂q̇` (`nv x nv`). Needs placements and body velocities in `data`; `v` is the joint
+/// velocity vector.
+///
+/// World frame, for one point `p` on the chain of joints `j` from the root (1-DoF each, axis
+/// `a_j` through `o_j`): the point Jacobian column is `J_j = a_j × (p − o_j)` (revolute) or `a_j`
+/// (prismatic), `τ_i = J_i · f`, `ṗ = Σ_j J_j q̇_j`. Moving `q_k` rotates everything beyond joint `k`
+/// about `a_k` (`ω_k = a_k`; `0` for a prismatic joint) and moves `p` by `J_k`, so
+/// `∂J_j/∂q_k = ω_k × J_j` when `k ⪯ j` and `a_j × J_k` (revolute `j`, zero for prismatic) when
+/// `j ≺ k`. Then `∂τ_i/∂q_k = ∂J_i/∂q_k · f + J_i · (F_p J_k + F_v Σ_j ∂J_j/∂q_k q̇_j)` and
+/// `∂τ_i/∂q̇_k = J_i · F_v J_k`, with `(F_p, F_v)` from [`GroundContact::force_partials`].
+#[allow(clippy::too_many_arguments)] // the generalized force and its two Jacobians
+pub fn add_contact_force_partials(
+    ground: &GroundContact,
+    model: &Model,
+    data: &Data,
+    points: &[ContactPoint],
+    v: &[f64],
+    tau: &mut [f64],
+    tq: &mut DMatrix<f64>,
+    tv: &mut DMatrix<f64>,
+) {
+    // World axis, Jacobian column and rotation rate of joint `j` for point `p`.
+    let column = |j: usize, p: &Vector3<f64>| {
+        let om = &data.o_m_i[j];
+        let a = om.rot * model.joints[j].axis;
+        match model.joints[j].kind {
+            JointKind::Revolute => (a, a.cross(&(p - om.trans)), a),
+            JointKind::Prismatic => (a, a, Vector3::zeros()),
+        }
+    };
+    // ∂J_j/∂q_k (indices are depth-first, so on one chain `k ⪯ j` is `k <= j`).
+    let djac = |j: usize,
+                k: usize,
+                (aj, jj): (Vector3<f64>, Vector3<f64>),
+                (jk, wk): (Vector3<f64>, Vector3<f64>)| {
+        if k <= j {
+            wk.cross(&jj)
+        } else if model.joints[j].kind == JointKind::Revolute {
+            aj.cross(&jk)
+        } else {
+            Vector3::zeros()
+        }
+    };
+    for c in points {
+        let (p, pv) = point_state(data, c);
+        let (f, fp, fv) = ground.force_partials(&p, &pv);
+        if f == Vector3::zeros() {
+            continue;
+        }
+        add_point_force(model, data, c.joint, &p, &f, tau);
+        let mut k = Some(c.joint);
+        while let Some(kk) = k {
+            let (_, jk, wk) = column(kk, &p);
+            let mut dpv = Vector3::zeros();
+            let mut j = Some(c.joint);
+            while let Some(jj) = j {
+                let (aj, jcol, _) = column(jj, &p);
+                dpv += djac(jj, kk, (aj, jcol), (jk, wk)) * v[jj];
+                j = model.joints[jj].parent;
+            }
+            let df = fp * jk + fv * dpv;
+            let fvk = fv * jk;
+            let mut i = Some(c.joint);
+            while let Some(ii) = i {
+                let (ai, ji, _) = column(ii, &p);
+                tq[(ii, kk)] += djac(ii, kk, (ai, ji), (jk, wk)).dot(&f) + ji.dot(&df);
+                tv[(ii, kk)] += ji.dot(&fvk);
+                i = model.joints[ii].parent;
+            }
+            k = model.joints[kk].parent;
         }
     }
 }
@@ -120,6 +239,35 @@ pub fn add_point_force(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn force_partials_match_finite_differences() {
+        let g = GroundContact::default();
+        let cases = [
+            (
+                Vector3::new(0.1, 0.0, -0.002),
+                Vector3::new(0.004, -0.003, 0.01),
+            ),
+            (
+                Vector3::new(0.0, 0.2, -0.001),
+                Vector3::new(0.5, 0.2, -0.05),
+            ),
+            (Vector3::new(0.0, 0.0, 0.01), Vector3::new(0.5, 0.2, -0.05)),
+        ];
+        for (p, v) in cases {
+            let (f, fp, fv) = g.force_partials(&p, &v);
+            assert_eq!(f, g.force(&p, &v));
+            for k in 0..3 {
+                let h = 1e-7;
+                let mut e = Vector3::zeros();
+                e[k] = h;
+                let dp = (g.force(&(p + e), &v) - g.force(&(p - e), &v)) / (2.0 * h);
+                let dv = (g.force(&p, &(v + e)) - g.force(&p, &(v - e))) / (2.0 * h);
+                assert!((dp - fp.column(k)).norm() < 1e-5 * fp.norm().max(1.0));
+                assert!((dv - fv.column(k)).norm() < 1e-5 * fv.norm().max(1.0));
+            }
+        }
+    }
 
     #[test]
     fn normal_force_only_pushes_and_friction_is_bounded() {

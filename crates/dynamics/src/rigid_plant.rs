@@ -7,17 +7,25 @@
 //! by RK4 with a fixed internal step; [`Plant::step`] advances one control period with the action
 //! held (zero-order hold).
 //!
+//! [`Plant::linearize`] is analytical: the exact Jacobian of the discrete map. At every RK4 stage
+//! the partials of the applied torques (motors, PD, friction, contact: diagonal or per contact
+//! chain, see [`add_contact_force_partials`]) are chained with the analytical ABA derivatives,
+//! `∂q̈/∂x = ∂q̈/∂x|_τ + M⁻¹ ∂τ/∂x`, `∂q̈/∂u = M⁻¹ ∂τ/∂u`, and the sensitivity `∂x/∂(x₀, u)` is
+//! carried through the stages exactly as the state is. [`RigidBodyPlant::linearize_fd`] keeps the
+//! central-difference twin as the test oracle.
+//!
 //! An idealized and a true system are two configurations of one model: [`Overrides`] changes a
 //! body's mass and the friction coefficients (p0, Table I: Leo's torso mass and joint viscous
 //! friction).
 
 use crate::actuators::{Actuator, JointFriction};
-use crate::contact::{point_state, ContactPoint, GroundContact};
+use crate::contact::{add_contact_force_partials, point_state, ContactPoint, GroundContact};
 use crate::rigid::{
-    aba, forward_kinematics_velocity, kinetic_energy, potential_energy, Data, Model,
+    aba, aba_derivatives, forward_kinematics_velocity, kinetic_energy, potential_energy, Data,
+    Model,
 };
 use crate::Plant;
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::sync::Mutex;
@@ -79,6 +87,40 @@ struct Work {
     tau: Vec<f64>,
     x: Vec<f64>,
     k: [Vec<f64>; 4],
+}
+
+/// Partial derivatives of the applied generalized force `τ(q, q̇, u)`.
+#[derive(Debug, Clone)]
+struct ForceJacobian {
+    /// `∂τ/∂q` (`nv x nv`).
+    tq: DMatrix<f64>,
+    /// `∂τ/∂q̇` (`nv x nv`).
+    tv: DMatrix<f64>,
+    /// `∂τ/∂u` (`nv x m`).
+    tu: DMatrix<f64>,
+}
+
+/// Buffers of one analytical linearization (allocated once per call, reused by every stage).
+struct LinearizeWork {
+    jac: ForceJacobian,
+    /// `∂q̈/∂x` of one stage (`nv x 2 nv`).
+    dx: DMatrix<f64>,
+    /// `∂q̈/∂u` of one stage (`nv x m`).
+    du: DMatrix<f64>,
+    /// Sensitivity `∂x/∂(x₀, u)` at the start of the substep (`2 nv x (2 nv + m)`).
+    phi: DMatrix<f64>,
+    /// Sensitivity of the current stage's state.
+    s: DMatrix<f64>,
+    /// Sensitivities of the four stage derivatives.
+    dk: [DMatrix<f64>; 4],
+}
+
+/// `y += a x` for matrices of one shape.
+#[inline]
+fn axpy(y: &mut DMatrix<f64>, a: f64, x: &DMatrix<f64>) {
+    for (yi, xi) in y.as_mut_slice().iter_mut().zip(x.as_slice()) {
+        *yi += a * xi;
+    }
 }
 
 /// A rigid-body robot as a [`Plant`].
@@ -318,32 +360,174 @@ impl RigidBodyPlant {
         self.work.lock().unwrap_or_else(|e| e.into_inner())
     }
 
+    /// The applied generalized force (friction, actuators, contact) into `tau`; with `jac`, also
+    /// its partial derivatives. Leaves placements and body velocities in `data` when there are
+    /// contacts.
+    #[allow(clippy::too_many_arguments)]
+    fn applied_torque(
+        &self,
+        data: &mut Data,
+        tau: &mut [f64],
+        q: &[f64],
+        v: &[f64],
+        u: &[f64],
+        mut jac: Option<&mut ForceJacobian>,
+    ) {
+        for ((t, f), vi) in tau.iter_mut().zip(&self.friction).zip(v) {
+            *t = f.torque(*vi);
+        }
+        if let Some(j) = jac.as_deref_mut() {
+            j.tq.fill(0.0);
+            j.tv.fill(0.0);
+            j.tu.fill(0.0);
+            for (i, (f, vi)) in self.friction.iter().zip(v).enumerate() {
+                j.tv[(i, i)] = f.torque_derivative(*vi);
+            }
+        }
+        let mut k = 0;
+        for (i, act) in &self.actuators {
+            let learned = act.is_learned();
+            let ui = if learned { u[k] } else { 0.0 };
+            match jac.as_deref_mut() {
+                None => tau[*i] += act.torque(ui, q[*i], v[*i]),
+                Some(j) => {
+                    let (t, du, dq, dv) = act.torque_partials(ui, q[*i], v[*i]);
+                    tau[*i] += t;
+                    if learned {
+                        j.tu[(*i, k)] += du;
+                    }
+                    j.tq[(*i, *i)] += dq;
+                    j.tv[(*i, *i)] += dv;
+                }
+            }
+            if learned {
+                k += 1;
+            }
+        }
+        if let Some(g) = &self.ground {
+            if !self.contacts.is_empty() {
+                forward_kinematics_velocity(&self.model, data, q, v);
+                match jac {
+                    None => g.add_generalized_forces(&self.model, data, &self.contacts, tau),
+                    Some(j) => add_contact_force_partials(
+                        g,
+                        &self.model,
+                        data,
+                        &self.contacts,
+                        v,
+                        tau,
+                        &mut j.tq,
+                        &mut j.tv,
+                    ),
+                }
+            }
+        }
+    }
+
     /// Continuous dynamics `ẋ = f(x, u)` into `out` (length `2 nv`).
     fn derivative(&self, w: &mut Work, x: &[f64], u: &[f64], out: &mut [f64]) {
         let n = self.model.nv();
         let (q, v) = x.split_at(n);
-        for ((t, f), vi) in w.tau.iter_mut().zip(&self.friction).zip(v) {
-            *t = f.torque(*vi);
-        }
-        let mut k = 0;
-        for (i, act) in &self.actuators {
-            let ui = if act.is_learned() {
-                k += 1;
-                u[k - 1]
-            } else {
-                0.0
-            };
-            w.tau[*i] += act.torque(ui, q[*i], v[*i]);
-        }
-        if let Some(g) = &self.ground {
-            if !self.contacts.is_empty() {
-                forward_kinematics_velocity(&self.model, &mut w.data, q, v);
-                g.add_generalized_forces(&self.model, &w.data, &self.contacts, &mut w.tau);
-            }
-        }
+        self.applied_torque(&mut w.data, &mut w.tau, q, v, u, None);
         let ddq = aba(&self.model, &mut w.data, q, v, &w.tau);
         out[..n].copy_from_slice(v);
         out[n..].copy_from_slice(ddq.as_slice());
+    }
+
+    /// [`RigidBodyPlant::derivative`] at a stage state `x` whose sensitivity is `lw.s`; writes
+    /// `ẋ` into `out` and its sensitivity `A S + [0 B]` into `dk`, with
+    /// `A = [[0, I], [∂q̈/∂q, ∂q̈/∂q̇]]`, `B = [[0], [∂q̈/∂u]]`.
+    fn derivative_sensitivity(
+        &self,
+        w: &mut Work,
+        lw: &mut LinearizeWork,
+        stage: usize,
+        x: &[f64],
+        u: &[f64],
+        out: &mut [f64],
+    ) {
+        let n = self.model.nv();
+        let (q, v) = x.split_at(n);
+        self.applied_torque(&mut w.data, &mut w.tau, q, v, u, Some(&mut lw.jac));
+        let d = &mut w.data;
+        aba_derivatives(&self.model, d, q, v, &w.tau);
+        out[..n].copy_from_slice(v);
+        out[n..].copy_from_slice(d.ddq.as_slice());
+        let mut dq = lw.dx.columns_mut(0, n);
+        dq.copy_from(&d.ddq_dq);
+        dq.gemm(1.0, &d.minv, &lw.jac.tq, 1.0);
+        let mut dv = lw.dx.columns_mut(n, n);
+        dv.copy_from(&d.ddq_dv);
+        dv.gemm(1.0, &d.minv, &lw.jac.tv, 1.0);
+        lw.du.gemm(1.0, &d.minv, &lw.jac.tu, 0.0);
+        let s = if stage == 0 { &lw.phi } else { &lw.s };
+        let dk = &mut lw.dk[stage];
+        dk.rows_mut(0, n).copy_from(&s.rows(n, n));
+        dk.rows_mut(n, n).gemm(1.0, &lw.dx, s, 0.0);
+        let m = lw.du.ncols();
+        let mut b = dk.view_mut((n, 2 * n), (n, m));
+        b += &lw.du;
+    }
+
+    /// The exact Jacobians `(∂step/∂x, ∂step/∂u)` of one control period, by chaining the
+    /// analytical ABA derivatives with the actuator and contact partials through every RK4 stage
+    /// (what [`Plant::linearize`] returns). At a clipping or contact switch it is the derivative
+    /// of the branch the trajectory is on.
+    pub fn linearize_analytic(&self, x: &[f64], u: &[f64]) -> (DMatrix<f64>, DMatrix<f64>) {
+        let n = self.model.nv();
+        let nx = 2 * n;
+        let m = self.action_dim();
+        let cols = nx + m;
+        let mut lw = LinearizeWork {
+            jac: ForceJacobian {
+                tq: DMatrix::zeros(n, n),
+                tv: DMatrix::zeros(n, n),
+                tu: DMatrix::zeros(n, m),
+            },
+            dx: DMatrix::zeros(n, nx),
+            du: DMatrix::zeros(n, m),
+            phi: DMatrix::identity(nx, cols),
+            s: DMatrix::zeros(nx, cols),
+            dk: std::array::from_fn(|_| DMatrix::zeros(nx, cols)),
+        };
+        let mut guard = self.lock();
+        let w = &mut *guard;
+        let h = self.config.control_period / self.substeps as f64;
+        let mut xc = x.to_vec();
+        let mut k = std::mem::take(&mut w.k);
+        let mut xs = std::mem::take(&mut w.x);
+        for _ in 0..self.substeps {
+            self.derivative_sensitivity(w, &mut lw, 0, &xc, u, &mut k[0]);
+            for (stage, frac) in [(1, 0.5), (2, 0.5), (3, 1.0)] {
+                for i in 0..nx {
+                    xs[i] = xc[i] + frac * h * k[stage - 1][i];
+                }
+                lw.s.copy_from(&lw.phi);
+                axpy(&mut lw.s, frac * h, &lw.dk[stage - 1]);
+                let (_, rest) = k.split_at_mut(stage);
+                self.derivative_sensitivity(w, &mut lw, stage, &xs, u, &mut rest[0]);
+            }
+            for i in 0..nx {
+                xc[i] += h / 6.0 * (k[0][i] + 2.0 * k[1][i] + 2.0 * k[2][i] + k[3][i]);
+            }
+            let [d1, d2, d3, d4] = &lw.dk;
+            axpy(&mut lw.phi, h / 6.0, d1);
+            axpy(&mut lw.phi, h / 3.0, d2);
+            axpy(&mut lw.phi, h / 3.0, d3);
+            axpy(&mut lw.phi, h / 6.0, d4);
+        }
+        w.k = k;
+        w.x = xs;
+        (
+            lw.phi.columns(0, nx).into_owned(),
+            lw.phi.columns(nx, m).into_owned(),
+        )
+    }
+
+    /// The central-difference twin of [`Plant::linearize`] ([`crate::linearize_fd`]): the test
+    /// oracle of [`RigidBodyPlant::linearize_analytic`].
+    pub fn linearize_fd(&self, x: &DVector<f64>, u: &DVector<f64>) -> (DMatrix<f64>, DMatrix<f64>) {
+        crate::linearize_fd(self, x, u)
     }
 
     /// Integrates one control period from `x` under action `u`, in place.
@@ -392,5 +576,10 @@ impl Plant for RigidBodyPlant {
         let mut y = x.clone();
         self.step_in_place(y.as_mut_slice(), u.as_slice());
         y
+    }
+
+    /// Analytical: [`RigidBodyPlant::linearize_analytic`].
+    fn linearize(&self, x: &DVector<f64>, u: &DVector<f64>) -> (DMatrix<f64>, DMatrix<f64>) {
+        self.linearize_analytic(x.as_slice(), u.as_slice())
     }
 }
