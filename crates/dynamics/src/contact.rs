@@ -147,8 +147,8 @@ impl GroundContact {
 /// `a_j` through `o_j`): the point Jacobian column is `J_j = a_j × (p − o_j)` (revolute) or `a_j`
 /// (prismatic), `τ_i = J_i · f`, `ṗ = Σ_j J_j q̇_j`. Moving `q_k` rotates everything beyond joint `k`
 /// about `a_k` (`ω_k = a_k`; `0` for a prismatic joint) and moves `p` by `J_k`, so
-/// `∂J_j/∂q_k = ω_k × J_j` when `k ⪯ j` and `a_j × J_k` (revolute `j`, zero for prismatic) when
-/// `j ≺ k`. Then `∂τ_i/∂q_k = ∂J_i/∂q_k · f + J_i · (F_p J_k + F_v Σ_j ∂J_j/∂q_k q̇_j)` and
+/// `∂J_j/∂q_k = ω_k × J_j` when `k ⪯ j` and `ω_j × J_k` when `j ≺ k`; with running sums along the
+/// chain, `∂ṗ/∂q_k = ω_k × Σ_{j ⪰ k} J_j q̇_j + (Σ_{j ≺ k} ω_j q̇_j) × J_k` costs O(1) per `k`. Then `∂τ_i/∂q_k = ∂J_i/∂q_k · f + J_i · (F_p J_k + F_v Σ_j ∂J_j/∂q_k q̇_j)` and
 /// `∂τ_i/∂q̇_k = J_i · F_v J_k`, with `(F_p, F_v)` from [`GroundContact::force_partials`].
 #[allow(clippy::too_many_arguments)] // the generalized force and its two Jacobians
 pub fn add_contact_force_partials(
@@ -161,28 +161,10 @@ pub fn add_contact_force_partials(
     tq: &mut DMatrix<f64>,
     tv: &mut DMatrix<f64>,
 ) {
-    // World axis, Jacobian column and rotation rate of joint `j` for point `p`.
-    let column = |j: usize, p: &Vector3<f64>| {
-        let om = &data.o_m_i[j];
-        let a = om.rot * model.joints[j].axis;
-        match model.joints[j].kind {
-            JointKind::Revolute => (a, a.cross(&(p - om.trans)), a),
-            JointKind::Prismatic => (a, a, Vector3::zeros()),
-        }
-    };
-    // ∂J_j/∂q_k (indices are depth-first, so on one chain `k ⪯ j` is `k <= j`).
-    let djac = |j: usize,
-                k: usize,
-                (aj, jj): (Vector3<f64>, Vector3<f64>),
-                (jk, wk): (Vector3<f64>, Vector3<f64>)| {
-        if k <= j {
-            wk.cross(&jj)
-        } else if model.joints[j].kind == JointKind::Revolute {
-            aj.cross(&jk)
-        } else {
-            Vector3::zeros()
-        }
-    };
+    const MAX_DEPTH: usize = 32;
+    // Per chain member, root first: joint index, Jacobian column, rotation rate.
+    let mut stack = [(0usize, Vector3::zeros(), Vector3::zeros()); MAX_DEPTH];
+    let mut heap = Vec::new();
     for c in points {
         let (p, pv) = point_state(data, c);
         let (f, fp, fv) = ground.force_partials(&p, &pv);
@@ -190,26 +172,48 @@ pub fn add_contact_force_partials(
             continue;
         }
         add_point_force(model, data, c.joint, &p, &f, tau);
+        let mut depth = 0;
         let mut k = Some(c.joint);
         while let Some(kk) = k {
-            let (_, jk, wk) = column(kk, &p);
-            let mut dpv = Vector3::zeros();
-            let mut j = Some(c.joint);
-            while let Some(jj) = j {
-                let (aj, jcol, _) = column(jj, &p);
-                dpv += djac(jj, kk, (aj, jcol), (jk, wk)) * v[jj];
-                j = model.joints[jj].parent;
-            }
+            depth += 1;
+            k = model.joints[kk].parent;
+        }
+        let chain: &mut [(usize, Vector3<f64>, Vector3<f64>)] = if depth <= MAX_DEPTH {
+            &mut stack[..depth]
+        } else {
+            heap.resize(depth, stack[0]);
+            &mut heap[..]
+        };
+        let mut k = Some(c.joint);
+        for slot in chain.iter_mut().rev() {
+            let j = k.expect("chain length counted above");
+            let om = &data.o_m_i[j];
+            let a = om.rot * model.joints[j].axis;
+            *slot = match model.joints[j].kind {
+                JointKind::Revolute => (j, a.cross(&(p - om.trans)), a),
+                JointKind::Prismatic => (j, a, Vector3::zeros()),
+            };
+            k = model.joints[j].parent;
+        }
+        // ∂ṗ/∂q_k = ω_k × Σ_{j ⪰ k} J_j q̇_j + (Σ_{j ≺ k} ω_j q̇_j) × J_k.
+        let mut below: Vector3<f64> = chain.iter().map(|(j, jc, _)| jc * v[*j]).sum();
+        let mut above = Vector3::zeros();
+        for (ck, &(kk, jk, wk)) in chain.iter().enumerate() {
+            let dpv = wk.cross(&below) + above.cross(&jk);
             let df = fp * jk + fv * dpv;
             let fvk = fv * jk;
-            let mut i = Some(c.joint);
-            while let Some(ii) = i {
-                let (ai, ji, _) = column(ii, &p);
-                tq[(ii, kk)] += djac(ii, kk, (ai, ji), (jk, wk)).dot(&f) + ji.dot(&df);
+            for (ci, &(ii, ji, wi)) in chain.iter().enumerate() {
+                // ∂J_i/∂q_k: `ω_k × J_i` if k ⪯ i, else `ω_i × J_k` (zero for prismatic i).
+                let dji = if ck <= ci {
+                    wk.cross(&ji)
+                } else {
+                    wi.cross(&jk)
+                };
+                tq[(ii, kk)] += dji.dot(&f) + ji.dot(&df);
                 tv[(ii, kk)] += ji.dot(&fvk);
-                i = model.joints[ii].parent;
             }
-            k = model.joints[kk].parent;
+            below -= jk * v[kk];
+            above += wk * v[kk];
         }
     }
 }
