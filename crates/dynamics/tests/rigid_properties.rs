@@ -262,3 +262,58 @@ fn world_frame_and_tangent_rnea_derivatives_agree() {
         }
     }
 }
+
+/// Mass fixed to the world (a heavy root link and a link welded to it) follows Pinocchio: it is
+/// recorded in `world_mass` but left out of the total mass, the centre of mass and the potential
+/// energy (Pinocchio's `centerOfMass`/`computeTotalMass` sum from joint 1, skipping the
+/// universe), and it does not change the dynamics.
+#[test]
+fn mass_fixed_to_the_world_is_left_out_of_com_as_in_pinocchio() {
+    let inertial = |m: f64, z: f64| {
+        format!(
+            r#"<inertial><origin xyz="0 0 {z}"/><mass value="{m}"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>"#
+        )
+    };
+    let urdf = |base_mass: Option<f64>| {
+        let base = match base_mass {
+            Some(m) => format!(r#"<link name="base">{}</link>"#, inertial(m, 0.1)),
+            None => r#"<link name="base"/>"#.to_string(),
+        };
+        let welded = match base_mass {
+            Some(m) => format!(
+                r#"<link name="plate">{}</link><joint name="weld" type="fixed"><parent link="base"/><child link="plate"/><origin xyz="1 0 0"/></joint>"#,
+                inertial(2.0 * m, 0.0)
+            ),
+            None => String::new(),
+        };
+        format!(
+            r#"<robot name="r">{base}{welded}
+            <joint name="pivot" type="revolute"><parent link="base"/><child link="bob"/>
+              <origin xyz="0 0 0.5"/><axis xyz="0 1 0"/>
+              <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+            <link name="bob">{}</link></robot>"#,
+            inertial(0.7, -0.3)
+        )
+    };
+    let heavy = Model::from_urdf_str(&urdf(Some(5.0))).unwrap();
+    let light = Model::from_urdf_str(&urdf(None)).unwrap();
+    assert!((heavy.world_mass - 15.0).abs() < 1e-12);
+    assert!((heavy.total_mass() - 0.7).abs() < 1e-12);
+    let (q, v) = ([0.4], [1.3]);
+    let mut d = Data::new(&heavy);
+    center_of_mass(&heavy, &mut d, &q, &v);
+    // The bob alone: 0.3 m from the pivot at (0, 0, 0.5), swung by q about +y.
+    let (s, c) = q[0].sin_cos();
+    let expected = nalgebra::Vector3::new(-0.3 * s, 0.0, 0.5 - 0.3 * c);
+    assert!((d.com - expected).norm() < 1e-12, "{}", d.com);
+    let expected_v = nalgebra::Vector3::new(-0.3 * c, 0.0, 0.3 * s) * v[0];
+    assert!((d.com_velocity - expected_v).norm() < 1e-12);
+    let pe = potential_energy(&heavy, &mut d, &q);
+    assert!((pe - 0.7 * 9.81 * expected.z).abs() < 1e-12);
+    let mut dl = Data::new(&light);
+    assert_eq!(crba(&heavy, &mut d, &q), crba(&light, &mut dl, &q));
+    assert_eq!(
+        aba(&heavy, &mut d, &q, &v, &[0.2]),
+        aba(&light, &mut dl, &q, &v, &[0.2])
+    );
+}

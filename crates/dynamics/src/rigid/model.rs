@@ -251,7 +251,9 @@ pub struct Model {
     pub frames: Vec<Frame>,
     /// World-frame gravity (m/s²).
     pub gravity: Vector3<f64>,
-    /// Mass rigidly attached to the world (ignored by the dynamics).
+    /// Mass rigidly attached to the world: the root link and links fixed to it. Ignored by the
+    /// dynamics, and left out of [`Model::total_mass`], the centre of mass and the potential
+    /// energy, as Pinocchio leaves out its universe's inertia.
     pub world_mass: f64,
 }
 
@@ -640,7 +642,8 @@ impl Model {
         self.joints.iter().map(|j| j.name.clone()).collect()
     }
 
-    /// Total mass of the moving bodies.
+    /// Total mass of the moving bodies (Pinocchio's `computeTotalMass`: without
+    /// [`Model::world_mass`]).
     pub fn total_mass(&self) -> f64 {
         self.joints.iter().map(|j| j.inertia.mass).sum()
     }
