@@ -4,7 +4,9 @@
 use nalgebra::DVector;
 use tandem_dynamics::actuators::{Actuator, DcMotor, JointFriction};
 use tandem_dynamics::rigid::Model;
-use tandem_dynamics::rigid_plant::{Overrides, RigidBodyPlant, RigidPlantConfig, RigidPlantError};
+use tandem_dynamics::rigid_plant::{
+    LimitSpring, Overrides, RigidBodyPlant, RigidPlantConfig, RigidPlantError,
+};
 use tandem_dynamics::{check_dims, Plant};
 
 /// A pendulum about `axis` (bob 0.3 m below the pivot, 0.5 kg).
@@ -340,4 +342,97 @@ fn arm_linearization_matches_finite_differences_and_respects_clipping() {
     let (_, b) = p.linearize(&x, &clipped);
     assert_eq!(b.column(0).abs().max(), 0.0);
     assert!(b.column(1).abs().max() > 1e-3);
+}
+
+/// A pendulum about the vertical (no gravity torque) with the range [-0.5, 0.5] rad.
+fn limited_pendulum() -> Model {
+    Model::from_urdf_str(
+        r#"<robot name="p"><link name="base"/>
+        <joint name="pivot" type="revolute"><parent link="base"/><child link="bob"/>
+          <axis xyz="0 0 1"/><limit lower="-0.5" upper="0.5" effort="5" velocity="10"/></joint>
+        <link name="bob"><inertial><origin xyz="0.3 0 0"/><mass value="0.5"/>
+          <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/></inertial></link>
+        </robot>"#,
+    )
+    .unwrap()
+}
+
+#[test]
+fn compliant_position_limit_bounces_the_joint_back_without_energy_gain() {
+    let x0 = DVector::from_vec(vec![0.3, 2.0]);
+    let none = DVector::zeros(0);
+    // Off by default: the joint sails through its range.
+    let free = RigidBodyPlant::new(limited_pendulum(), cfg()).unwrap();
+    let mut x = x0.clone();
+    for _ in 0..25 {
+        x = free.step(&x, &none);
+    }
+    assert!((x[0] - (0.3 + 2.0 * 0.5)).abs() < 1e-9, "free: {}", x[0]);
+    // Enabled: an undamped spring returns the joint with the same speed (elastic bounce) and
+    // total energy (kinetic + limit spring) is conserved; a damped one loses energy monotonically.
+    let spring = LimitSpring {
+        stiffness: 100.0,
+        damping: 0.0,
+    };
+    // 1 ms control period, so that the sampled peak is within 3e-4 of the true one.
+    let fine = RigidPlantConfig {
+        control_period: 1e-3,
+        internal_step: 1e-3,
+    };
+    let p = RigidBodyPlant::new(limited_pendulum(), fine)
+        .unwrap()
+        .with_position_limits(spring)
+        .unwrap();
+    let e0 = p.total_energy(x0.as_slice());
+    let (mut x, mut max_q) = (x0.clone(), f64::MIN);
+    for _ in 0..500 {
+        x = p.step(&x, &none);
+        max_q = max_q.max(x[0]);
+        let e = p.total_energy(x.as_slice());
+        // The spring force has a kink at the limit, where RK4 drops to low order: 1e-4, not
+        // the 1e-8 of smooth motion.
+        assert!((e - e0).abs() < 1e-4 * e0, "{e} vs {e0}");
+    }
+    // Overshoot: ½ I ω² = ½ k d² with I = 0.5 · 0.3² + 0.001.
+    let inertia = 0.5 * 0.09 + 0.001;
+    let d = 2.0 * (inertia / spring.stiffness).sqrt();
+    assert!(
+        (max_q - 0.5 - d).abs() < 0.01 * d,
+        "overshoot {} vs {d}",
+        max_q - 0.5
+    );
+    assert!(x[0] < 0.5 && (x[1] + 2.0).abs() < 2e-4, "bounced back: {x}");
+    let damped = RigidBodyPlant::new(limited_pendulum(), fine)
+        .unwrap()
+        .with_position_limits(LimitSpring::default())
+        .unwrap();
+    let mut x = x0.clone();
+    let mut last = damped.total_energy(x.as_slice());
+    for _ in 0..500 {
+        x = damped.step(&x, &none);
+        let e = damped.total_energy(x.as_slice());
+        assert!(e <= last + 1e-12);
+        last = e;
+    }
+    assert!(x[1] < 0.0 && x[1] > -2.0, "damped bounce: {x}");
+    // Linearization inside the limit spring (motor on the joint) agrees with finite differences.
+    let driven = RigidBodyPlant::new(limited_pendulum(), cfg())
+        .unwrap()
+        .with_actuator("pivot", Actuator::Torque { limit: 5.0 })
+        .unwrap()
+        .with_position_limits(LimitSpring::default())
+        .unwrap();
+    let xin = DVector::from_vec(vec![0.52, 0.3]);
+    let (ea, eb) = check_linearization(&driven, &xin, &DVector::from_vec(vec![0.5]));
+    assert!(ea < 1e-6 && eb < 1e-6, "A err {ea:e}, B err {eb:e}");
+    let bad = LimitSpring {
+        stiffness: -1.0,
+        damping: 0.0,
+    };
+    assert!(matches!(
+        RigidBodyPlant::new(limited_pendulum(), cfg())
+            .unwrap()
+            .with_position_limits(bad),
+        Err(RigidPlantError::Config(_))
+    ));
 }
