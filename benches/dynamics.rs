@@ -3,10 +3,18 @@
 //!
 //! Reference (issue 3): Pinocchio 4.1 compiled from its C++ headers on this kind of machine, same
 //! URDF: ABA 2.06 µs, RNEA 1.01 µs, CRBA 0.54 µs per call; ABA derivatives about 5 µs for a 6-DoF
-//! arm through its Python binding. Run with `cargo bench --bench dynamics`.
+//! arm through its Python binding.
+//!
+//! The `biped` group times `RigidBodyPlant::linearize` of one 30 ms control period (30 RK4 steps
+//! with contact) of the Leo-like biped (10 DoF, 6 actions): analytical (ABA derivatives chained
+//! with the actuator and contact partials through the RK4 stages) against central differences
+//! (`2 (20 + 6)` rollouts of the period). Run with `cargo bench --bench dynamics`.
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use nalgebra::DVector;
+use tandem_dynamics::biped::{leo_plant, leo_true_overrides, standing_state};
 use tandem_dynamics::rigid::{aba, aba_derivatives, crba, rnea, rnea_derivatives, Data, Model};
+use tandem_dynamics::rigid_plant::RigidPlantConfig;
 
 fn arm7() -> Model {
     Model::from_urdf_file(concat!(
@@ -72,6 +80,23 @@ fn bench(c: &mut Criterion) {
                 black_box(&tau),
             )
         })
+    });
+    g.finish();
+
+    let plant = leo_plant(RigidPlantConfig::default(), &leo_true_overrides()).expect("biped");
+    let mut x = standing_state(plant.model());
+    let n = plant.model().nv();
+    x[1] -= 0.001;
+    x[n] = 0.03;
+    x[n + 3] = 0.2;
+    let u = DVector::from_vec(vec![1.5, -2.0, 0.7, -1.0, 2.5, -0.4]);
+    let mut g = c.benchmark_group("biped");
+    g.sample_size(20);
+    g.bench_function("linearize_analytic", |b| {
+        b.iter(|| plant.linearize_analytic(black_box(x.as_slice()), black_box(u.as_slice())))
+    });
+    g.bench_function("linearize_fd", |b| {
+        b.iter(|| plant.linearize_fd(black_box(&x), black_box(&u)))
     });
     g.finish();
 }

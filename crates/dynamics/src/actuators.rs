@@ -56,6 +56,26 @@ impl DcMotor {
         tau.clamp(-self.torque_max, self.torque_max)
     }
 
+    /// [`DcMotor::torque`] and its partial derivatives `(τ, ∂τ/∂U, ∂τ/∂q̇)`: `G K / R` and
+    /// `−G² K² / R` inside the limits, zero where the voltage or the torque is clipped (the
+    /// one-sided derivative of the clipped branch).
+    #[inline]
+    pub fn torque_partials(&self, u: f64, qdot: f64) -> (f64, f64, f64) {
+        let uc = u.clamp(-self.voltage_max, self.voltage_max);
+        let k = self.torque_constant;
+        let g = self.gear;
+        let tau = g * k * (uc - k * g * qdot) / self.resistance;
+        if tau.abs() > self.torque_max {
+            return (tau.clamp(-self.torque_max, self.torque_max), 0.0, 0.0);
+        }
+        let du = if u.abs() < self.voltage_max {
+            g * k / self.resistance
+        } else {
+            0.0
+        };
+        (tau, du, -g * k * k * g / self.resistance)
+    }
+
     /// Voltage that produces torque `tau` at velocity `qdot` (inverse of [`DcMotor::torque`]
     /// before clipping): what a torque-level controller sends.
     #[inline]
@@ -108,6 +128,19 @@ impl JointFriction {
         };
         -self.viscous * qdot - coulomb
     }
+
+    /// `∂τ/∂q̇` of [`JointFriction::torque`]: `−b − (c / v_s) (1 − tanh²(q̇ / v_s))`.
+    #[inline]
+    pub fn torque_derivative(&self, qdot: f64) -> f64 {
+        let coulomb = if self.coulomb != 0.0 {
+            let vs = self.stiction_velocity.max(1e-12);
+            let t = (qdot / vs).tanh();
+            self.coulomb / vs * (1.0 - t * t)
+        } else {
+            0.0
+        };
+        -self.viscous - coulomb
+    }
 }
 
 /// A proportional-derivative joint controller.
@@ -129,6 +162,17 @@ impl PdController {
     #[inline]
     pub fn torque(&self, q: f64, qdot: f64) -> f64 {
         (self.kp * (self.target - q) - self.kd * qdot).clamp(-self.torque_max, self.torque_max)
+    }
+
+    /// [`PdController::torque`] and `(∂τ/∂q, ∂τ/∂q̇)`: `(−kp, −kd)`, zero where clipped.
+    #[inline]
+    pub fn torque_partials(&self, q: f64, qdot: f64) -> (f64, f64, f64) {
+        let tau = self.kp * (self.target - q) - self.kd * qdot;
+        if tau.abs() > self.torque_max {
+            (tau.clamp(-self.torque_max, self.torque_max), 0.0, 0.0)
+        } else {
+            (tau, -self.kp, -self.kd)
+        }
     }
 }
 
@@ -160,6 +204,26 @@ impl Actuator {
             Actuator::Motor(m) => m.torque(u, qdot),
             Actuator::Torque { limit } => u.clamp(-limit, *limit),
             Actuator::Pd(pd) => pd.torque(q, qdot),
+        }
+    }
+
+    /// [`Actuator::torque`] and its partial derivatives `(τ, ∂τ/∂u, ∂τ/∂q, ∂τ/∂q̇)`; a clipped
+    /// input or output has zero derivative (the clipped branch's).
+    #[inline]
+    pub fn torque_partials(&self, u: f64, q: f64, qdot: f64) -> (f64, f64, f64, f64) {
+        match self {
+            Actuator::Motor(m) => {
+                let (t, du, dv) = m.torque_partials(u, qdot);
+                (t, du, 0.0, dv)
+            }
+            Actuator::Torque { limit } => {
+                let du = if u.abs() < *limit { 1.0 } else { 0.0 };
+                (u.clamp(-limit, *limit), du, 0.0, 0.0)
+            }
+            Actuator::Pd(pd) => {
+                let (t, dq, dv) = pd.torque_partials(q, qdot);
+                (t, 0.0, dq, dv)
+            }
         }
     }
 }
@@ -196,6 +260,64 @@ mod tests {
         assert!(f.torque(1.0) < 0.0 && f.torque(-1.0) > 0.0);
         assert_eq!(f.torque(0.0), 0.0);
         assert!((f.torque(2.0) - (-0.06 - 0.1)).abs() < 1e-9);
+    }
+
+    /// Central difference of `f` at `z`.
+    fn fd(f: impl Fn(f64) -> f64, z: f64) -> f64 {
+        let h = 1e-6 * z.abs().max(1.0);
+        (f(z + h) - f(z - h)) / (2.0 * h)
+    }
+
+    #[test]
+    fn partials_match_finite_differences_and_vanish_when_clipped() {
+        let motor = Actuator::Motor(DcMotor {
+            torque_max: 1.0,
+            ..DcMotor::default()
+        });
+        let pd = Actuator::Pd(PdController {
+            kp: 10.0,
+            kd: 0.5,
+            target: 0.2,
+            torque_max: 3.0,
+        });
+        let src = Actuator::Torque { limit: 2.0 };
+        // (actuator, u, q, q̇): inside the limits, then voltage-, torque- and output-clipped.
+        let cases = [
+            (motor, 3.0, 0.1, 0.4, true),
+            (motor, 12.0, 0.1, 0.4, false),
+            (motor, 9.0, 0.1, -3.0, false),
+            (pd, 0.0, 0.1, 0.7, true),
+            (pd, 0.0, -1.0, 0.0, false),
+            (src, 1.5, 0.0, 0.0, true),
+            (src, -2.5, 0.0, 0.0, false),
+        ];
+        for (a, u, q, v, inside) in cases {
+            let (t, du, dq, dv) = a.torque_partials(u, q, v);
+            assert_eq!(t, a.torque(u, q, v));
+            let fu = fd(|z| a.torque(z, q, v), u);
+            let fq = fd(|z| a.torque(u, z, v), q);
+            let fv = fd(|z| a.torque(u, q, z), v);
+            for (an, num) in [(du, fu), (dq, fq), (dv, fv)] {
+                assert!(
+                    (an - num).abs() < 1e-6 * an.abs().max(1.0),
+                    "{a:?}: {an} vs {num}"
+                );
+            }
+            assert_eq!(inside, du != 0.0 || dq != 0.0, "{a:?} at u = {u}");
+        }
+        let f = JointFriction {
+            viscous: 0.03,
+            coulomb: 0.1,
+            stiction_velocity: 0.01,
+        };
+        for v in [-0.5, -0.004, 0.0, 0.003, 0.02, 1.0] {
+            let num = fd(|z| f.torque(z), v);
+            let an = f.torque_derivative(v);
+            assert!(
+                (an - num).abs() < 1e-6 * an.abs().max(1.0),
+                "{v}: {an} vs {num}"
+            );
+        }
     }
 
     #[test]

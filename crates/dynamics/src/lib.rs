@@ -5,7 +5,7 @@
 //! a learned model can be trained on the difference between them.
 //!
 //! This crate owns
-//! - the [`Plant`] trait and its finite-difference [`Plant::linearize`] default,
+//! - the [`Plant`] trait and its finite-difference [`Plant::linearize`] default ([`linearize_fd`]),
 //! - [`integrate`]: fixed-step integrators (explicit Euler, RK4) for continuous-time dynamics,
 //! - classic plants (cart-pole, gymnasium pendulum, the DC-motor pendulum of paper p0),
 //! - [`rigid`]: rigid bodies from URDF (kinematics, Jacobians, RNEA, CRBA, ABA, analytical
@@ -28,4 +28,4 @@ mod plant;
 pub mod rigid;
 pub mod rigid_plant;
 
-pub use plant::{check_dims, Plant, PlantError};
+pub use plant::{check_dims, linearize_fd, Plant, PlantError};

@@ -74,31 +74,42 @@ pub trait Plant {
     /// (`h = 1e-6 · max(1, |z_i|)`), accurate to about 1e-8 for smooth dynamics. Plants with
     /// analytical derivatives override it.
     fn linearize(&self, x: &DVector<f64>, u: &DVector<f64>) -> (DMatrix<f64>, DMatrix<f64>) {
-        let (n, m) = (self.state_dim(), self.action_dim());
-        let mut a = DMatrix::zeros(n, n);
-        let mut b = DMatrix::zeros(n, m);
-        let mut xp = x.clone();
-        for i in 0..n {
-            let h = 1e-6 * x[i].abs().max(1.0);
-            xp[i] = x[i] + h;
-            let fp = self.step(&xp, u);
-            xp[i] = x[i] - h;
-            let fm = self.step(&xp, u);
-            xp[i] = x[i];
-            a.set_column(i, &((fp - fm) / (2.0 * h)));
-        }
-        let mut up = u.clone();
-        for j in 0..m {
-            let h = 1e-6 * u[j].abs().max(1.0);
-            up[j] = u[j] + h;
-            let fp = self.step(x, &up);
-            up[j] = u[j] - h;
-            let fm = self.step(x, &up);
-            up[j] = u[j];
-            b.set_column(j, &((fp - fm) / (2.0 * h)));
-        }
-        (a, b)
+        linearize_fd(self, x, u)
     }
+}
+
+/// Central-difference Jacobians `(∂step/∂x, ∂step/∂u)` of any plant, with a step scaled to each
+/// component's magnitude (`h = 1e-6 · max(1, |z_i|)`): the default [`Plant::linearize`], and the
+/// test oracle of plants that override it with analytical derivatives.
+pub fn linearize_fd<P: Plant + ?Sized>(
+    plant: &P,
+    x: &DVector<f64>,
+    u: &DVector<f64>,
+) -> (DMatrix<f64>, DMatrix<f64>) {
+    let (n, m) = (plant.state_dim(), plant.action_dim());
+    let mut a = DMatrix::zeros(n, n);
+    let mut b = DMatrix::zeros(n, m);
+    let mut xp = x.clone();
+    for i in 0..n {
+        let h = 1e-6 * x[i].abs().max(1.0);
+        xp[i] = x[i] + h;
+        let fp = plant.step(&xp, u);
+        xp[i] = x[i] - h;
+        let fm = plant.step(&xp, u);
+        xp[i] = x[i];
+        a.set_column(i, &((fp - fm) / (2.0 * h)));
+    }
+    let mut up = u.clone();
+    for j in 0..m {
+        let h = 1e-6 * u[j].abs().max(1.0);
+        up[j] = u[j] + h;
+        let fp = plant.step(x, &up);
+        up[j] = u[j] - h;
+        let fm = plant.step(x, &up);
+        up[j] = u[j];
+        b.set_column(j, &((fp - fm) / (2.0 * h)));
+    }
+    (a, b)
 }
 
 /// Checks that `x` and `u` have the plant's dimensions and are finite.

@@ -4,7 +4,9 @@
 use nalgebra::DVector;
 use tandem_dynamics::actuators::{Actuator, DcMotor, JointFriction};
 use tandem_dynamics::rigid::Model;
-use tandem_dynamics::rigid_plant::{Overrides, RigidBodyPlant, RigidPlantConfig, RigidPlantError};
+use tandem_dynamics::rigid_plant::{
+    LimitSpring, Overrides, RigidBodyPlant, RigidPlantConfig, RigidPlantError,
+};
 use tandem_dynamics::{check_dims, Plant};
 
 /// A pendulum about `axis` (bob 0.3 m below the pivot, 0.5 kg).
@@ -149,4 +151,288 @@ fn bad_configuration_is_an_error() {
     ));
     let toml_like: Result<Overrides, _> = serde_json::from_str(r#"{"link_mas": {}}"#);
     assert!(toml_like.is_err(), "unknown override keys are rejected");
+}
+
+/// Largest entry-wise difference relative to the largest entry (at least 1).
+fn rel_err(a: &nalgebra::DMatrix<f64>, b: &nalgebra::DMatrix<f64>) -> f64 {
+    (a - b).abs().max() / a.abs().max().max(1.0)
+}
+
+/// Central differences of one control period with step `h` on every component.
+fn jacobians_fd(
+    p: &RigidBodyPlant,
+    x: &DVector<f64>,
+    u: &DVector<f64>,
+    h: f64,
+) -> (nalgebra::DMatrix<f64>, nalgebra::DMatrix<f64>) {
+    let col = |xp: DVector<f64>, xm: DVector<f64>, up: DVector<f64>, um: DVector<f64>| {
+        (p.step(&xp, &up) - p.step(&xm, &um)) / (2.0 * h)
+    };
+    let mut a = nalgebra::DMatrix::zeros(x.len(), x.len());
+    let mut b = nalgebra::DMatrix::zeros(x.len(), u.len());
+    for i in 0..x.len() {
+        let (mut xp, mut xm) = (x.clone(), x.clone());
+        xp[i] += h;
+        xm[i] -= h;
+        a.set_column(i, &col(xp, xm, u.clone(), u.clone()));
+    }
+    for j in 0..u.len() {
+        let (mut up, mut um) = (u.clone(), u.clone());
+        up[j] += h;
+        um[j] -= h;
+        b.set_column(j, &col(x.clone(), x.clone(), up, um));
+    }
+    (a, b)
+}
+
+/// Analytical vs finite-difference Jacobians of one control period; returns the two errors
+/// against the plant's own oracle ([`RigidBodyPlant::linearize_fd`], `h = 1e-6`).
+fn check_linearization(p: &RigidBodyPlant, x: &DVector<f64>, u: &DVector<f64>) -> (f64, f64) {
+    let (a, b) = p.linearize(x, u);
+    let (fa, fb) = p.linearize_fd(x, u);
+    assert_eq!((a.shape(), b.shape()), (fa.shape(), fb.shape()));
+    (rel_err(&fa, &a), rel_err(&fb, &b))
+}
+
+/// The Leo-like biped (true configuration: viscous joint friction; plus Coulomb friction on the
+/// knees) at `x`, with a mid-range voltage on every motor.
+fn biped_case(
+    x_of: impl Fn(&Model) -> DVector<f64>,
+) -> (RigidBodyPlant, DVector<f64>, DVector<f64>) {
+    use tandem_dynamics::biped::{leo_plant, leo_true_overrides};
+    let p = leo_plant(RigidPlantConfig::default(), &leo_true_overrides())
+        .unwrap()
+        .with_friction(
+            "left_knee",
+            JointFriction {
+                viscous: 0.03,
+                coulomb: 0.02,
+                stiction_velocity: 0.05,
+            },
+        )
+        .unwrap();
+    let x = x_of(p.model());
+    let u = DVector::from_vec(vec![1.5, -2.0, 0.7, -1.0, 2.5, -0.4]);
+    (p, x, u)
+}
+
+#[test]
+fn biped_linearization_in_contact_matches_finite_differences() {
+    use tandem_dynamics::biped::standing_state;
+    let (p, x, u) = biped_case(|m| {
+        let mut x = standing_state(m);
+        let n = m.nv();
+        x[1] -= 0.001; // pressed 1.2 mm into the ground
+        for (i, q) in [
+            (3, 0.05),
+            (4, -0.08),
+            (5, 0.03),
+            (6, -0.04),
+            (7, 0.06),
+            (9, 0.2),
+        ] {
+            x[i] = q;
+        }
+        // Sliding forwards 3 cm/s, pitching slowly, limbs moving.
+        for (i, v) in [
+            (0, 0.03),
+            (2, 0.1),
+            (3, 0.2),
+            (4, -0.3),
+            (8, 0.25),
+            (9, 0.5),
+        ] {
+            x[n + i] = v;
+        }
+        x
+    });
+    let heights = p.contact_heights(x.as_slice());
+    assert!(
+        heights.iter().filter(|h| **h < 0.0).count() >= 3,
+        "feet in contact: {heights:?}"
+    );
+    // The stiff contact (k = 2e4 N/m on sub-kilogram links) makes the h = 1e-6 oracle's
+    // truncation error visible (1.4e-3 on ∂/∂boom_z, about 8e-6 relative); it shrinks as h²
+    // towards the analytical value, so the oracle here is h = 1e-7, and h = 1e-6 must be about
+    // 100 times further off (a plain FD bug would not converge).
+    let (a, b) = p.linearize(&x, &u);
+    let (fa6, _) = p.linearize_fd(&x, &u);
+    let (fa7, fb7) = jacobians_fd(&p, &x, &u, 1e-7);
+    let (ea, eb) = (rel_err(&fa7, &a), rel_err(&fb7, &b));
+    assert!(ea < 1e-6 && eb < 1e-6, "A err {ea:e}, B err {eb:e}");
+    let ea6 = rel_err(&fa6, &a);
+    assert!(ea < ea6 / 20.0, "h = 1e-7: {ea:e}, h = 1e-6: {ea6:e}");
+}
+
+#[test]
+fn biped_linearization_in_the_air_matches_finite_differences() {
+    use tandem_dynamics::biped::standing_state;
+    let (p, x, u) = biped_case(|m| {
+        let mut x = standing_state(m);
+        let n = m.nv();
+        x[1] += 0.3;
+        for (i, q) in [
+            (2, 0.2),
+            (3, 0.5),
+            (4, -0.9),
+            (5, 0.3),
+            (6, -0.4),
+            (7, 0.6),
+            (9, 1.0),
+        ] {
+            x[i] = q;
+        }
+        for i in 0..n {
+            x[n + i] = 0.3 * ((i as f64) - 4.5).sin();
+        }
+        x
+    });
+    assert!(p.contact_heights(x.as_slice()).iter().all(|h| *h > 0.05));
+    let (ea, eb) = check_linearization(&p, &x, &u);
+    assert!(ea < 1e-6 && eb < 1e-6, "A err {ea:e}, B err {eb:e}");
+}
+
+#[test]
+fn arm_linearization_matches_finite_differences_and_respects_clipping() {
+    let model = Model::from_urdf_file(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../tests/fixtures/pinocchio/arm7.urdf"
+    ))
+    .unwrap();
+    let motor = DcMotor {
+        torque_max: 5.0,
+        ..DcMotor::default()
+    };
+    let mut p = RigidBodyPlant::new(model, cfg()).unwrap();
+    for j in ["a1", "a2", "a3"] {
+        p = p
+            .with_actuator(j, Actuator::Torque { limit: 20.0 })
+            .unwrap();
+    }
+    p = p
+        .with_actuator("a4", Actuator::Motor(motor))
+        .unwrap()
+        .with_actuator(
+            "a5",
+            Actuator::Pd(tandem_dynamics::actuators::PdController {
+                kp: 30.0,
+                kd: 1.0,
+                target: 0.2,
+                torque_max: 50.0,
+            }),
+        )
+        .unwrap()
+        .with_friction(
+            "a6",
+            JointFriction {
+                viscous: 0.05,
+                coulomb: 0.1,
+                stiction_velocity: 0.5,
+            },
+        )
+        .unwrap();
+    let x = DVector::from_vec(vec![
+        0.3, -0.5, 1.1, -1.2, 0.4, 0.9, -2.0, 0.5, -1.0, 0.8, 0.3, -0.7, 0.6, -0.9,
+    ]);
+    let u = DVector::from_vec(vec![3.0, -8.0, 1.0, 4.0]);
+    let (ea, eb) = check_linearization(&p, &x, &u);
+    assert!(ea < 1e-6 && eb < 1e-6, "A err {ea:e}, B err {eb:e}");
+    // A torque beyond its limit has no effect at the margin: its column of B is zero.
+    let clipped = DVector::from_vec(vec![30.0, -8.0, 1.0, 4.0]);
+    let (_, b) = p.linearize(&x, &clipped);
+    assert_eq!(b.column(0).abs().max(), 0.0);
+    assert!(b.column(1).abs().max() > 1e-3);
+}
+
+/// A pendulum about the vertical (no gravity torque) with the range [-0.5, 0.5] rad.
+fn limited_pendulum() -> Model {
+    Model::from_urdf_str(
+        r#"<robot name="p"><link name="base"/>
+        <joint name="pivot" type="revolute"><parent link="base"/><child link="bob"/>
+          <axis xyz="0 0 1"/><limit lower="-0.5" upper="0.5" effort="5" velocity="10"/></joint>
+        <link name="bob"><inertial><origin xyz="0.3 0 0"/><mass value="0.5"/>
+          <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/></inertial></link>
+        </robot>"#,
+    )
+    .unwrap()
+}
+
+#[test]
+fn compliant_position_limit_bounces_the_joint_back_without_energy_gain() {
+    let x0 = DVector::from_vec(vec![0.3, 2.0]);
+    let none = DVector::zeros(0);
+    // Off by default: the joint sails through its range.
+    let free = RigidBodyPlant::new(limited_pendulum(), cfg()).unwrap();
+    let mut x = x0.clone();
+    for _ in 0..25 {
+        x = free.step(&x, &none);
+    }
+    assert!((x[0] - (0.3 + 2.0 * 0.5)).abs() < 1e-9, "free: {}", x[0]);
+    // Enabled: an undamped spring returns the joint with the same speed (elastic bounce) and
+    // total energy (kinetic + limit spring) is conserved; a damped one loses energy monotonically.
+    let spring = LimitSpring {
+        stiffness: 100.0,
+        damping: 0.0,
+    };
+    // 1 ms control period, so that the sampled peak is within 3e-4 of the true one.
+    let fine = RigidPlantConfig {
+        control_period: 1e-3,
+        internal_step: 1e-3,
+    };
+    let p = RigidBodyPlant::new(limited_pendulum(), fine)
+        .unwrap()
+        .with_position_limits(spring)
+        .unwrap();
+    let e0 = p.total_energy(x0.as_slice());
+    let (mut x, mut max_q) = (x0.clone(), f64::MIN);
+    for _ in 0..500 {
+        x = p.step(&x, &none);
+        max_q = max_q.max(x[0]);
+        let e = p.total_energy(x.as_slice());
+        // The spring force has a kink at the limit, where RK4 drops to low order: 1e-4, not
+        // the 1e-8 of smooth motion.
+        assert!((e - e0).abs() < 1e-4 * e0, "{e} vs {e0}");
+    }
+    // Overshoot: ½ I ω² = ½ k d² with I = 0.5 · 0.3² + 0.001.
+    let inertia = 0.5 * 0.09 + 0.001;
+    let d = 2.0 * (inertia / spring.stiffness).sqrt();
+    assert!(
+        (max_q - 0.5 - d).abs() < 0.01 * d,
+        "overshoot {} vs {d}",
+        max_q - 0.5
+    );
+    assert!(x[0] < 0.5 && (x[1] + 2.0).abs() < 2e-4, "bounced back: {x}");
+    let damped = RigidBodyPlant::new(limited_pendulum(), fine)
+        .unwrap()
+        .with_position_limits(LimitSpring::default())
+        .unwrap();
+    let mut x = x0.clone();
+    let mut last = damped.total_energy(x.as_slice());
+    for _ in 0..500 {
+        x = damped.step(&x, &none);
+        let e = damped.total_energy(x.as_slice());
+        assert!(e <= last + 1e-12);
+        last = e;
+    }
+    assert!(x[1] < 0.0 && x[1] > -2.0, "damped bounce: {x}");
+    // Linearization inside the limit spring (motor on the joint) agrees with finite differences.
+    let driven = RigidBodyPlant::new(limited_pendulum(), cfg())
+        .unwrap()
+        .with_actuator("pivot", Actuator::Torque { limit: 5.0 })
+        .unwrap()
+        .with_position_limits(LimitSpring::default())
+        .unwrap();
+    let xin = DVector::from_vec(vec![0.52, 0.3]);
+    let (ea, eb) = check_linearization(&driven, &xin, &DVector::from_vec(vec![0.5]));
+    assert!(ea < 1e-6 && eb < 1e-6, "A err {ea:e}, B err {eb:e}");
+    let bad = LimitSpring {
+        stiffness: -1.0,
+        damping: 0.0,
+    };
+    assert!(matches!(
+        RigidBodyPlant::new(limited_pendulum(), cfg())
+            .unwrap()
+            .with_position_limits(bad),
+        Err(RigidPlantError::Config(_))
+    ));
 }

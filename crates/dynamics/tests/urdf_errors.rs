@@ -181,6 +181,49 @@ fn zero_axis_is_rejected() {
 }
 
 #[test]
+fn revolute_or_prismatic_joint_without_limit_is_rejected_as_urdfdom_does() {
+    for ty in ["revolute", "prismatic"] {
+        let no_limit = format!(
+            r#"<joint name="elbow" type="{ty}"><parent link="base"/><child link="a"/><axis xyz="0 1 0"/></joint>"#
+        );
+        let e = err(&robot(&(link("a") + &no_limit)));
+        assert!(
+            matches!(e, UrdfError::MissingLimit { ref joint, ref joint_type } if joint == "elbow" && joint_type == ty),
+            "{e}"
+        );
+        assert!(e.to_string().contains("'elbow'"), "{e}");
+        // Self-closing joint element: no children at all.
+        let empty = format!(r#"<joint name="bare" type="{ty}"/>"#);
+        let e = err(&robot(&(link("a") + &empty)));
+        assert!(
+            matches!(e, UrdfError::MissingLimit { ref joint, .. } if joint == "bare"),
+            "{e}"
+        );
+    }
+    // Continuous joints need none and are unbounded; a <limit> elsewhere in the file does not
+    // count for a joint without one.
+    let cont = r#"<joint name="wheel" type="continuous"><parent link="base"/><child link="a"/><axis xyz="0 1 0"/></joint>"#;
+    let m = Model::from_urdf_str(&robot(&(link("a") + cont))).unwrap();
+    assert_eq!(
+        (m.joints[0].lower, m.joints[0].upper),
+        (f64::NEG_INFINITY, f64::INFINITY)
+    );
+    let no_limit = r#"<joint name="knee" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 1 0"/></joint>"#;
+    let body = link("a") + &link("b") + &joint("hip", "revolute", "base", "a", "") + no_limit;
+    let e = err(&robot(&body));
+    assert!(
+        matches!(e, UrdfError::MissingLimit { ref joint, .. } if joint == "knee"),
+        "{e}"
+    );
+    // With its <limit>, the range is the one written.
+    let m = Model::from_urdf_str(&robot(
+        &(link("a") + &joint("j", "prismatic", "base", "a", "")),
+    ))
+    .unwrap();
+    assert_eq!((m.joints[0].lower, m.joints[0].upper), (-1.0, 1.0));
+}
+
+#[test]
 fn missing_file_is_an_io_error() {
     let e = Model::from_urdf_file("/nonexistent/robot.urdf").unwrap_err();
     assert!(matches!(e, UrdfError::Io { .. }));

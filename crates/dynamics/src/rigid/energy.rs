@@ -6,6 +6,11 @@ use nalgebra::Vector3;
 
 /// Whole-body centre of mass and its velocity (world frame), in `data.com` and
 /// `data.com_velocity`. Massless models give zeros.
+///
+/// Only moving bodies count: mass rigidly attached to the world (the root link and links fixed
+/// to it, [`Model::world_mass`]) is left out, as Pinocchio's `centerOfMass` and
+/// `computeTotalMass` leave out the universe's inertia (their sums start at joint 1 with
+/// `data.mass[0] = 0`), so `com` matches Pinocchio's `data.com[0]`.
 pub fn center_of_mass(model: &Model, data: &mut Data, q: &[f64], v: &[f64]) {
     forward_kinematics_velocity(model, data, q, v);
     let mut mc = Vector3::zeros();
@@ -40,7 +45,8 @@ pub fn kinetic_energy(model: &Model, data: &mut Data, q: &[f64], v: &[f64]) -> f
         .sum()
 }
 
-/// Potential energy `Σ m_i (-g · c_i)` (zero at the world origin's height).
+/// Potential energy `Σ m_i (-g · c_i)` of the moving bodies (zero at the world origin's height;
+/// mass fixed to the world is a constant and left out, as in Pinocchio).
 pub fn potential_energy(model: &Model, data: &mut Data, q: &[f64]) -> f64 {
     super::kinematics::forward_kinematics(model, data, q);
     model

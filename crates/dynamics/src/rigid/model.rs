@@ -112,6 +112,15 @@ pub enum UrdfError {
         /// The axis as written.
         axis: [f64; 3],
     },
+    /// A revolute or prismatic joint without `<limit>`. urdfdom (and so ROS and Pinocchio)
+    /// rejects such a joint; urdf-rs would silently give it the range `[0, 0]` and zero effort.
+    #[error("joint '{joint}' is {joint_type} but has no <limit> (use type=\"continuous\" for an unbounded revolute joint)")]
+    MissingLimit {
+        /// The joint.
+        joint: String,
+        /// `"revolute"` or `"prismatic"`.
+        joint_type: String,
+    },
     /// A non-finite number in an origin or limit.
     #[error("joint '{joint}': non-finite {what}")]
     NonFinite {
@@ -242,13 +251,17 @@ pub struct Model {
     pub frames: Vec<Frame>,
     /// World-frame gravity (m/s²).
     pub gravity: Vector3<f64>,
-    /// Mass rigidly attached to the world (ignored by the dynamics).
+    /// Mass rigidly attached to the world: the root link and links fixed to it. Ignored by the
+    /// dynamics, and left out of [`Model::total_mass`], the centre of mass and the potential
+    /// energy, as Pinocchio leaves out its universe's inertia.
     pub world_mass: f64,
 }
 
 struct Scan {
     types: Vec<(String, String)>,
     inertial_missing: Vec<(String, &'static str)>,
+    /// Revolute/prismatic joints (name, type) without a `<limit>` child.
+    limit_missing: Vec<(String, String)>,
 }
 
 /// A light pass over the XML so that structural problems name their element (urdf-rs's serde
@@ -262,7 +275,11 @@ fn prescan(xml: &str) -> Result<Scan, UrdfError> {
     let mut scan = Scan {
         types: Vec::new(),
         inertial_missing: Vec::new(),
+        limit_missing: Vec::new(),
     };
+    // The open <joint>: (name, type, has <limit>).
+    let mut open_joint: Option<(String, String, bool)> = None;
+    let needs_limit = |ty: &str| ty == "revolute" || ty == "prismatic";
     let mut saw_robot = false;
     loop {
         let ev = reader.read_event().map_err(|e| {
@@ -295,7 +312,19 @@ fn prescan(xml: &str) -> Result<Scan, UrdfError> {
                 (Some("robot"), "joint") => {
                     let name = attr("name").unwrap_or_default();
                     let ty = attr("type").unwrap_or_default();
+                    if empty {
+                        if needs_limit(&ty) {
+                            scan.limit_missing.push((name.clone(), ty.clone()));
+                        }
+                    } else {
+                        open_joint = Some((name.clone(), ty.clone(), false));
+                    }
                     scan.types.push((name, ty));
+                }
+                (Some("joint"), "limit") => {
+                    if let Some(j) = open_joint.as_mut() {
+                        j.2 = true;
+                    }
                 }
                 (Some("robot"), "link") => link_name = attr("name").unwrap_or_default(),
                 (Some("link"), "inertial") => {
@@ -322,15 +351,25 @@ fn prescan(xml: &str) -> Result<Scan, UrdfError> {
             }
         }
         match ev {
-            Event::End(_) if stack.pop().as_deref() == Some("inertial") => {
-                if let Some((m, i)) = inertial_children.take() {
-                    if !m {
-                        scan.inertial_missing.push((link_name.clone(), "mass"));
-                    } else if !i {
-                        scan.inertial_missing.push((link_name.clone(), "inertia"));
+            Event::End(_) => match stack.pop().as_deref() {
+                Some("inertial") => {
+                    if let Some((m, i)) = inertial_children.take() {
+                        if !m {
+                            scan.inertial_missing.push((link_name.clone(), "mass"));
+                        } else if !i {
+                            scan.inertial_missing.push((link_name.clone(), "inertia"));
+                        }
                     }
                 }
-            }
+                Some("joint") if stack.last().map(String::as_str) == Some("robot") => {
+                    if let Some((name, ty, false)) = open_joint.take() {
+                        if needs_limit(&ty) {
+                            scan.limit_missing.push((name, ty));
+                        }
+                    }
+                }
+                _ => {}
+            },
             Event::Eof => break,
             _ => {}
         }
@@ -402,6 +441,11 @@ impl Model {
     }
 
     /// Parses URDF text.
+    ///
+    /// Joint limits follow urdfdom (the parser behind ROS and Pinocchio): a `revolute` or
+    /// `prismatic` joint must have a `<limit>` ([`UrdfError::MissingLimit`] names it otherwise);
+    /// `continuous` joints are unbounded; a `<limit>` without `effort`/`velocity` (or with 0)
+    /// leaves that limit infinite.
     pub fn from_urdf_str(xml: &str) -> Result<Model, UrdfError> {
         const KNOWN: [&str; 7] = [
             "revolute",
@@ -421,6 +465,12 @@ impl Model {
                 });
             }
         }
+        if let Some((joint, ty)) = scan.limit_missing.first() {
+            return Err(UrdfError::MissingLimit {
+                joint: joint.clone(),
+                joint_type: ty.clone(),
+            });
+        }
         if let Some((link, missing)) = scan.inertial_missing.first() {
             return Err(UrdfError::MissingInertia {
                 link: link.clone(),
@@ -433,6 +483,10 @@ impl Model {
     }
 
     /// Builds the model from a parsed urdf-rs robot.
+    ///
+    /// urdf-rs fills a missing `<limit>` with zeros, which cannot be told from a written one
+    /// here: a revolute/prismatic joint without `<limit>` gets the range `[0, 0]`. Parse with
+    /// [`Model::from_urdf_str`] to have it rejected.
     pub fn from_robot(robot: &urdf_rs::Robot) -> Result<Model, UrdfError> {
         if robot.links.is_empty() {
             return Err(UrdfError::Malformed(format!(
@@ -588,7 +642,8 @@ impl Model {
         self.joints.iter().map(|j| j.name.clone()).collect()
     }
 
-    /// Total mass of the moving bodies.
+    /// Total mass of the moving bodies (Pinocchio's `computeTotalMass`: without
+    /// [`Model::world_mass`]).
     pub fn total_mass(&self) -> f64 {
         self.joints.iter().map(|j| j.inertia.mass).sum()
     }
