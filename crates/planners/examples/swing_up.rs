@@ -22,7 +22,7 @@ use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 use tandem_models::PlantModel;
 use tandem_planners::{
     Bounds, Cem, CemConfig, DmdMpc, DmdMpcConfig, Ilqr, IlqrConfig, Mppi, MppiConfig, Noise,
-    Objective, Planner, Utility,
+    Objective, Planner, Temperature, Utility,
 };
 
 fn wrap(phi: f64) -> f64 {
@@ -42,13 +42,12 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
         .unwrap_or(default)
 }
 
-fn planner(name: &str) -> Box<dyn Planner> {
+fn planner(name: &str, seed: u64) -> Box<dyn Planner> {
     let bounds = Some(Bounds::symmetric(1, 3.0));
     let horizon = env_or("H", if name == "ilqr" { 40 } else { 30 });
     let n = env_or("N", 100);
     let iterations = env_or("ITERS", 3);
     let std = env_or("STD", 1.5);
-    let seed = env_or("SEED", 0);
     match name {
         "cem" => Box::new(
             Cem::new(CemConfig {
@@ -68,8 +67,13 @@ fn planner(name: &str) -> Box<dyn Planner> {
         "mppi" => Box::new(
             Mppi::new(MppiConfig {
                 horizon,
-                samples: n,
-                lambda: env_or("LAMBDA", 1.0),
+                samples: env_or("N", 200),
+                lambda: env_or("LAMBDA", 0.05),
+                temperature: match std::env::var("TEMP").as_deref() {
+                    Ok("fixed") => Temperature::Fixed,
+                    Ok("ess") => Temperature::EffectiveSamples,
+                    _ => Temperature::Spread,
+                },
                 noise: Noise::Isotropic(std),
                 iterations,
                 correlation: env_or("BETA", 0.8),
@@ -126,40 +130,58 @@ fn main() {
     let smooth = Objective::new(2, 1, |x, u| {
         10.0 * (1.0 - x[0].cos()) + 0.1 * x[1] * x[1] + 0.01 * u[0] * u[0]
     });
+    // `SEEDS=n` runs seeds 0..n (each planner and seed its own episode); else the one `SEED`.
+    let seeds: Vec<u64> = match std::env::var("SEEDS").ok().and_then(|v| v.parse().ok()) {
+        Some(n) => (0..n).collect(),
+        None => vec![env_or("SEED", 0)],
+    };
     for name in names {
-        let mut p = planner(&name);
-        let objective = if name == "ilqr" { &smooth } else { &objective };
-        if std::env::var("ONESHOT").is_ok() {
-            let plan = p.plan(&[PI, 0.0], &model, objective).expect("plan");
-            println!(
-                "{name}: open-loop plan cost from (pi, 0): {:.1}",
-                plan.total_cost
-            );
-            continue;
+        for &seed in &seeds {
+            episode(&name, seed, &plant, &model, &objective, &smooth);
         }
-        let mut x = [PI, 0.0];
-        let (mut ret, mut worst_late) = (0.0, 0.0f64);
-        let start = Instant::now();
-        for t in 0..400 {
-            let u = p.plan(&x, &model, objective).expect("plan").first_action();
-            assert!(u[0].abs() <= 3.0);
-            ret += reward(&x, &u);
-            x = plant.step_array(&x, u[0]);
-            if std::env::var("TRACE").is_ok() && t % 5 == 0 {
-                println!(
-                    "  t {t:3} phi {:7.3} phidot {:7.2} u {:6.2}",
-                    wrap(x[0]),
-                    x[1],
-                    u[0]
-                );
-            }
-            if t >= 300 {
-                worst_late = worst_late.max(wrap(x[0]).abs());
-            }
-        }
-        println!(
-            "{name}: return {ret:.1}, max |phi| over the last 100 steps {worst_late:.4}, {:.2} s",
-            start.elapsed().as_secs_f64()
-        );
     }
+}
+
+fn episode(
+    name: &str,
+    seed: u64,
+    plant: &DcMotorPendulum,
+    model: &PlantModel<DcMotorPendulum>,
+    objective: &Objective,
+    smooth: &Objective,
+) {
+    let mut p = planner(name, seed);
+    let objective = if name == "ilqr" { smooth } else { objective };
+    if std::env::var("ONESHOT").is_ok() {
+        let plan = p.plan(&[PI, 0.0], model, objective).expect("plan");
+        println!(
+            "{name} seed {seed}: open-loop plan cost from (pi, 0): {:.1}",
+            plan.total_cost
+        );
+        return;
+    }
+    let mut x = [PI, 0.0];
+    let (mut ret, mut worst_late) = (0.0, 0.0f64);
+    let start = Instant::now();
+    for t in 0..400 {
+        let u = p.plan(&x, model, objective).expect("plan").first_action();
+        assert!(u[0].abs() <= 3.0);
+        ret += reward(&x, &u);
+        x = plant.step_array(&x, u[0]);
+        if std::env::var("TRACE").is_ok() && t % 5 == 0 {
+            println!(
+                "  t {t:3} phi {:7.3} phidot {:7.2} u {:6.2}",
+                wrap(x[0]),
+                x[1],
+                u[0]
+            );
+        }
+        if t >= 300 {
+            worst_late = worst_late.max(wrap(x[0]).abs());
+        }
+    }
+    println!(
+        "{name} seed {seed}: return {ret:.1}, max |phi| over the last 100 steps {worst_late:.4}, {:.2} s",
+        start.elapsed().as_secs_f64()
+    );
 }
