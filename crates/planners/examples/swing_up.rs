@@ -6,14 +6,28 @@
 //! prints each planner's episode return (p0: about −660 for its best learned policy; the issue
 //! asks for ≥ −800), the largest |φ| over the last 100 steps, and the wall time.
 //!
-//! Defaults: horizon 30 (iLQR 40), 100 samples, 3 iterations, noise std 1.5 with AR(1)
-//! correlation 0.8 between steps (white noise does not find the swing-up with these budgets).
-//! Override with the environment: `H`, `N`, `ITERS`, `STD`, `BETA`, `LAMBDA`, `ALPHA`, `ELITE`,
-//! `SEED`, `MAXIT`; `TRACE=1` prints the trajectory, `ONESHOT=1` one open-loop plan's cost.
+//! Defaults: horizon 30 (iLQR 40), 100 samples (MPPI 200), 3 iterations, noise std 1.5 with
+//! AR(1) correlation 0.8 between steps (white noise does not find the swing-up with these
+//! budgets). MPPI uses the spread-normalized temperature `λ (max S − min S)` with `λ = 0.05`
+//! (PI²'s cost normalization, `h = 20`). Override with the environment: `H`, `N`, `ITERS`, `STD`,
+//! `BETA`, `LAMBDA`, `TEMP` (`fixed`, `spread`, `ess`), `ALPHA`, `ELITE`, `SEED` or `SEEDS=n`
+//! (seeds 0..n), `MAXIT`; `TRACE=1` prints the trajectory, `ONESHOT=1` one open-loop plan's cost.
 //!
-//! Measured (2 shared cores, seed 0 unless noted): iLQR −606 (|φ| < 1e-4 over the last 100
-//! steps, 0.9 s); CEM −761 (seeds 1, 2: −872, −1030); DMD-MPC −747 (seeds 1, 2: −1173, −736);
-//! MPPI fails to balance (best −2455 with λ = 20, 5 iterations, 200 samples).
+//! Measured (`SEEDS=3 … cem mppi dmd ilqr`, 2 shared cores at load 9–12; seeds 0, 1, 2; wall time
+//! per 400-step episode): iLQR −606, −603, −600 (|φ| < 1e-4 over the last 100 steps, ~1 s);
+//! CEM −761, −872, −1030 (14–25 s); MPPI −1107, −738, −693 (37–50 s); DMD-MPC −747, −1173, −736
+//! (11–13 s).
+//!
+//! Why MPPI failed with a fixed temperature (best −2455 before): the sampled cost spread is
+//! hundreds while swinging and below one while balancing, so no single `λ` fits. Raw `λ = 1` is
+//! greedy (one sample carries the update): it swings up, but the noisy first action cannot
+//! balance. Hotter, it averages mirror-image swing-ups (left first / right first) from the
+//! symmetric start into nothing and never leaves the bottom (−13 000 with `λ = 0.1 × spread`, or
+//! with `σ = 3` where clamped ±3 V samples cancel). Normalizing by the spread fixes both phases;
+//! the remaining misses are a local optimum the 1.5 s horizon cannot see past: arriving short of
+//! the top, the pendulum is held at |φ| ≈ 0.5 rad with saturated voltage (3 V gives 45% of the
+//! gravity torque) before falling back for another swing. Longer horizons (45) and single-update
+//! MPPI (300 samples, 1 iteration) were worse; 200 samples helped.
 
 use std::f64::consts::PI;
 use std::time::Instant;
