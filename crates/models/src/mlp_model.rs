@@ -11,7 +11,8 @@ use crate::model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
 use crate::train::{
-    nn_other, standardized_inputs, train_network, Objective, Opt, OptimizerConfig, Standardizer,
+    nn_other, standardized_inputs, standardized_inputs_into, train_network, Objective, Opt,
+    OptimizerConfig, PredictScratch, Standardizer,
 };
 
 /// Settings of an [`MlpModel`]. `Default` = p2 (Sec. 3.1): two hidden layers of 256 units, SGD
@@ -89,6 +90,8 @@ pub struct MlpModel {
     in_action: Standardizer,
     /// Standardizes `[Δs, r]`.
     out_norm: Standardizer,
+    /// `predict`'s reused input and workspace buffers.
+    scratch: PredictScratch,
 }
 
 impl MlpModel {
@@ -123,6 +126,7 @@ impl MlpModel {
             in_state: Standardizer::identity(state_dim),
             in_action: Standardizer::identity(action_dim),
             out_norm: Standardizer::identity(state_dim + 1),
+            scratch: PredictScratch::default(),
             cfg,
         })
     }
@@ -193,26 +197,24 @@ impl Objective for MlpObjective {
     }
 }
 
-impl DynamicsModel for MlpModel {
-    fn state_dim(&self) -> usize {
-        self.state_dim
-    }
-
-    fn action_dim(&self) -> usize {
-        self.action_dim
-    }
-
-    fn predict(&self, input: &ModelInput<'_>, _rng: &mut Rng) -> Result<Prediction, ModelError> {
-        let b = check_input(input, self.state_dim, self.action_dim, false)?;
-        let x = standardized_inputs(
+impl MlpModel {
+    /// `predict` on given buffers: standardized inputs into `x`, the forward pass in `ws`.
+    fn predict_with(
+        &self,
+        input: &ModelInput<'_>,
+        b: usize,
+        x: &mut Vec<f32>,
+        ws: &mut tandem_nn::MlpWorkspace,
+    ) -> Result<Prediction, ModelError> {
+        standardized_inputs_into(
             &[
                 (input.states, &self.in_state),
                 (input.actions, &self.in_action),
             ],
             b,
+            x,
         );
-        let mut ws = self.net.workspace();
-        let out = self.net.forward(&x, b, &mut ws).map_err(nn_other)?;
+        let out = self.net.forward(x, b, ws).map_err(nn_other)?;
         let s = self.state_dim;
         let dout = self.net.output_dim();
         let mut next = Array2::zeros((b, s));
@@ -236,6 +238,22 @@ impl DynamicsModel for MlpModel {
             rewards,
             terminal_prob: probs,
         })
+    }
+}
+
+impl DynamicsModel for MlpModel {
+    fn state_dim(&self) -> usize {
+        self.state_dim
+    }
+
+    fn action_dim(&self) -> usize {
+        self.action_dim
+    }
+
+    fn predict(&self, input: &ModelInput<'_>, _rng: &mut Rng) -> Result<Prediction, ModelError> {
+        let b = check_input(input, self.state_dim, self.action_dim, false)?;
+        self.scratch
+            .with(|x, ws| self.predict_with(input, b, x, ws))
     }
 
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {

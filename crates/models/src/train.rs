@@ -279,8 +279,20 @@ pub(crate) fn standardized_inputs(
     parts: &[(ArrayView2<'_, f64>, &Standardizer)],
     rows: usize,
 ) -> Vec<f32> {
+    let mut x = Vec::new();
+    standardized_inputs_into(parts, rows, &mut x);
+    x
+}
+
+/// [`standardized_inputs`] into a reused buffer (no allocation once it has held this many rows).
+pub(crate) fn standardized_inputs_into(
+    parts: &[(ArrayView2<'_, f64>, &Standardizer)],
+    rows: usize,
+    x: &mut Vec<f32>,
+) {
     let din: usize = parts.iter().map(|(_, s)| s.dim()).sum();
-    let mut x = vec![0.0f32; rows * din];
+    x.clear();
+    x.resize(rows * din, 0.0);
     for (r, out) in x.chunks_exact_mut(din.max(1)).enumerate().take(rows) {
         let mut off = 0;
         for (a, s) in parts {
@@ -289,5 +301,33 @@ pub(crate) fn standardized_inputs(
             off += d;
         }
     }
-    x
+}
+
+/// Reusable buffers of a model's `predict` (standardized inputs and the network workspace), so
+/// that repeated predictions of one batch size (a planner's rollouts) allocate only their result.
+/// Behind a mutex so the model stays `Sync`; a contended lock falls back to fresh buffers. Cloning
+/// gives fresh, empty buffers.
+#[derive(Debug, Default)]
+pub(crate) struct PredictScratch(std::sync::Mutex<(Vec<f32>, tandem_nn::MlpWorkspace)>);
+
+impl Clone for PredictScratch {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl PredictScratch {
+    /// Runs `f` on the buffers (or on fresh ones when another thread holds them).
+    pub(crate) fn with<R>(
+        &self,
+        f: impl FnOnce(&mut Vec<f32>, &mut tandem_nn::MlpWorkspace) -> R,
+    ) -> R {
+        match self.0.try_lock() {
+            Ok(mut g) => {
+                let (x, ws) = &mut *g;
+                f(x, ws)
+            }
+            Err(_) => f(&mut Vec::new(), &mut tandem_nn::MlpWorkspace::default()),
+        }
+    }
 }

@@ -40,11 +40,11 @@ pub use error::{PlanError, Result};
 pub use ilqr::{backward_pass, BackwardPass, Ilqr, IlqrConfig, IlqrSolution};
 pub use lqr_flm::{LqrFlm, LqrFlmConfig, LqrFlmStep};
 pub use mpc::{Bounds, Noise, Plan, Planner};
-pub use mppi::{Mppi, MppiConfig};
+pub use mppi::{Mppi, MppiConfig, Temperature};
 pub use objective::{
     CostFn, Objective, QuadCost, QuadTerminal, RunningDerivFn, TerminalDerivFn, TerminalFn, ValueFn,
 };
-pub use pi2::{pi2_update, pi2_weights, Pi2Config, Pi2Step};
+pub use pi2::{pi2_update, pi2_update_with_temperatures, pi2_weights, Pi2Config, Pi2Step};
 pub use pilqr::{model_cost_to_go, reparametrize, Pilqr, PilqrConfig, PilqrStep};
 pub use tvlg::{
     expected_cost, forward_moments, policy_kl, quadratize_cost, sample_trajectories, QuadraticCost,

@@ -96,11 +96,25 @@ impl LqrFlm {
         cost: &[QuadraticCost],
         kl_step: Option<f64>,
     ) -> Result<LqrFlmStep> {
+        let eps = kl_step.unwrap_or(self.cfg.kl_step);
+        self.update_per_step(prev, dynamics, cost, &vec![eps; prev.horizon()])
+    }
+
+    /// One update with its own KL bound `ε_t` at every step (PILQR's per-step step adjustment).
+    pub fn update_per_step(
+        &self,
+        prev: &TvlgController,
+        dynamics: &TvlgDynamics,
+        cost: &[QuadraticCost],
+        kl_steps: &[f64],
+    ) -> Result<LqrFlmStep> {
         let t_len = prev.horizon();
         check_len("fitted dynamics horizon", t_len, dynamics.horizon())?;
         check_len("cost terms (T running + terminal)", t_len + 1, cost.len())?;
-        let eps = kl_step.unwrap_or(self.cfg.kl_step);
-        positive("kl_step", eps)?;
+        check_len("per-step KL bounds", t_len, kl_steps.len())?;
+        for &e in kl_steps {
+            positive("kl_step", e)?;
+        }
         let cfg = &self.cfg;
         let mut etas = vec![cfg.eta_init; t_len];
         let mut lo = vec![cfg.min_eta; t_len];
@@ -119,6 +133,7 @@ impl LqrFlm {
                 .collect();
             let mut done = true;
             for t in 0..t_len {
+                let eps = kl_steps[t];
                 let con = kl[t] - eps;
                 let at_floor = etas[t] <= cfg.min_eta * 1.000001;
                 if con.abs() <= cfg.tolerance * eps || (con < 0.0 && at_floor) {

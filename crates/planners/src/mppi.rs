@@ -3,11 +3,12 @@
 //!
 //! Each call: warm start from the previous mean shifted by one step; sample perturbations
 //! `ε ~ N(0, Σ)` per step, clamp `μ + ε` into the bounds (the perturbation used in the update is
-//! the clamped one), roll out, weight each sample by `exp(−(S_i − min S)/λ)`, and move the mean
-//! by the weighted perturbation. Sample 0 is the unperturbed mean. With `control_cost` the
+//! the clamped one), roll out, weight each sample by `exp(−(S_i − min S)/λ_eff)`, and move the
+//! mean by the weighted perturbation. `λ_eff` is `λ` itself (Williams et al.) or, with
+//! [`Temperature::Spread`] / [`Temperature::EffectiveSamples`], scaled to the sampled costs. Sample 0 is the unperturbed mean. With `control_cost` the
 //! sample cost gains Williams et al.'s importance-sampling term `λ Σ_h μ_hᵀ Σ⁻¹ ε_h`.
 
-use ndarray::{s, Array2, Array3};
+use ndarray::{s, Array1, Array2, Array3};
 use tandem_core::{seeding::rng_from_seed, Rng};
 use tandem_models::DynamicsModel;
 
@@ -27,8 +28,10 @@ pub struct MppiConfig {
     pub horizon: usize,
     /// Sampled sequences `N` per update.
     pub samples: usize,
-    /// Temperature `λ > 0`.
+    /// Temperature `λ > 0`; how it scales with the costs is set by `temperature`.
     pub lambda: f64,
+    /// How `λ` enters the weights `exp(−(S_i − min S)/λ_eff)`.
+    pub temperature: Temperature,
     /// Perturbation covariance `Σ`.
     pub noise: Noise,
     /// Correlation `β ∈ [0, 1)` of the sampling noise between consecutive steps (AR(1); 0 is
@@ -50,12 +53,80 @@ impl Default for MppiConfig {
             horizon: 30,
             samples: 500,
             lambda: 1.0,
+            temperature: Temperature::Fixed,
             noise: Noise::Isotropic(1.0),
             iterations: 1,
             control_cost: false,
             correlation: 0.0,
             bounds: None,
             seed: 0,
+        }
+    }
+}
+
+/// How MPPI's temperature relates to the sampled costs.
+///
+/// With `Fixed`, `λ` is in units of the cost, so one value cannot serve a task whose cost spread
+/// across samples changes by orders of magnitude between phases (a swing-up: spreads of hundreds
+/// while swinging, below one while balancing): too hot and the mean does not move (or averages
+/// mirror-image solutions to nothing), too cold and one noisy sample is followed. The other rules
+/// make the weights invariant to the cost scale.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "snake_case")]
+pub enum Temperature {
+    /// `λ_eff = λ` (Williams et al. 2017).
+    Fixed,
+    /// `λ_eff = λ (max S − min S)`: the cost normalization of PI² (Theodorou et al. 2010, weights
+    /// `exp(−h (S − min S)/(max S − min S))` with `h = 1/λ`; they use `h = 10`).
+    Spread,
+    /// `λ_eff` chosen at every update (bisection in log space) so that the effective sample size
+    /// `(Σ w)² / Σ w²` is `λ N` (`λ ∈ (0, 1]`): a constant share of the samples carries the update,
+    /// the adaptive-temperature rule of sequential Monte Carlo / PI²-type KL bounds.
+    EffectiveSamples,
+}
+
+impl Temperature {
+    fn validate(&self, lambda: f64) -> Result<()> {
+        match self {
+            Temperature::EffectiveSamples if lambda > 1.0 => Err(crate::PlanError::Config(
+                format!("lambda is an effective-sample fraction in (0, 1], got {lambda}"),
+            )),
+            _ => Ok(()),
+        }
+    }
+
+    /// `λ_eff` for these costs.
+    pub fn resolve(&self, lambda: f64, costs: &Array1<f64>) -> f64 {
+        let lo = costs.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = costs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let spread = hi - lo;
+        match self {
+            Temperature::Fixed => lambda,
+            _ if spread <= 0.0 => lambda,
+            Temperature::Spread => lambda * spread,
+            Temperature::EffectiveSamples => {
+                let target = lambda * costs.len() as f64;
+                let ess = |l: f64| {
+                    let (mut s1, mut s2) = (0.0, 0.0);
+                    for c in costs {
+                        let w = (-(c - lo) / l).exp();
+                        s1 += w;
+                        s2 += w * w;
+                    }
+                    s1 * s1 / s2
+                };
+                // ESS grows with λ_eff from 1 (one sample) towards N (uniform).
+                let (mut a, mut b) = ((spread * 1e-6).ln(), (spread * 1e6).ln());
+                for _ in 0..60 {
+                    let mid = 0.5 * (a + b);
+                    if ess(mid.exp()) < target {
+                        a = mid;
+                    } else {
+                        b = mid;
+                    }
+                }
+                b.exp()
+            }
         }
     }
 }
@@ -76,6 +147,7 @@ impl Mppi {
         nonzero("iterations", cfg.iterations)?;
         crate::mpc::correlation(cfg.correlation)?;
         positive("lambda", cfg.lambda)?;
+        cfg.temperature.validate(cfg.lambda)?;
         let rng = rng_from_seed(cfg.seed);
         Ok(Self {
             cfg,
@@ -163,8 +235,9 @@ impl Planner for Mppi {
                     costs[i] += lam * cc;
                 }
             }
+            let lam_eff = self.cfg.temperature.resolve(lam, &costs);
             let beta = costs.iter().copied().fold(f64::INFINITY, f64::min);
-            let w = costs.mapv(|c| (-(c - beta) / lam).exp());
+            let w = costs.mapv(|c| (-(c - beta) / lam_eff).exp());
             let wsum = w.sum();
             let mut new_mean = mean.clone();
             for t in 0..h {
@@ -187,5 +260,39 @@ impl Planner for Mppi {
     fn reset(&mut self) {
         self.mean = None;
         self.rng = rng_from_seed(self.cfg.seed);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ess(costs: &Array1<f64>, l: f64) -> f64 {
+        let lo = costs.iter().copied().fold(f64::INFINITY, f64::min);
+        let w = costs.mapv(|c| (-(c - lo) / l).exp());
+        w.sum().powi(2) / w.mapv(|v| v * v).sum()
+    }
+
+    #[test]
+    fn temperature_rules() {
+        let costs = Array1::from_iter((0..100).map(|i| ((i * 37) % 101) as f64 * 0.5));
+        assert_eq!(Temperature::Fixed.resolve(2.0, &costs), 2.0);
+        // Spread: the weights do not change when the costs are scaled and shifted.
+        let scaled = costs.mapv(|c| 1000.0 * c + 7.0);
+        let (a, b) = (
+            Temperature::Spread.resolve(0.05, &costs),
+            Temperature::Spread.resolve(0.05, &scaled),
+        );
+        assert!((b / a - 1000.0).abs() < 1e-9);
+        assert!((a - 0.05 * 50.0).abs() < 1e-12);
+        // Effective samples: the bisection meets the target share, at any cost scale.
+        for c in [&costs, &scaled] {
+            let l = Temperature::EffectiveSamples.resolve(0.1, c);
+            assert!((ess(c, l) - 10.0).abs() < 1e-6, "{}", ess(c, l));
+        }
+        // Equal costs: nothing to scale, λ is returned as is.
+        let flat = Array1::from_elem(5, 3.0);
+        assert_eq!(Temperature::EffectiveSamples.resolve(0.1, &flat), 0.1);
+        assert!(Temperature::EffectiveSamples.validate(1.5).is_err());
     }
 }

@@ -85,6 +85,23 @@ pub fn pi2_weights(s: &[f64], eps: f64) -> (Vec<f64>, f64) {
     (weights(eta), eta)
 }
 
+/// Weights `softmax(−(S − min S)/η)` at a given temperature `η` (`+∞`: uniform).
+fn weights_at(s: &[f64], eta: f64) -> Vec<f64> {
+    let smin = s.iter().copied().fold(f64::INFINITY, f64::min);
+    let w: Vec<f64> = s
+        .iter()
+        .map(|v| {
+            if eta.is_finite() {
+                (-(v - smin) / eta).exp()
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let z: f64 = w.iter().sum();
+    w.into_iter().map(|v| v / z).collect()
+}
+
 /// One PI² update of `prev` from samples: `states` `N x (T+1) x S` (or `N x T x S`), `actions`
 /// `N x T x A` (the controls to reweigh: the sampled ones, or in PILQR their reparametrized
 /// versions), `cost_to_go` `N x T`.
@@ -94,6 +111,21 @@ pub fn pi2_update(
     actions: &Array3<f64>,
     cost_to_go: &Array2<f64>,
     cfg: &Pi2Config,
+) -> Result<Pi2Step> {
+    pi2_update_with_temperatures(prev, states, actions, cost_to_go, cfg, None)
+}
+
+/// [`pi2_update`] with the temperatures `η_t` given instead of found from the KL bound (`None`:
+/// from the bound). PILQR finds `η_t` on the full cost-to-go and then reweighs by the residual
+/// cost-to-go at those temperatures (the authors' GPS code, `traj_opt_pilqr.py`: `fixed_eta`),
+/// so that residuals that are small next to the full cost spread move the controller little.
+pub fn pi2_update_with_temperatures(
+    prev: &TvlgController,
+    states: &Array3<f64>,
+    actions: &Array3<f64>,
+    cost_to_go: &Array2<f64>,
+    cfg: &Pi2Config,
+    temperatures: Option<&[f64]>,
 ) -> Result<Pi2Step> {
     positive("kl_step", cfg.kl_step)?;
     let (n_s, t_len, m) = actions.dim();
@@ -107,6 +139,14 @@ pub fn pi2_update(
     if cost_to_go.iter().any(|v| !v.is_finite()) {
         return Err(crate::PlanError::NonFinite("PI2 cost-to-go".into()));
     }
+    if let Some(etas) = temperatures {
+        check_len("PI2 temperatures", t_len, etas.len())?;
+        if let Some(e) = etas.iter().find(|e| e.is_nan() || **e <= 0.0) {
+            return Err(crate::PlanError::Config(format!(
+                "PI2 temperatures must be positive (+inf: uniform weights), got {e}"
+            )));
+        }
+    }
     let mut gains = Vec::with_capacity(t_len);
     let mut offsets = Vec::with_capacity(t_len);
     let mut covs = Vec::with_capacity(t_len);
@@ -114,7 +154,11 @@ pub fn pi2_update(
     let mut wmat = Array2::zeros((n_s, t_len));
     let d = n + 1;
     for t in 0..t_len {
-        let (w, eta) = pi2_weights(&cost_to_go.column(t).to_vec(), cfg.kl_step);
+        let column = cost_to_go.column(t).to_vec();
+        let (w, eta) = match temperatures {
+            Some(etas) => (weights_at(&column, etas[t]), etas[t]),
+            None => pi2_weights(&column, cfg.kl_step),
+        };
         etas.push(eta);
         // Weighted least squares of u on [x; 1] (or on 1 with K fixed), ridge towards prev.
         let mut theta_prev = DMatrix::zeros(d, m);

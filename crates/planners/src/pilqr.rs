@@ -6,33 +6,48 @@
 //! 1. quadratic cost `ĉ` around the samples' mean; the model cost-to-go `Ŝ_{i,t}`: run the old
 //!    controller with each sample's stored noise `ξ_{i,j}` from `(x_{i,t}, u_{i,t})` under the
 //!    fitted TVLG dynamics and sum `ĉ` (§III-C); the residual `S̃ = S − Ŝ`;
-//! 2. step adjustment: `ρ = mean_t std_i(S̃_{i,t}) / std_i(S_{i,t})` is the share of the
-//!    cost-to-go differences the model does not explain; the LQR-FLM step is
-//!    `ε_LQR = ε · max(min_lqr_fraction, 1 − ρ)`, so PILQR shifts towards PI² as the model
-//!    degrades. (p4 describes the behaviour, not the formula; this rule is ours.)
-//! 3. `p̂ = LQR-FLM(p̄, ε_LQR)`; reparametrized controls `û_{i,t} = K̂_t x_{i,t} + k̂_t + chol(Σ̂_t) ξ_{i,t}`;
-//! 4. `p = PI²(p̂)` on `(x, û)` weighted by the residuals `S̃`.
+//! 2. step adjustment (p4 §V: "shift towards model-free updates from the PI² method as the TVLG
+//!    approximation of the dynamics became less accurate"; the rule is the authors' GPS code,
+//!    `algorithm_traj_opt_pilqr.py`, `step_rule = 'res_percent'`): at each step the residual ratio
+//!    `r_t = mean_i |S̃_{i,t}| / mean_i |S_{i,t}|`; a per-step multiplier `m_t` is halved where
+//!    `r_t > 0.2`, doubled where `r_t < 0.05`, kept in `[0.01, 10]`, and carried from update to
+//!    update (not adjusted on the first); the LQR-FLM bound at step `t` is `ε_t = ε m_t`;
+//! 3. `p̂ = LQR-FLM(p̄, ε_t)`; reparametrized controls `û_{i,t} = K̂_t x_{i,t} + k̂_t + chol(Σ̂_t) ξ_{i,t}`;
+//! 4. `p = PI²(p̂)` on `(x, û)` weighted by the residuals `S̃`, at the temperatures `η_t` that the
+//!    PI² KL bound gives on the full cost-to-go `S` (the authors' code: `fixed_eta`). Residuals
+//!    that are small next to the spread of `S` then move the controller little, while a poor
+//!    model (large residuals) hands the step over to PI².
 
 use ndarray::{Array2, Array3};
 use tandem_models::TvlgDynamics;
 
-use crate::error::Result;
+use crate::error::{PlanError, Result};
 use crate::lqr_flm::{LqrFlm, LqrFlmConfig, LqrFlmStep};
 use crate::objective::Objective;
-use crate::pi2::{pi2_update, Pi2Config, Pi2Step};
+use crate::pi2::{pi2_update_with_temperatures, pi2_weights, Pi2Config, Pi2Step};
 use crate::tvlg::{quadratize_cost, QuadraticCost, TrajectorySamples, TvlgController};
 use nalgebra::DVector;
 
-/// Settings of [`Pilqr`].
+/// Settings of [`Pilqr`]. The step-adjustment defaults are the authors' (GPS `ALG_PILQR`:
+/// `step_rule_res_ratio_dec = 0.2`, `step_rule_res_ratio_inc = 0.05`, step multipliers in
+/// `[0.01, 10]`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PilqrConfig {
-    /// The LQR-FLM stage (its `kl_step` is the full step `ε`).
+    /// The LQR-FLM stage (its `kl_step` is the base bound `ε` that the multipliers scale).
     pub lqr: LqrFlmConfig,
-    /// The PI² stage on the residuals.
+    /// The PI² stage on the residuals (its `kl_step` sets the temperatures on the full cost).
     pub pi2: Pi2Config,
-    /// Smallest share of `ε` the LQR-FLM stage keeps.
-    pub min_lqr_fraction: f64,
+    /// Whether to adjust the per-step multipliers (`false`: `ε_t = ε` always, GPS's `'const'`).
+    pub adjust_step: bool,
+    /// Residual ratio above which a step's multiplier is halved.
+    pub res_ratio_dec: f64,
+    /// Residual ratio below which a step's multiplier is doubled.
+    pub res_ratio_inc: f64,
+    /// Smallest multiplier.
+    pub min_step_mult: f64,
+    /// Largest multiplier.
+    pub max_step_mult: f64,
 }
 
 impl Default for PilqrConfig {
@@ -40,7 +55,11 @@ impl Default for PilqrConfig {
         Self {
             lqr: LqrFlmConfig::default(),
             pi2: Pi2Config::default(),
-            min_lqr_fraction: 0.1,
+            adjust_step: true,
+            res_ratio_dec: 0.2,
+            res_ratio_inc: 0.05,
+            min_step_mult: 0.01,
+            max_step_mult: 10.0,
         }
     }
 }
@@ -50,34 +69,64 @@ impl Default for PilqrConfig {
 pub struct PilqrStep {
     /// The new controller.
     pub controller: TvlgController,
-    /// `ρ`, the unexplained share of the cost-to-go differences.
-    pub residual_share: f64,
+    /// Residual ratios `r_t = mean_i |S̃_{i,t}| / mean_i |S_{i,t}|`.
+    pub residual_ratio: Vec<f64>,
+    /// The multipliers `m_t` this update used (`ε_t = ε m_t`).
+    pub step_mult: Vec<f64>,
     /// The LQR-FLM stage.
     pub lqr: LqrFlmStep,
     /// The PI² stage.
     pub pi2: Pi2Step,
 }
 
-/// PILQR; see the module docs.
+/// PILQR; see the module docs. Keeps the per-step multipliers between updates (one optimizer per
+/// trajectory; [`Pilqr::reset`] forgets them).
 #[derive(Debug, Clone)]
 pub struct Pilqr {
     cfg: PilqrConfig,
     lqr: LqrFlm,
+    step_mult: Vec<f64>,
 }
 
 impl Pilqr {
     /// An optimizer with these settings (checked here).
     pub fn new(cfg: PilqrConfig) -> Result<Self> {
-        crate::mpc::fraction("min_lqr_fraction", cfg.min_lqr_fraction)?;
+        crate::mpc::positive("min_step_mult", cfg.min_step_mult)?;
+        crate::mpc::positive("max_step_mult", cfg.max_step_mult)?;
+        crate::mpc::positive("res_ratio_dec", cfg.res_ratio_dec)?;
+        crate::mpc::positive("res_ratio_inc", cfg.res_ratio_inc)?;
+        if cfg.min_step_mult > 1.0 || cfg.max_step_mult < 1.0 {
+            return Err(PlanError::Config(format!(
+                "step multipliers [{}, {}] must contain 1",
+                cfg.min_step_mult, cfg.max_step_mult
+            )));
+        }
+        if cfg.res_ratio_inc > cfg.res_ratio_dec {
+            return Err(PlanError::Config(format!(
+                "res_ratio_inc {} must not exceed res_ratio_dec {}",
+                cfg.res_ratio_inc, cfg.res_ratio_dec
+            )));
+        }
         Ok(Self {
             lqr: LqrFlm::new(cfg.lqr.clone())?,
             cfg,
+            step_mult: Vec::new(),
         })
+    }
+
+    /// The per-step multipliers after the last update (empty before the first).
+    pub fn step_mult(&self) -> &[f64] {
+        &self.step_mult
+    }
+
+    /// Forgets the multipliers (start of a new trajectory optimization).
+    pub fn reset(&mut self) {
+        self.step_mult.clear();
     }
 
     /// One update of `prev` from its `samples` and the dynamics fitted to them.
     pub fn update(
-        &self,
+        &mut self,
         prev: &TvlgController,
         samples: &TrajectorySamples,
         dynamics: &TvlgDynamics,
@@ -87,34 +136,55 @@ impl Pilqr {
         let s = samples.cost_to_go();
         let resid = &s - &model_cost_to_go(prev, samples, dynamics, &cost);
         let t_len = s.ncols();
-        let rho = (0..t_len)
+        let ratio: Vec<f64> = (0..t_len)
             .map(|t| {
-                (std(&resid.column(t).to_vec()) / std(&s.column(t).to_vec()).max(1e-12)).min(1.0)
+                let r = resid.column(t).mapv(f64::abs).mean().unwrap_or(0.0);
+                let a = s.column(t).mapv(f64::abs).mean().unwrap_or(0.0);
+                r / a.max(1e-300)
             })
-            .sum::<f64>()
-            / t_len as f64;
-        let eps = self.cfg.lqr.kl_step * (1.0 - rho).max(self.cfg.min_lqr_fraction);
-        let lqr = self.lqr.update(prev, dynamics, &cost, Some(eps))?;
+            .collect();
+        if self.step_mult.len() != t_len {
+            // First update: multipliers start at 1 and are not adjusted (the authors' code
+            // adjusts from the second iteration on).
+            self.step_mult = vec![1.0; t_len];
+        } else if self.cfg.adjust_step {
+            for (m, r) in self.step_mult.iter_mut().zip(&ratio) {
+                let f = if *r > self.cfg.res_ratio_dec {
+                    0.5
+                } else if *r < self.cfg.res_ratio_inc {
+                    2.0
+                } else {
+                    1.0
+                };
+                *m = (*m * f).clamp(self.cfg.min_step_mult, self.cfg.max_step_mult);
+            }
+        }
+        let eps: Vec<f64> = self
+            .step_mult
+            .iter()
+            .map(|m| self.cfg.lqr.kl_step * m)
+            .collect();
+        let lqr = self.lqr.update_per_step(prev, dynamics, &cost, &eps)?;
         let u_hat = reparametrize(&lqr.controller, samples);
-        let pi2 = pi2_update(
+        let etas: Vec<f64> = (0..t_len)
+            .map(|t| pi2_weights(&s.column(t).to_vec(), self.cfg.pi2.kl_step).1)
+            .collect();
+        let pi2 = pi2_update_with_temperatures(
             &lqr.controller,
             &samples.states,
             &u_hat,
             &resid,
             &self.cfg.pi2,
+            Some(&etas),
         )?;
         Ok(PilqrStep {
             controller: pi2.controller.clone(),
-            residual_share: rho,
+            residual_ratio: ratio,
+            step_mult: self.step_mult.clone(),
             lqr,
             pi2,
         })
     }
-}
-
-fn std(v: &[f64]) -> f64 {
-    let m = v.iter().sum::<f64>() / v.len() as f64;
-    (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len() as f64).sqrt()
 }
 
 /// The controls the samples would have had under `controller` with their stored noise (p4 §III-C).

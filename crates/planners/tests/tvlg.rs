@@ -10,8 +10,9 @@ use ndarray::{Array2, ArrayView2};
 use tandem_core::seeding::rng_from_seed;
 use tandem_models::{TvlgConfig, TvlgFit};
 use tandem_planners::{
-    pi2_update, pi2_weights, quadratize_cost, sample_trajectories, Dynamics, LqrFlm, LqrFlmConfig,
-    ModelDynamics, Objective, Pi2Config, Pilqr, PilqrConfig, Result, SampleConfig, TvlgController,
+    pi2_update, pi2_update_with_temperatures, pi2_weights, quadratize_cost, sample_trajectories,
+    Dynamics, LqrFlm, LqrFlmConfig, ModelDynamics, Objective, Pi2Config, Pilqr, PilqrConfig,
+    Result, SampleConfig, TvlgController,
 };
 
 const T: usize = 20;
@@ -202,83 +203,143 @@ fn pi2_temperature_meets_the_kl_bound() {
     assert!(w[0] > w[1]);
 }
 
-/// On the reacher with a wall, at equal samples per iteration, PILQR ends cheaper than PI² and
-/// all three improve. Prints the learning curves. (p4 Fig. 3 also has PILQR beat LQR-FLM; on this
-/// wall task it does not yet: LQR-FLM ends lower. See the crate report.)
+/// PILQR's step adjustment (the authors' `res_percent` rule): on a linear system with a quadratic
+/// cost the fitted model and the quadratic cost are exact, the residual cost-to-go vanishes, and
+/// every step's multiplier doubles per update (after the first, which keeps 1); with strong
+/// process noise the model's mean prediction explains little of each sample's cost-to-go, the
+/// residuals stay large and the multipliers halve. The comparison with LQR-FLM and PI² on the wall reacher is the
+/// `wall_reacher` example (tens of seconds in release).
 #[test]
-fn pilqr_beats_pi2_on_the_wall_reacher() {
-    let sys = Reacher { wall: Some(0.6) };
-    let obj = Reacher::objective([0.55, 1.45]);
-    let x0 = [0.0, 0.0, 0.0, 0.0];
-    let scfg = SampleConfig {
-        samples: 20,
-        ..Default::default()
-    };
-    let iters = 10;
-    let init = TvlgController::constant(30, 4, &[0.0, 0.0], 2.0).unwrap();
-    let run = |method: &str| -> Vec<f64> {
-        let mut ctrl = init.clone();
-        let mut rng = rng_from_seed(5);
-        let mut fit = TvlgFit::new(TvlgConfig::default());
-        let lqr = LqrFlm::new(LqrFlmConfig {
-            kl_step: 1.0,
-            ..Default::default()
-        })
-        .unwrap();
-        let pilqr = Pilqr::new(PilqrConfig {
+fn pilqr_step_multipliers_follow_the_residual_ratio() {
+    let m = LinearModel::double_integrator();
+    let sys = ModelDynamics::new(&m, 0);
+    let x0 = [1.0, 0.0];
+    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
+    let r = DMatrix::from_element(1, 1, 0.01);
+    let quadratic = quadratic_objective(&q, &r, &(&q * 10.0));
+    let obj = &quadratic;
+    for (process_std, expect_up) in [(1e-4, true), (0.3, false)] {
+        let scfg = SampleConfig {
+            samples: 20,
+            x0_std: 0.0,
+            process_std,
+        };
+        let mut pilqr = Pilqr::new(PilqrConfig {
             lqr: LqrFlmConfig {
-                kl_step: 1.0,
+                kl_step: 0.5,
                 ..Default::default()
             },
             ..Default::default()
         })
         .unwrap();
-        let mut evals = vec![evaluate(&ctrl, &sys, &obj, &x0)];
-        for _ in 0..iters {
-            let samples = sample_trajectories(&ctrl, &sys, &obj, &x0, &scfg, &mut rng).unwrap();
-            ctrl = match method {
-                "pi2" => {
-                    pi2_update(
-                        &ctrl,
-                        &samples.states,
-                        &samples.actions,
-                        &samples.cost_to_go(),
-                        &Pi2Config::default(),
-                    )
-                    .unwrap()
-                    .controller
-                }
-                _ => {
-                    let dynamics = fit
-                        .fit(samples.states.view(), samples.actions.view())
-                        .unwrap();
-                    if method == "lqr" {
-                        let cost = quadratize_cost(&obj, &samples).unwrap();
-                        lqr.update(&ctrl, &dynamics, &cost, None)
-                            .unwrap()
-                            .controller
-                    } else {
-                        pilqr
-                            .update(&ctrl, &samples, &dynamics, &obj)
-                            .unwrap()
-                            .controller
-                    }
-                }
-            };
-            evals.push(evaluate(&ctrl, &sys, &obj, &x0));
+        let mut ctrl = TvlgController::constant(T, 2, &[0.0], 1.0).unwrap();
+        let mut fit = TvlgFit::new(TvlgConfig {
+            prior: None,
+            ..Default::default()
+        });
+        let mut rng = rng_from_seed(7);
+        let mut mults = Vec::new();
+        let mut ratios = Vec::new();
+        for _ in 0..3 {
+            let samples = sample_trajectories(&ctrl, &sys, obj, &x0, &scfg, &mut rng).unwrap();
+            let dynamics = fit
+                .fit(samples.states.view(), samples.actions.view())
+                .unwrap();
+            let step = pilqr.update(&ctrl, &samples, &dynamics, obj).unwrap();
+            mults.push(step.step_mult.clone());
+            ratios.push(step.residual_ratio.clone());
+            ctrl = step.controller;
         }
-        evals
-    };
-    let (l, p, x) = (run("lqr"), run("pi2"), run("pilqr"));
-    println!("LQR-FLM {l:?}\nPI2 {p:?}\nPILQR {x:?}");
-    let best = |v: &[f64]| *v.last().unwrap();
-    assert!(
-        best(&x) < best(&p),
-        "PILQR {} vs PI2 {}",
-        best(&x),
-        best(&p)
-    );
-    for v in [&l, &p, &x] {
-        assert!(best(v) < 0.5 * v[0]);
+        println!("expect_up {expect_up}: ratios {ratios:?}\nmultipliers {mults:?}");
+        assert!(mults[0].iter().all(|&v| v == 1.0));
+        if expect_up {
+            // (The first batch, from a fixed start under an open-loop controller, excites the
+            // fit less; its ratio is not used for adjustment.)
+            assert!(
+                ratios[1..].iter().flatten().all(|&v| v < 0.05),
+                "{ratios:?}"
+            );
+            assert!(mults[2].iter().all(|&v| v == 4.0), "{mults:?}");
+        } else {
+            let mean_ratio = ratios[2].iter().sum::<f64>() / T as f64;
+            assert!(mean_ratio > 0.2, "{ratios:?}");
+            assert!(mults[2].iter().any(|&v| v < 1.0), "{mults:?}");
+        }
+        // The multipliers are the update's per-step KL bounds: the LQR stage meets them on average.
+        assert_eq!(pilqr.step_mult(), &mults[2][..]);
     }
+}
+
+/// PI² at given temperatures: the temperatures the KL bound finds reproduce `pi2_update` exactly;
+/// a hotter temperature moves the controller's offsets less; an infinite one weighs all samples
+/// equally, so `k_t` (gains fixed) becomes the plain mean of the sampled open-loop actions.
+#[test]
+fn pi2_at_given_temperatures() {
+    let m = LinearModel::double_integrator();
+    let sys = ModelDynamics::new(&m, 0);
+    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
+    let r = DMatrix::from_element(1, 1, 0.01);
+    let obj = quadratic_objective(&q, &r, &(&q * 10.0));
+    let ctrl = TvlgController::constant(T, 2, &[0.0], 1.0).unwrap();
+    let samples = sample_trajectories(
+        &ctrl,
+        &sys,
+        &obj,
+        &[1.0, 0.0],
+        &SampleConfig::default(),
+        &mut rng_from_seed(2),
+    )
+    .unwrap();
+    let s = samples.cost_to_go();
+    let cfg = Pi2Config {
+        update_gains: false,
+        ..Default::default()
+    };
+    let free = pi2_update(&ctrl, &samples.states, &samples.actions, &s, &cfg).unwrap();
+    let fixed = pi2_update_with_temperatures(
+        &ctrl,
+        &samples.states,
+        &samples.actions,
+        &s,
+        &cfg,
+        Some(&free.etas),
+    )
+    .unwrap();
+    assert_eq!(free.controller.offsets, fixed.controller.offsets);
+    let hot: Vec<f64> = free.etas.iter().map(|e| e * 100.0).collect();
+    let hot = pi2_update_with_temperatures(
+        &ctrl,
+        &samples.states,
+        &samples.actions,
+        &s,
+        &cfg,
+        Some(&hot),
+    )
+    .unwrap();
+    let moved = |c: &TvlgController| c.offsets.iter().map(|k| k.norm()).sum::<f64>();
+    assert!(moved(&hot.controller) < moved(&free.controller));
+    let inf = vec![f64::INFINITY; T];
+    let uniform = pi2_update_with_temperatures(
+        &ctrl,
+        &samples.states,
+        &samples.actions,
+        &s,
+        &cfg,
+        Some(&inf),
+    )
+    .unwrap();
+    let n = samples.len() as f64;
+    for t in 0..T {
+        let mean = samples.actions.slice(ndarray::s![.., t, 0]).sum() / n;
+        assert!((uniform.controller.offsets[t][0] - mean).abs() < 1e-12);
+    }
+    assert!(pi2_update_with_temperatures(
+        &ctrl,
+        &samples.states,
+        &samples.actions,
+        &s,
+        &cfg,
+        Some(&[1.0]),
+    )
+    .is_err());
 }
