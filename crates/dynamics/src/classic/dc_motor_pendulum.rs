@@ -26,6 +26,12 @@ pub const M_REAL: f64 = 0.090;
 /// gravity term changes) would describe a heavier pendulum with no extra inertia, which no
 /// physical mass change does. Callers who want that variant set [`Self::j`] directly: `J` is a
 /// field, [`Self::with_mass`] is the only place the rule above is applied.
+///
+/// The fixed-`J` variant is the larger gap (+64 % in the gravity-to-inertia ratio instead of
+/// +24 %, and a relatively more damped pendulum): the idealized DDPG policy of
+/// `tandem reproduce p0-pendulum` scores −10517 on it (p0: −15508), but the receding-horizon
+/// planners tuned on this model then stall at the 27° equilibrium where full voltage holds the
+/// pendulum against gravity, so the true model keeps the physical rule above.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DcMotorPendulumParams {
