@@ -83,9 +83,22 @@ pub mod loss;
 pub mod mlp;
 pub mod normalizer;
 pub mod optim;
+mod simd;
 
 /// Runs two closures, potentially in parallel (rayon's `join`), returning both results.
 pub use rayon::join;
+
+/// Runs `op` on a thread of rayon's pool and returns its result, so that the [`join`]s inside it
+/// are cheap in-pool forks (the idle worker steals the second closure) instead of one hand-over
+/// from the calling thread to the pool and back per `join`. With a single-thread pool, or when
+/// already on a pool thread, `op` simply runs here.
+pub fn in_pool<R: Send>(op: impl FnOnce() -> R + Send) -> R {
+    if rayon::current_thread_index().is_some() || rayon::current_num_threads() < 2 {
+        op()
+    } else {
+        rayon::scope(|_| op())
+    }
+}
 
 pub use checkpoint::{Checkpoint, Checkpointable};
 pub use error::{check_finite, NnError, Result};
