@@ -243,14 +243,6 @@ impl Agent for Sac {
 
 impl OffPolicyAgent for Sac {
     fn update(&mut self, batch: &Batch) -> Result<Metrics> {
-        // On a pool thread, the twin-critic `join`s below fork cheaply.
-        tandem_nn::in_pool(|| self.update_in_pool(batch))
-    }
-}
-
-impl Sac {
-    /// [`OffPolicyAgent::update`]'s work (see the module docs).
-    fn update_in_pool(&mut self, batch: &Batch) -> Result<Metrics> {
         let (od, ad) = (self.od, self.scale.dim());
         batch.check(od, ad)?;
         let n = batch.len();

@@ -14,8 +14,7 @@
 //! * Checkpoints ([`Checkpoint`], [`Checkpointable`]) in the safetensors format, bit-exact.
 //! * [`candle_ext`]: seeded candle parameters ([`candle_ext::ParamSet`]: linear, conv,
 //!   transposed conv) stepped by the same optimizers, and [`candle_ext::configure_cpu_threads`].
-//! * [`join`]: run two closures on two threads (rayon), e.g. SAC's twin critics; [`in_pool`]: run
-//!   a whole training step on a pool thread so that its `join`s fork cheaply.
+//! * [`join`]: run two closures on two threads (rayon), e.g. SAC's twin critics.
 //! * [`fastmath`]: vectorizable `exp`/`sigmoid`/`tanh` (≤ 5e-7 error) used by the activations.
 //! * Errors: one enum, [`NnError`]; shape mismatches and non-finite numbers are errors.
 //!
@@ -95,18 +94,6 @@ mod simd;
 
 /// Runs two closures, potentially in parallel (rayon's `join`), returning both results.
 pub use rayon::join;
-
-/// Runs `op` on a thread of rayon's pool and returns its result, so that the [`join`]s inside it
-/// are cheap in-pool forks (the idle worker steals the second closure) instead of one hand-over
-/// from the calling thread to the pool and back per `join`. With a single-thread pool, or when
-/// already on a pool thread, `op` simply runs here.
-pub fn in_pool<R: Send>(op: impl FnOnce() -> R + Send) -> R {
-    if rayon::current_thread_index().is_some() || rayon::current_num_threads() < 2 {
-        op()
-    } else {
-        rayon::scope(|_| op())
-    }
-}
 
 pub use checkpoint::{Checkpoint, Checkpointable};
 pub use error::{check_finite, NnError, Result};
