@@ -367,16 +367,23 @@ impl OffPolicyAgent for Sac {
         }
 
         // 5. Actor through the updated critics: dQmin/da from the smaller critic of each row.
+        //    Each thread also moves its target critic towards the updated critic (stable-baselines3
+        //    does this after the actor step; the critics do not change in between, so the numbers
+        //    are the same).
         concat_rows(obs, od, &s.act, ad, &mut s.x);
         {
             let (q1, q2) = (&mut self.q1, &mut self.q2);
+            let (t1, t2) = (&mut self.q1_t, &mut self.q2_t);
+            let tau = self.config.tau;
             let (x, o1, o2) = (&s.x, &mut s.q_pi1, &mut s.q_pi2);
             let (r1, r2) = tandem_nn::join(
                 || -> Result<()> {
+                    t1.polyak(q1, tau)?;
                     o1.copy_from_slice(q1.mlp.forward_train(x, n, &mut q1.ws, None)?);
                     Ok(())
                 },
                 || -> Result<()> {
+                    t2.polyak(q2, tau)?;
                     o2.copy_from_slice(q2.mlp.forward_train(x, n, &mut q2.ws, None)?);
                     Ok(())
                 },
@@ -431,10 +438,6 @@ impl OffPolicyAgent for Sac {
             None,
         )?;
         self.actor.step()?;
-
-        // 6. Targets.
-        self.q1_t.polyak(&self.q1, self.config.tau)?;
-        self.q2_t.polyak(&self.q2, self.config.tau)?;
 
         let mut m = Metrics::default();
         m.push("critic_loss", critic_loss);

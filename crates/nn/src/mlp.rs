@@ -20,6 +20,7 @@ use crate::checkpoint::{Checkpoint, Checkpointable};
 use crate::error::{check_finite, check_len, NnError, Result};
 use crate::fastmath;
 use crate::kernels::{gemm_nn, gemm_nt, gemm_tn};
+use crate::simd::multiversion;
 
 /// Element-wise activation of a layer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -525,6 +526,7 @@ impl Mlp {
             layers,
             g_a,
             g_b,
+            g_c,
             ..
         } = ws;
         // g_a holds dL/d(output of layer l) on entry to iteration l.
@@ -542,34 +544,48 @@ impl Mlp {
                     }
                 }
                 let act = self.activation(l);
-                let z: &[f32] = if act.needs_pre() { &cur.z[..n] } else { &[] };
-                activation_backward(act, g, &cur.y[..n], z);
+                if act != Activation::Identity {
+                    let z: &[f32] = if act.needs_pre() { &cur.z[..n] } else { &[] };
+                    activation_backward(act, g, &cur.y[..n], z, &mut g_c[..n]);
+                    std::mem::swap(g_a, g_c);
+                }
             }
             let x: &[f32] = if l == 0 {
                 &x0[..batch * s.fan_in]
             } else {
                 &layers[l - 1].input_of_next()[..batch * s.fan_in]
             };
-            if let Some(gr) = grads.as_deref_mut() {
+            let w = &self.params[s.weight_offset..s.bias_offset];
+            let g = &g_a[..n];
+            // The weight gradient `dZᵀ X` and the input gradient `dZ W` are independent products;
+            // when both are large they run side by side (no effect on the numbers).
+            let weight_grad = |gr: &mut [f32]| {
                 let (gw, gb) = gr[s.weight_offset..s.bias_offset + s.fan_out]
                     .split_at_mut(s.fan_in * s.fan_out);
-                gemm_tn(s.fan_out, s.fan_in, batch, &g_a[..n], x, gw, false);
-                column_sums(&g_a[..n], s.fan_out, gb);
+                gemm_tn(s.fan_out, s.fan_in, batch, g, x, gw, false);
+                column_sums(g, s.fan_out, gb);
+            };
+            let d_in: Option<&mut [f32]> = if l > 0 {
+                Some(&mut g_b[..batch * s.fan_in])
+            } else {
+                d_input.as_deref_mut()
+            };
+            let input_grad = |d: &mut [f32]| gemm_nn(batch, s.fan_in, s.fan_out, g, w, d, false);
+            match (grads.as_deref_mut(), d_in) {
+                (Some(gr), Some(d)) if split_backward(batch * s.fan_in * s.fan_out) => {
+                    rayon::join(|| weight_grad(gr), || input_grad(d));
+                }
+                (gr, d) => {
+                    if let Some(gr) = gr {
+                        weight_grad(gr);
+                    }
+                    if let Some(d) = d {
+                        input_grad(d);
+                    }
+                }
             }
-            let w = &self.params[s.weight_offset..s.bias_offset];
             if l > 0 {
-                gemm_nn(
-                    batch,
-                    s.fan_in,
-                    s.fan_out,
-                    &g_a[..n],
-                    w,
-                    &mut g_b[..batch * s.fan_in],
-                    false,
-                );
                 std::mem::swap(g_a, g_b);
-            } else if let Some(d) = d_input.as_deref_mut() {
-                gemm_nn(batch, s.fan_in, s.fan_out, &g_a[..n], w, d, false);
             }
         }
         ws.tape = None;
@@ -577,81 +593,92 @@ impl Mlp {
     }
 }
 
-/// `y[r, :] = act(y[r, :] + b)`, keeping `z = y + b` when asked (SiLU's backward needs it).
-fn bias_activation(y: &mut [f32], b: &[f32], act: Activation, z: Option<&mut [f32]>) {
-    let width = b.len();
-    if let Some(z) = z {
-        for (yr, zr) in y.chunks_exact_mut(width).zip(z.chunks_exact_mut(width)) {
-            for ((yv, zv), bv) in yr.iter_mut().zip(zr.iter_mut()).zip(b) {
-                let v = *yv + bv;
-                *zv = v;
-                *yv = act.apply(v);
-            }
-        }
-        return;
-    }
-    macro_rules! rows {
-        ($f:expr) => {
-            for yr in y.chunks_exact_mut(width) {
-                for (yv, bv) in yr.iter_mut().zip(b) {
-                    *yv = $f(*yv + bv);
-                }
-            }
-        };
-    }
-    match act {
-        Activation::Identity => rows!(|v: f32| v),
-        Activation::Relu => rows!(|v: f32| v.max(0.0)),
-        Activation::Tanh => rows!(fastmath::tanh),
-        Activation::Sigmoid => rows!(fastmath::sigmoid),
-        Activation::Elu => rows!(|v: f32| if v > 0.0 { v } else { fastmath::exp_m1(v) }),
-        Activation::Silu => rows!(|v: f32| v * fastmath::sigmoid(v)),
-    }
+/// Whether a backward layer's two products of `macs` multiply-adds each run on two threads: only
+/// when rayon has a second thread and each product is large enough (2^21 multiply-adds, a
+/// 128×128×128 product) to pay for handing work over.
+fn split_backward(macs: usize) -> bool {
+    macs >= 1 << 21 && rayon::current_num_threads() > 1
 }
 
-/// `g *= act'(z)`, using the output `y = act(z)` where possible.
-fn activation_backward(act: Activation, g: &mut [f32], y: &[f32], z: &[f32]) {
-    match act {
-        Activation::Identity => {}
-        Activation::Relu => {
-            for (gv, yv) in g.iter_mut().zip(y) {
-                if *yv <= 0.0 {
-                    *gv = 0.0;
+multiversion! {
+    /// `y[r, :] = act(y[r, :] + b)`, keeping `z = y + b` when asked (SiLU's backward needs it).
+    fn bias_activation(y: &mut [f32], b: &[f32], act: Activation, z: Option<&mut [f32]>) {
+        let width = b.len();
+        if let Some(z) = z {
+            for (yr, zr) in y.chunks_exact_mut(width).zip(z.chunks_exact_mut(width)) {
+                for ((yv, zv), bv) in yr.iter_mut().zip(zr.iter_mut()).zip(b) {
+                    let v = *yv + bv;
+                    *zv = v;
+                    *yv = act.apply(v);
                 }
             }
+            return;
         }
-        Activation::Tanh => {
-            for (gv, yv) in g.iter_mut().zip(y) {
-                *gv *= 1.0 - yv * yv;
-            }
-        }
-        Activation::Sigmoid => {
-            for (gv, yv) in g.iter_mut().zip(y) {
-                *gv *= yv * (1.0 - yv);
-            }
-        }
-        Activation::Elu => {
-            for (gv, yv) in g.iter_mut().zip(y) {
-                if *yv <= 0.0 {
-                    *gv *= yv + 1.0;
+        macro_rules! rows {
+            ($f:expr) => {
+                for yr in y.chunks_exact_mut(width) {
+                    for (yv, bv) in yr.iter_mut().zip(b) {
+                        *yv = $f(*yv + bv);
+                    }
                 }
-            }
+            };
         }
-        Activation::Silu => {
-            for (gv, zv) in g.iter_mut().zip(z) {
-                let s = fastmath::sigmoid(*zv);
-                *gv *= s * (1.0 + zv * (1.0 - s));
-            }
+        match act {
+            Activation::Identity => rows!(|v: f32| v),
+            Activation::Relu => rows!(|v: f32| v.max(0.0)),
+            Activation::Tanh => rows!(fastmath::tanh),
+            Activation::Sigmoid => rows!(fastmath::sigmoid),
+            Activation::Elu => rows!(|v: f32| if v > 0.0 { v } else { fastmath::exp_m1(v) }),
+            Activation::Silu => rows!(|v: f32| v * fastmath::sigmoid(v)),
         }
     }
 }
 
-/// `out[j] = Σ_r g[r, j]`.
-fn column_sums(g: &[f32], width: usize, out: &mut [f32]) {
-    out.fill(0.0);
-    for row in g.chunks_exact(width) {
-        for (o, v) in out.iter_mut().zip(row) {
-            *o += v;
+multiversion! {
+    /// `out = g · act'(z)`, using the output `y = act(z)` where possible (not called for the
+    /// identity). Writes a separate buffer with selects, not in-place conditional stores: those
+    /// compile to masked stores, which are slow on AMD cores.
+    fn activation_backward(act: Activation, g: &[f32], y: &[f32], z: &[f32], out: &mut [f32]) {
+        match act {
+            Activation::Identity => out.copy_from_slice(g),
+            Activation::Relu => {
+                for ((o, gv), yv) in out.iter_mut().zip(g).zip(y) {
+                    *o = if *yv > 0.0 { *gv } else { 0.0 };
+                }
+            }
+            Activation::Tanh => {
+                for ((o, gv), yv) in out.iter_mut().zip(g).zip(y) {
+                    *o = gv * (1.0 - yv * yv);
+                }
+            }
+            Activation::Sigmoid => {
+                for ((o, gv), yv) in out.iter_mut().zip(g).zip(y) {
+                    *o = gv * (yv * (1.0 - yv));
+                }
+            }
+            Activation::Elu => {
+                for ((o, gv), yv) in out.iter_mut().zip(g).zip(y) {
+                    *o = if *yv > 0.0 { *gv } else { gv * (yv + 1.0) };
+                }
+            }
+            Activation::Silu => {
+                for ((o, gv), zv) in out.iter_mut().zip(g).zip(z) {
+                    let s = fastmath::sigmoid(*zv);
+                    *o = gv * (s * (1.0 + zv * (1.0 - s)));
+                }
+            }
+        }
+    }
+}
+
+multiversion! {
+    /// `out[j] = Σ_r g[r, j]` (rows added in order, so the sums do not depend on the lane count).
+    fn column_sums(g: &[f32], width: usize, out: &mut [f32]) {
+        out.fill(0.0);
+        for row in g.chunks_exact(width) {
+            for (o, v) in out.iter_mut().zip(row) {
+                *o += v;
+            }
         }
     }
 }
@@ -814,6 +841,7 @@ pub struct MlpWorkspace {
     layers: Vec<LayerBuf>,
     g_a: Vec<f32>,
     g_b: Vec<f32>,
+    g_c: Vec<f32>,
     tape: Option<Tape>,
 }
 
@@ -846,6 +874,7 @@ impl MlpWorkspace {
         }
         grow(&mut self.g_a, batch * widest);
         grow(&mut self.g_b, batch * widest);
+        grow(&mut self.g_c, batch * widest);
     }
 
     fn output(&self, net: &Mlp, batch: usize) -> &[f32] {

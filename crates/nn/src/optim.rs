@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{Checkpoint, Checkpointable};
 use crate::error::{check_finite, check_len, NnError, Result};
+use crate::simd::multiversion;
 
 /// A first-order optimizer stepping a flat parameter buffer with a gradient of the same layout.
 pub trait Optimizer {
@@ -147,6 +148,42 @@ impl Adam {
     }
 }
 
+/// The per-step constants of [`adam_update`].
+#[derive(Clone, Copy)]
+struct AdamCoefficients {
+    b1: f32,
+    b2: f32,
+    ob1: f32,
+    ob2: f32,
+    eps: f32,
+    l2: f32,
+    step_size: f32,
+    inv_bc2_sqrt: f32,
+}
+
+multiversion! {
+    /// One Adam step over flat slices (one pass over parameters, gradients and both moments).
+    fn adam_update(
+        params: &mut [f32],
+        grads: &[f32],
+        m: &mut [f32],
+        v: &mut [f32],
+        c: AdamCoefficients,
+    ) {
+        let n = params.len();
+        let (grads, m, v) = (&grads[..n], &mut m[..n], &mut v[..n]);
+        for i in 0..n {
+            let p = &mut params[i];
+            let g = grads[i] + c.l2 * *p;
+            let mi = c.b1 * m[i] + c.ob1 * g;
+            let vi = c.b2 * v[i] + c.ob2 * g * g;
+            m[i] = mi;
+            v[i] = vi;
+            *p -= c.step_size * mi / (vi.sqrt() * c.inv_bc2_sqrt + c.eps);
+        }
+    }
+}
+
 impl Optimizer for Adam {
     fn step(&mut self, params: &mut [f32], grads: &[f32]) -> Result<()> {
         check_step(self.m.len(), params, grads)?;
@@ -165,17 +202,17 @@ impl Optimizer for Adam {
             params.iter_mut().for_each(|p| *p *= f);
         }
         let l2 = if c.decoupled { 0.0 } else { wd };
-        for (((p, &g), m), v) in params
-            .iter_mut()
-            .zip(grads)
-            .zip(self.m.iter_mut())
-            .zip(self.v.iter_mut())
-        {
-            let g = g + l2 * *p;
-            *m = b1 * *m + ob1 * g;
-            *v = b2 * *v + ob2 * g * g;
-            *p -= step_size * *m / (v.sqrt() * inv_bc2_sqrt + eps);
-        }
+        let coef = AdamCoefficients {
+            b1,
+            b2,
+            ob1,
+            ob2,
+            eps,
+            l2,
+            step_size,
+            inv_bc2_sqrt,
+        };
+        adam_update(params, grads, &mut self.m, &mut self.v, coef);
         Ok(())
     }
 
@@ -514,11 +551,18 @@ pub fn polyak_update(target: &mut [f32], source: &[f32], tau: f32) -> Result<()>
             "polyak tau must be in [0, 1], got {tau}"
         )));
     }
-    let keep = 1.0 - tau;
-    for (t, &s) in target.iter_mut().zip(source) {
-        *t = keep * *t + tau * s;
-    }
+    polyak_loop(target, source, tau);
     Ok(())
+}
+
+multiversion! {
+    /// `target = (1 - tau) target + tau source`, element-wise.
+    fn polyak_loop(target: &mut [f32], source: &[f32], tau: f32) {
+        let keep = 1.0 - tau;
+        for (t, &s) in target.iter_mut().zip(source) {
+            *t = keep * *t + tau * s;
+        }
+    }
 }
 
 #[cfg(test)]
