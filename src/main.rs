@@ -57,6 +57,8 @@ fn run(command: Command) -> cli::Result<()> {
 }
 
 fn main() -> ExitCode {
+    // candle (conv Q-networks) needs its thread settings before any thread exists.
+    tandem_nn::candle_ext::configure_cpu_threads();
     let cli = Cli::parse();
     match run(cli.command) {
         Ok(()) => ExitCode::SUCCESS,

@@ -3,6 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::conv_qnet::ConvQNetConfig;
 use crate::error::{ensure, Result};
 use crate::noise::NoiseConfig;
 
@@ -229,14 +230,36 @@ impl SacConfig {
     }
 }
 
+/// Which Q-network DQN uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum QNetwork {
+    /// An MLP over flat observations.
+    Mlp,
+    /// A [`ConvQNet`](crate::ConvQNet) over image observations (`DqnConfig::conv`).
+    Conv,
+}
+
 /// DQN (Mnih et al. 2015) with the double-DQN option (van Hasselt et al. 2016).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DqnConfig {
-    /// Hidden layers of the Q-network (MLP).
+    /// The Q-network: `"mlp"` or `"conv"`.
+    pub network: QNetwork,
+    /// The convolutional layers when `network = "conv"` (a `[agent.conv]` table in TOML).
+    pub conv: ConvQNetConfig,
+    /// Hidden layers of the Q-network: the whole MLP, or the fully connected layers after the
+    /// convolutions of a conv Q-network.
     pub hidden: Vec<usize>,
-    /// Learning rate (Adam).
+    /// Learning rate (Adam) at the first environment step.
     pub learning_rate: f64,
+    /// If set, the learning rate decays linearly from `learning_rate` to this value over
+    /// `learning_rate_decay_steps` environment steps and stays there (stable-baselines3's
+    /// `linear_schedule` / rl-baselines3-zoo's `lin_` prefix, with the run length as the
+    /// horizon). `None`: constant.
+    pub learning_rate_final: Option<f64>,
+    /// Horizon of that decay, in environment steps (counted from step 0, warm-up included).
+    pub learning_rate_decay_steps: usize,
     /// Discount γ.
     pub gamma: f64,
     /// Copy the online network into the target network every this many environment steps
@@ -272,11 +295,16 @@ impl Default for DqnConfig {
     /// replay 10^5, 1000 warm-up steps, γ = 0.99, train every 256 steps with 128 gradient steps,
     /// hidden [256, 256], ε from 1 to 0.04 over 16% of the 50k steps (8000), gradient-norm clip 10
     /// counted from step 0, a hard target copy every 10 environment steps, Adam (ε = 1e-8),
-    /// gradient-norm clip 10 and Huber loss (stable-baselines3 `DQN` defaults).
+    /// gradient-norm clip 10 and Huber loss (stable-baselines3 `DQN` defaults); a constant
+    /// learning rate and an MLP Q-network (`conv` holds p2's maze encoder for `network = "conv"`).
     fn default() -> Self {
         Self {
+            network: QNetwork::Mlp,
+            conv: ConvQNetConfig::default(),
             hidden: vec![256, 256],
             learning_rate: 2.3e-3,
+            learning_rate_final: None,
+            learning_rate_decay_steps: 50_000,
             gamma: 0.99,
             target_update_interval: 10,
             exploration_initial_eps: 1.0,
@@ -298,7 +326,24 @@ impl DqnConfig {
     /// Checks every range.
     pub fn validate(&self) -> Result<()> {
         check_hidden("hidden", &self.hidden)?;
+        if self.network == QNetwork::Conv {
+            self.conv.validate()?;
+        }
         check_lr("learning_rate", self.learning_rate)?;
+        if let Some(lr) = self.learning_rate_final {
+            ensure(
+                lr.is_finite() && lr >= 0.0 && lr <= self.learning_rate,
+                "learning_rate_final",
+                lr,
+                "must lie in [0, learning_rate]",
+            )?;
+            ensure(
+                self.learning_rate_decay_steps >= 1,
+                "learning_rate_decay_steps",
+                self.learning_rate_decay_steps,
+                "must be >= 1",
+            )?;
+        }
         check_gamma(self.gamma)?;
         ensure(
             self.target_update_interval >= 1,
@@ -325,6 +370,17 @@ impl DqnConfig {
             "must be > 0",
         )?;
         self.schedule().validate()
+    }
+
+    /// The learning rate after `steps` environment steps (see `learning_rate_final`).
+    pub fn learning_rate_at(&self, steps: u64) -> f64 {
+        match self.learning_rate_final {
+            None => self.learning_rate,
+            Some(end) => {
+                let f = (steps as f64 / self.learning_rate_decay_steps as f64).min(1.0);
+                self.learning_rate + f * (end - self.learning_rate)
+            }
+        }
     }
 
     /// ε after `steps` environment steps: linear from initial to final over `exploration_steps`.

@@ -1,17 +1,161 @@
 //! DQN (Mnih et al. 2015) as stable-baselines3's `DQN`: a target network copied every
 //! `target_update_interval` environment steps and a linear ε-greedy schedule, both counted in
 //! environment steps from the first one (warm-up included) through [`Agent::on_env_step`]; Huber
-//! loss, gradient-norm clipping and the double-DQN target (van Hasselt et al. 2016) as an option. The Q-network is an MLP over flat observations; a
-//! convolutional Q-network for image observations is not written yet.
+//! loss, gradient-norm clipping, the double-DQN target (van Hasselt et al. 2016) and a linearly
+//! decaying learning rate (SB3's `linear_schedule`) as options.
+//!
+//! The Q-network is an MLP over flat observations (`network = "mlp"`) or, for image observations
+//! such as p2's 16×16 RGB maze, a [`ConvQNet`] (`network = "conv"`, layers in `DqnConfig::conv`).
+//! Both are trained by the same loss code: the agent computes `∂L/∂Q` of the Huber loss on
+//! `Q(s, a)` and the network back-propagates it.
 
 use rand::Rng as _;
 use tandem_core::{Action, Rng, SeedStream, Space};
-use tandem_nn::{clip_grad_norm, Checkpoint, MlpConfig, MlpWorkspace};
+use tandem_nn::{clip_grad_norm, Adam, AdamConfig, Checkpoint, Checkpointable, MlpConfig};
+use tandem_nn::{MlpWorkspace, Optimizer};
 
 use crate::agent::{check_obs, Agent, Batch, Metrics, Mode, OffPolicyAgent};
 use crate::common::{check_header, discrete_n, fit, obs_dim, save_header, Net, Target};
-use crate::config::DqnConfig;
+use crate::config::{DqnConfig, QNetwork};
+use crate::conv_qnet::ConvQNet;
 use crate::error::{AgentError, Result};
+
+/// The online and target Q-networks with what training them needs.
+#[derive(Debug, Clone)]
+#[allow(clippy::large_enum_variant)]
+enum QNets {
+    Mlp {
+        q: Net,
+        q_t: Target,
+        next_ws: MlpWorkspace,
+    },
+    Conv {
+        q: ConvQNet,
+        q_t: ConvQNet,
+        opt: Adam,
+        grads: Vec<f32>,
+    },
+}
+
+impl QNets {
+    /// Online-network Q-values of `n` observations (no graph kept).
+    fn online(&mut self, x: &[f32], n: usize) -> Result<&[f32]> {
+        match self {
+            QNets::Mlp { q, .. } => Ok(q.mlp.forward(x, n, &mut q.ws)?),
+            QNets::Conv { q, .. } => q.forward(x, n),
+        }
+    }
+
+    /// Online-network Q-values of the next observations, into a buffer that leaves the online
+    /// network's training workspace alone.
+    fn online_next(&mut self, x: &[f32], n: usize) -> Result<&[f32]> {
+        match self {
+            QNets::Mlp { q, next_ws, .. } => Ok(q.mlp.forward(x, n, next_ws)?),
+            QNets::Conv { q, .. } => q.forward(x, n),
+        }
+    }
+
+    fn target(&mut self, x: &[f32], n: usize) -> Result<&[f32]> {
+        match self {
+            QNets::Mlp { q_t, .. } => Ok(q_t.mlp.forward(x, n, &mut q_t.ws)?),
+            QNets::Conv { q_t, .. } => q_t.forward(x, n),
+        }
+    }
+
+    fn forward_train(&mut self, x: &[f32], n: usize) -> Result<&[f32]> {
+        match self {
+            QNets::Mlp { q, .. } => Ok(q.mlp.forward_train(x, n, &mut q.ws, None)?),
+            QNets::Conv { q, .. } => q.forward_train(x, n),
+        }
+    }
+
+    /// Back-propagates `d_q = ∂L/∂Q` of the last `forward_train`, clips the gradient's norm and
+    /// takes one Adam step with learning rate `lr`.
+    fn backward_step(&mut self, d_q: &[f32], max_norm: f32, lr: f32) -> Result<()> {
+        match self {
+            QNets::Mlp { q, .. } => {
+                q.mlp.backward(&mut q.ws, d_q, Some(&mut q.grads), None)?;
+                clip_grad_norm(&mut q.grads, max_norm)?;
+                q.opt.set_lr(lr);
+                q.step()
+            }
+            QNets::Conv { q, opt, grads, .. } => {
+                q.backward(d_q, grads)?;
+                clip_grad_norm(grads, max_norm)?;
+                opt.set_lr(lr);
+                let mut p = q.params().to_vec();
+                opt.step(&mut p, grads)?;
+                q.set_params(&p)
+            }
+        }
+    }
+
+    fn q_params(&self) -> &[f32] {
+        match self {
+            QNets::Mlp { q, .. } => q.mlp.params(),
+            QNets::Conv { q, .. } => q.params(),
+        }
+    }
+
+    fn target_params(&self) -> &[f32] {
+        match self {
+            QNets::Mlp { q_t, .. } => q_t.mlp.params(),
+            QNets::Conv { q_t, .. } => q_t.params(),
+        }
+    }
+
+    fn sync_target(&mut self) {
+        // Same architecture by construction, so the lengths match and the values are finite.
+        match self {
+            QNets::Mlp { q, q_t, .. } => q_t.mlp.params_mut().copy_from_slice(q.mlp.params()),
+            QNets::Conv { q, q_t, .. } => q_t
+                .set_params(q.params())
+                .expect("online and target conv Q-networks share one architecture"),
+        }
+    }
+
+    fn save(&self, ckpt: &mut Checkpoint) -> Result<()> {
+        match self {
+            QNets::Mlp { q, q_t, .. } => {
+                q.save("q", ckpt)?;
+                q_t.save("q_target", ckpt)
+            }
+            QNets::Conv { q, q_t, opt, .. } => {
+                q.save("qconv", ckpt)?;
+                opt.save_to("qconv_opt", ckpt)?;
+                q_t.save("qconv_target", ckpt)
+            }
+        }
+    }
+
+    fn load(&mut self, ckpt: &Checkpoint) -> Result<()> {
+        match self {
+            QNets::Mlp { q, q_t, .. } => {
+                q.load("q", ckpt)?;
+                q_t.load("q_target", ckpt)
+            }
+            QNets::Conv { q, q_t, opt, .. } => {
+                let missing = |_| {
+                    AgentError::Checkpoint(
+                        "has no conv Q-network (`qconv.*`): written by an MLP DQN?".into(),
+                    )
+                };
+                ckpt.shape("qconv_opt.m").map_err(missing)?;
+                // Load into copies first so a failure leaves the agent unchanged.
+                let (mut q2, mut t2, mut o2) = (q.clone(), q_t.clone(), opt.clone());
+                q2.load("qconv", ckpt)?;
+                t2.load("qconv_target", ckpt)?;
+                o2.load_from("qconv_opt", ckpt).map_err(|e| {
+                    AgentError::Checkpoint(format!(
+                        "does not match this agent's conv Q-network optimizer: {e}"
+                    ))
+                })?;
+                (*q, *q_t, *opt) = (q2, t2, o2);
+                Ok(())
+            }
+        }
+    }
+}
 
 /// A DQN agent.
 #[derive(Debug, Clone)]
@@ -19,12 +163,11 @@ pub struct Dqn {
     config: DqnConfig,
     od: usize,
     n_actions: usize,
-    q: Net,
-    q_t: Target,
+    nets: QNets,
     env_steps: u64,
     updates: u64,
     rng: Rng,
-    next_ws: MlpWorkspace,
+    x: Vec<f32>,
     y: Vec<f32>,
     d_q: Vec<f32>,
     best: Vec<usize>,
@@ -41,30 +184,50 @@ fn argmax(row: &[f32]) -> usize {
 }
 
 impl Dqn {
-    /// A DQN agent for the given spaces (a discrete action space), seeded by `seed`.
+    /// A DQN agent for the given spaces (a discrete action space), seeded by `seed`. With
+    /// `network = "conv"` the observation space must be a `Box` image of shape `conv.image`.
     pub fn new(config: DqnConfig, obs_space: &Space, act_space: &Space, seed: u64) -> Result<Self> {
         config.validate()?;
         let od = obs_dim("dqn", obs_space)?;
         let n_actions = discrete_n("dqn", act_space)?;
         let seeds = SeedStream::new(seed);
-        let mut sizes = vec![od];
-        sizes.extend(&config.hidden);
-        sizes.push(n_actions);
-        let q = Net::new(
-            MlpConfig::new(&sizes),
-            config.learning_rate,
-            &mut seeds.rng("dqn-init"),
-        )?;
+        let mut init = seeds.rng("dqn-init");
+        let nets = match config.network {
+            QNetwork::Mlp => {
+                let mut sizes = vec![od];
+                sizes.extend(&config.hidden);
+                sizes.push(n_actions);
+                let q = Net::new(MlpConfig::new(&sizes), config.learning_rate, &mut init)?;
+                QNets::Mlp {
+                    q_t: Target::of(&q),
+                    q,
+                    next_ws: MlpWorkspace::default(),
+                }
+            }
+            QNetwork::Conv => {
+                config.conv.check_space(obs_space)?;
+                let q = ConvQNet::new(config.conv.clone(), &config.hidden, n_actions, &mut init)?;
+                let opt = Adam::new(
+                    AdamConfig::with_lr(config.learning_rate as f32),
+                    q.num_params(),
+                )?;
+                QNets::Conv {
+                    q_t: q.clone(),
+                    grads: vec![0.0; q.num_params()],
+                    q,
+                    opt,
+                }
+            }
+        };
         Ok(Self {
-            q_t: Target::of(&q),
+            nets,
             rng: seeds.rng("dqn-explore"),
             config,
             od,
             n_actions,
-            q,
             env_steps: 0,
             updates: 0,
-            next_ws: MlpWorkspace::default(),
+            x: Vec::new(),
             y: Vec::new(),
             d_q: Vec::new(),
             best: Vec::new(),
@@ -76,26 +239,35 @@ impl Dqn {
         self.config.epsilon(self.env_steps)
     }
 
+    /// The learning rate the next update uses.
+    pub fn learning_rate(&self) -> f64 {
+        self.config.learning_rate_at(self.env_steps)
+    }
+
     /// Copies the online network into the target network.
     pub fn sync_target(&mut self) {
-        // Same architecture by construction (`Target::of`), so the lengths match.
-        self.q_t
-            .mlp
-            .params_mut()
-            .copy_from_slice(self.q.mlp.params());
+        self.nets.sync_target();
     }
 
     /// The target network's flat parameters.
     pub fn target_params(&self) -> &[f32] {
-        self.q_t.mlp.params()
+        self.nets.target_params()
     }
 
     /// The Q-network's flat parameters.
     pub fn q_params(&self) -> &[f32] {
-        self.q.mlp.params()
+        self.nets.q_params()
     }
 
-    /// Stores network, target, optimizer, counters and generator.
+    /// The greedy Q-values of one observation.
+    pub fn q_values(&mut self, obs: &[f64]) -> Result<Vec<f32>> {
+        check_obs(obs, self.od)?;
+        self.x.clear();
+        self.x.extend(obs.iter().map(|v| *v as f32));
+        Ok(self.nets.online(&self.x, 1)?.to_vec())
+    }
+
+    /// Stores networks, optimizer, counters and generator.
     pub fn save(&self, ckpt: &mut Checkpoint) -> Result<()> {
         save_header(
             ckpt,
@@ -104,8 +276,7 @@ impl Dqn {
             (self.od, self.n_actions),
             &self.rng,
         )?;
-        self.q.save("q", ckpt)?;
-        self.q_t.save("q_target", ckpt)?;
+        self.nets.save(ckpt)?;
         ckpt.put_u64("counters", &[2], &[self.env_steps, self.updates])?;
         Ok(())
     }
@@ -113,8 +284,7 @@ impl Dqn {
     /// Restores what [`Dqn::save`] stored; errors for another algorithm or architecture.
     pub fn load(&mut self, ckpt: &Checkpoint) -> Result<()> {
         let rng = check_header(ckpt, "dqn", (self.od, self.n_actions))?;
-        self.q.load("q", ckpt)?;
-        self.q_t.load("q_target", ckpt)?;
+        self.nets.load(ckpt)?;
         let c = ckpt.get_u64("counters", Some(&[2]))?;
         self.env_steps = c[0];
         self.updates = c[1];
@@ -136,8 +306,9 @@ impl Agent for Dqn {
                 return Ok(Action::Discrete(self.rng.random_range(0..self.n_actions)));
             }
         }
-        let x: Vec<f32> = obs.iter().map(|v| *v as f32).collect();
-        let q = self.q.mlp.forward(&x, 1, &mut self.q.ws)?;
+        self.x.clear();
+        self.x.extend(obs.iter().map(|v| *v as f32));
+        let q = self.nets.online(&self.x, 1)?;
         Ok(Action::Discrete(argmax(q)))
     }
 
@@ -171,12 +342,12 @@ impl OffPolicyAgent for Dqn {
 
         // Target: r + γ (1 - d) Q_t(s', argmax) with argmax from Q_t (DQN) or Q (double DQN).
         if self.config.double_dqn {
-            let qn = self.q.mlp.forward(next_obs, n, &mut self.next_ws)?;
+            let qn = self.nets.online_next(next_obs, n)?;
             for (b, row) in self.best.iter_mut().zip(qn.chunks_exact(na)) {
                 *b = argmax(row);
             }
         }
-        let qt = self.q_t.mlp.forward(next_obs, n, &mut self.q_t.ws)?;
+        let qt = self.nets.target(next_obs, n)?;
         let gamma = self.config.gamma as f32;
         for i in 0..n {
             let row = &qt[i * na..(i + 1) * na];
@@ -189,7 +360,7 @@ impl OffPolicyAgent for Dqn {
         }
 
         // Huber (smooth L1) on Q(s, a), mean over the batch.
-        let q = self.q.mlp.forward_train(obs, n, &mut self.q.ws, None)?;
+        let q = self.nets.forward_train(obs, n)?;
         let delta = self.config.huber_delta as f32;
         let mut loss = 0.0f64;
         let mut q_mean = 0.0f64;
@@ -212,16 +383,15 @@ impl OffPolicyAgent for Dqn {
                 value: loss,
             });
         }
-        self.q
-            .mlp
-            .backward(&mut self.q.ws, &self.d_q, Some(&mut self.q.grads), None)?;
-        clip_grad_norm(&mut self.q.grads, self.config.max_grad_norm as f32)?;
-        self.q.step()?;
+        let lr = self.learning_rate();
+        self.nets
+            .backward_step(&self.d_q, self.config.max_grad_norm as f32, lr as f32)?;
         self.updates += 1;
         let mut m = Metrics::default();
         m.push("loss", loss);
         m.push("q_mean", q_mean / n as f64);
         m.push("epsilon", self.epsilon());
+        m.push("learning_rate", lr);
         Ok(m)
     }
 }

@@ -22,10 +22,13 @@
 //! checkpoints ([`tandem_nn::Checkpoint`], safetensors) hold networks, optimizer states, noise
 //! state, generators, replay and the in-progress episode, so a resumed run continues bit-for-bit.
 //!
-//! Not written yet: the convolutional Q-network for p2's 16x16 RGB maze (DQN takes flat
-//! observations only) and a Gaussian-policy REINFORCE for continuous actions.
+//! DQN's Q-network is an MLP or, for image observations (p2's 16x16 RGB maze, `PixelMaze-v0`),
+//! a [`ConvQNet`] built from candle convolutions with `tandem_nn::candle_ext`'s seeded
+//! parameters, stepped by the same Adam. Not written yet: a Gaussian-policy REINFORCE for
+//! continuous actions.
 //!
-//! Dependencies: `tandem-nn` (networks, optimizers, checkpoints), `tandem-envs` (the `Env` trait
+//! Dependencies: `tandem-nn` (networks, optimizers, checkpoints), `candle-core`/`candle-nn`
+//! (the conv Q-network's layers and autograd), `tandem-envs` (the `Env` trait
 //! the training loop drives), `ndarray` (replay storage and minibatches), `rand`/`rand_distr`
 //! (seeded exploration and sampling), `serde`/`serde_json`/`toml` (configs, checkpoint payloads),
 //! `thiserror`.
@@ -36,6 +39,7 @@
 pub mod agent;
 mod common;
 pub mod config;
+pub mod conv_qnet;
 pub mod ddpg;
 pub mod dqn;
 pub mod error;
@@ -47,7 +51,10 @@ pub mod sac;
 pub mod trainer;
 
 pub use agent::{Agent, Batch, Episode, EpisodicAgent, Metrics, Mode, OffPolicyAgent};
-pub use config::{Baseline, DdpgConfig, DqnConfig, OffPolicySchedule, ReinforceConfig, SacConfig};
+pub use config::{
+    Baseline, DdpgConfig, DqnConfig, OffPolicySchedule, QNetwork, ReinforceConfig, SacConfig,
+};
+pub use conv_qnet::{ConvQNet, ConvQNetConfig};
 pub use ddpg::{random_action, Ddpg};
 pub use dqn::Dqn;
 pub use error::{AgentError, Result};

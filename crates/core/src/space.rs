@@ -130,7 +130,11 @@ impl Space {
         match self {
             Space::Box { low, high, shape } => {
                 let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+                // Long boxes with one bound for every component (images) print it once.
                 let fmt = |v: &[f64]| {
+                    if v.len() > 8 && v.iter().all(|x| x.to_bits() == v[0].to_bits()) {
+                        return format!("{} (every component)", v[0]);
+                    }
                     let s: Vec<String> = v.iter().map(|x| format!("{x}")).collect();
                     format!("[{}]", s.join(", "))
                 };
@@ -203,5 +207,23 @@ mod tests {
             d.check(&Action::Discrete(2)),
             Err(SpaceError::OutOfRange { action: 2, n: 2 })
         );
+    }
+
+    #[test]
+    fn describe_prints_shape_and_a_uniform_bound_of_an_image_once() {
+        assert_eq!(
+            Space::symmetric(2, 3.0).describe(),
+            "Box(2) low=[-3, -3] high=[3, 3]"
+        );
+        let img = Space::Box {
+            low: vec![0.0; 768],
+            high: vec![1.0; 768],
+            shape: vec![16, 16, 3],
+        };
+        assert_eq!(
+            img.describe(),
+            "Box(16x16x3) low=0 (every component) high=1 (every component)"
+        );
+        assert_eq!(Space::discrete(5).describe(), "Discrete(5)");
     }
 }

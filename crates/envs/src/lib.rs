@@ -6,6 +6,7 @@
 //! |---|---|
 //! | [`Env`], [`Step`], [`EnvError`] | the trait, with gymnasium's `terminated`/`truncated` |
 //! | [`CartPoleEnv`] (`CartPole-v1`), [`PendulumEnv`] (`Pendulum-v1`) | exact to gymnasium 1.x |
+//! | [`PixelMazeEnv`] (`PixelMaze-v0`) | p2's crowd-navigation maze as 16×16 RGB images, 5 discrete actions |
 //! | [`DcMotorPendulumEnv`] (`DcMotorPendulum-idealized-v0`, `DcMotorPendulum-real-v0`) | p0's swing-up pair; reward [`dc_motor_pendulum_reward`] |
 //! | [`make`], [`make_unwrapped`], [`registered`] | the registry |
 //! | [`TimeLimit`], [`SampleCounter`], [`ClipAction`], [`RescaleAction`], [`TransformObservation`] | wrappers |
@@ -17,6 +18,7 @@ mod cartpole;
 mod dc_motor;
 mod env;
 mod pendulum;
+mod pixel_maze;
 mod registry;
 pub mod wrappers;
 
@@ -27,6 +29,7 @@ pub use dc_motor::{
 };
 pub use env::{check_state, round_to_f32, Env, EnvError, Step};
 pub use pendulum::{angle_normalize, pendulum_reward, PendulumEnv};
+pub use pixel_maze::{PixelMazeEnv, PIXEL_MAZE_GRID, PIXEL_MAZE_OBSTACLES, PIXEL_MAZE_PIXELS};
 pub use registry::{make, make_unwrapped, registered, EnvSpec};
 pub use tandem_core::{Action, Space};
 pub use wrappers::{

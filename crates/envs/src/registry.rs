@@ -3,7 +3,8 @@
 use tandem_core::Space;
 
 use crate::{
-    CartPoleEnv, DcMotorPendulumEnv, Env, EnvError, PendulumEnv, PendulumModel, TimeLimit,
+    CartPoleEnv, DcMotorPendulumEnv, Env, EnvError, PendulumEnv, PendulumModel, PixelMazeEnv,
+    TimeLimit,
 };
 
 /// One registered environment: its id, what it is, its episode limit and its spaces.
@@ -43,6 +44,11 @@ const REGISTRY: &[(&str, &str, usize)] = &[
         "p0 DC-motor pendulum swing-up, true model (m = 0.090 kg)",
         400,
     ),
+    (
+        PixelMazeEnv::ID,
+        "p2's maze: reach the goal past patrolling obstacles, observed as 16x16 RGB images",
+        50,
+    ),
 ];
 
 /// The environment `id` without a time limit, or [`EnvError::Unknown`].
@@ -54,6 +60,7 @@ pub fn make_unwrapped(id: &str) -> Result<Box<dyn Env>, EnvError> {
             Box::new(DcMotorPendulumEnv::new(PendulumModel::Idealized))
         }
         DcMotorPendulumEnv::ID_REAL => Box::new(DcMotorPendulumEnv::new(PendulumModel::Real)),
+        PixelMazeEnv::ID => Box::new(PixelMazeEnv::new()),
         _ => return Err(EnvError::Unknown(id.to_string())),
     })
 }
@@ -108,7 +115,7 @@ mod tests {
             assert_eq!(env.action_space(), &spec.action_space);
         }
         let limits: Vec<usize> = registered().iter().map(|s| s.max_episode_steps).collect();
-        assert_eq!(limits, vec![500, 200, 400, 400]);
+        assert_eq!(limits, vec![500, 200, 400, 400, 50]);
     }
 
     #[test]
