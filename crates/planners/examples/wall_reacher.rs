@@ -28,12 +28,15 @@
 //! Environment overrides: `WALL`, `BOUNCE`, `TX`, `TY` (target), `SAMPLES`, `ITERS`, `SEEDS`,
 //! `KL_LQR`, `KL_PI2`, `VAR`, `CURVES=1` (print every iteration).
 
-use ndarray::{Array2, ArrayView2};
+#[path = "../tests/common/reacher.rs"]
+mod reacher;
+
+use reacher::{evaluate, objective, Reacher};
 use tandem_core::seeding::rng_from_seed;
 use tandem_models::{TvlgConfig, TvlgFit};
 use tandem_planners::{
-    pi2_update, quadratize_cost, sample_trajectories, Dynamics, LqrFlm, LqrFlmConfig, Objective,
-    Pi2Config, Pilqr, PilqrConfig, Result, SampleConfig, TvlgController,
+    pi2_update, quadratize_cost, sample_trajectories, LqrFlm, LqrFlmConfig, Objective, Pi2Config,
+    Pilqr, PilqrConfig, SampleConfig, TvlgController,
 };
 
 fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
@@ -41,71 +44,6 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(default)
-}
-
-/// The reacher; see the module docs.
-#[derive(Clone)]
-struct Reacher {
-    wall: f64,
-    bounce: f64,
-}
-
-fn ee(x: &[f64]) -> [f64; 2] {
-    [
-        x[0].cos() + (x[0] + x[1]).cos() * 0.8,
-        x[0].sin() + (x[0] + x[1]).sin() * 0.8,
-    ]
-}
-
-fn objective(target: [f64; 2]) -> Objective {
-    Objective::new(4, 2, move |x, u| {
-        let e = ee(x);
-        let d2 = (e[0] - target[0]).powi(2) + (e[1] - target[1]).powi(2);
-        d2 + 1e-3 * (u[0] * u[0] + u[1] * u[1])
-    })
-    .with_terminal(move |x| {
-        let e = ee(x);
-        20.0 * ((e[0] - target[0]).powi(2) + (e[1] - target[1]).powi(2))
-            + 0.1 * (x[2] * x[2] + x[3] * x[3])
-    })
-}
-
-impl Dynamics for Reacher {
-    fn state_dim(&self) -> usize {
-        4
-    }
-    fn action_dim(&self) -> usize {
-        2
-    }
-    fn step_batch(&self, s: ArrayView2<'_, f64>, a: ArrayView2<'_, f64>) -> Result<Array2<f64>> {
-        let dt = 0.05;
-        let mut out = Array2::zeros(s.dim());
-        for i in 0..s.nrows() {
-            let mut v = [
-                s[(i, 2)] + dt * (a[(i, 0)] - 0.5 * s[(i, 2)]),
-                s[(i, 3)] + dt * (a[(i, 1)] - 0.5 * s[(i, 3)]),
-            ];
-            let mut q = [s[(i, 0)] + dt * v[0], s[(i, 1)] + dt * v[1]];
-            if q[0] > self.wall {
-                // Reflect the overshoot and the velocity (e = 0: stick at the wall).
-                q[0] = self.wall - self.bounce * (q[0] - self.wall);
-                v[0] *= -self.bounce;
-            }
-            out.row_mut(i)
-                .assign(&ndarray::arr1(&[q[0], q[1], v[0], v[1]]));
-        }
-        Ok(out)
-    }
-}
-
-fn evaluate(ctrl: &TvlgController, sys: &Reacher, obj: &Objective, x0: &[f64]) -> f64 {
-    let cfg = SampleConfig {
-        samples: 200,
-        ..Default::default()
-    };
-    sample_trajectories(ctrl, sys, obj, x0, &cfg, &mut rng_from_seed(999))
-        .expect("evaluation rollouts")
-        .mean_cost()
 }
 
 fn run(method: &str, seed: u64, sys: &Reacher, obj: &Objective) -> Vec<f64> {
@@ -177,14 +115,14 @@ fn run(method: &str, seed: u64, sys: &Reacher, obj: &Objective) -> Vec<f64> {
 
 fn main() {
     let sys = Reacher {
-        wall: env_or("WALL", 0.6),
+        wall: Some(env_or("WALL", 0.6)),
         bounce: env_or("BOUNCE", 0.0),
     };
     let obj = objective([env_or("TX", 0.55), env_or("TY", 1.45)]);
     let seeds: u64 = env_or("SEEDS", 3);
     let curves = std::env::var("CURVES").is_ok();
     println!(
-        "wall {} bounce {} samples/iter {} iterations {}",
+        "wall {:?} bounce {} samples/iter {} iterations {}",
         sys.wall,
         sys.bounce,
         env_or("SAMPLES", 20),

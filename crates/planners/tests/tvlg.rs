@@ -4,15 +4,16 @@
 
 mod common;
 
+use common::reacher::{evaluate, objective, Reacher};
 use common::{quadratic_objective, riccati, LinearModel};
 use nalgebra::{DMatrix, DVector};
-use ndarray::{Array2, ArrayView2};
+use ndarray::Array2;
 use tandem_core::seeding::rng_from_seed;
 use tandem_models::{TvlgConfig, TvlgFit};
 use tandem_planners::{
     pi2_update, pi2_update_with_temperatures, pi2_weights, quadratize_cost, sample_trajectories,
     Dynamics, LqrFlm, LqrFlmConfig, ModelDynamics, Objective, Pi2Config, Pilqr, PilqrConfig,
-    Result, SampleConfig, TvlgController,
+    SampleConfig, TvlgController,
 };
 
 const T: usize = 20;
@@ -81,80 +82,13 @@ fn lqr_flm_with_fitted_dynamics_reaches_the_lqr_cost() {
     );
 }
 
-/// A planar 2-link reacher: joint angles and velocities, torque-like inputs on two damped joints
-/// (dt = 0.05); cost on the squared end-effector distance to a target. An optional wall stops
-/// joint 1 at `wall` (position clamped, velocity zeroed): an abrupt change in the dynamics.
-#[derive(Clone)]
-struct Reacher {
-    wall: Option<f64>,
-}
-
-impl Reacher {
-    fn ee(x: &[f64]) -> [f64; 2] {
-        [
-            x[0].cos() + x[0].cos() * 0.0 + (x[0] + x[1]).cos() * 0.8,
-            x[0].sin() + (x[0] + x[1]).sin() * 0.8,
-        ]
-    }
-    fn objective(target: [f64; 2]) -> Objective {
-        Objective::new(4, 2, move |x, u| {
-            let e = Self::ee(x);
-            let d2 = (e[0] - target[0]).powi(2) + (e[1] - target[1]).powi(2);
-            d2 + 1e-3 * (u[0] * u[0] + u[1] * u[1])
-        })
-        .with_terminal(move |x| {
-            let e = Self::ee(x);
-            20.0 * ((e[0] - target[0]).powi(2) + (e[1] - target[1]).powi(2))
-                + 0.1 * (x[2] * x[2] + x[3] * x[3])
-        })
-    }
-}
-
-impl Dynamics for Reacher {
-    fn state_dim(&self) -> usize {
-        4
-    }
-    fn action_dim(&self) -> usize {
-        2
-    }
-    fn step_batch(&self, s: ArrayView2<'_, f64>, a: ArrayView2<'_, f64>) -> Result<Array2<f64>> {
-        let dt = 0.05;
-        let mut out = Array2::zeros(s.dim());
-        for i in 0..s.nrows() {
-            let mut v = [
-                s[(i, 2)] + dt * (a[(i, 0)] - 0.5 * s[(i, 2)]),
-                s[(i, 3)] + dt * (a[(i, 1)] - 0.5 * s[(i, 3)]),
-            ];
-            let mut q = [s[(i, 0)] + dt * v[0], s[(i, 1)] + dt * v[1]];
-            if let Some(w) = self.wall {
-                if q[0] > w {
-                    q[0] = w;
-                    v[0] = 0.0;
-                }
-            }
-            out.row_mut(i)
-                .assign(&ndarray::arr1(&[q[0], q[1], v[0], v[1]]));
-        }
-        Ok(out)
-    }
-}
-
-/// Expected cost of a controller, estimated with a fixed set of 200 rollouts (common random
-/// numbers, so successive controllers are compared on the same noise).
-fn evaluate(ctrl: &TvlgController, sys: &dyn Dynamics, obj: &Objective, x0: &[f64]) -> f64 {
-    let cfg = SampleConfig {
-        samples: 200,
-        ..Default::default()
-    };
-    sample_trajectories(ctrl, sys, obj, x0, &cfg, &mut rng_from_seed(999))
-        .unwrap()
-        .mean_cost()
-}
-
 #[test]
 fn pi2_improves_a_reacher_monotonically() {
-    let sys = Reacher { wall: None };
-    let obj = Reacher::objective([0.2, 1.2]);
+    let sys = Reacher {
+        wall: None,
+        bounce: 0.0,
+    };
+    let obj = objective([0.2, 1.2]);
     let x0 = [0.0, 0.0, 0.0, 0.0];
     let mut ctrl = TvlgController::constant(30, 4, &[0.0, 0.0], 4.0).unwrap();
     let cfg = Pi2Config::default();

@@ -1,6 +1,8 @@
 //! Shared test fixtures: a linear model, a pendulum model, and the Riccati truth.
 #![allow(dead_code)]
 
+pub mod reacher;
+
 use nalgebra::{DMatrix, DVector};
 use ndarray::Array2;
 use tandem_core::Rng;
