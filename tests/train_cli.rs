@@ -16,17 +16,9 @@ fn tmp(name: &str) -> PathBuf {
     d
 }
 
-#[test]
-fn a_short_run_writes_config_metrics_summary_curve_and_checkpoint() {
-    let dir = tmp("run");
-    let cfg = dir.join("small.toml");
-    std::fs::write(
-        &cfg,
-        "[agent]\nhidden = [16, 16]\nbatch_size = 32\n[train]\neval_interval = 100\neval_episodes = 2\n",
-    )
-    .unwrap();
-    let out = dir.join("out");
-    let o = tandem()
+/// `tandem train` with SAC on Pendulum-v1 for 300 steps, seed 3, with `cfg` and `out`.
+fn train_sac(cfg: &std::path::Path, out: &std::path::Path) -> std::process::Output {
+    tandem()
         .args([
             "train",
             "--algo",
@@ -40,11 +32,24 @@ fn a_short_run_writes_config_metrics_summary_curve_and_checkpoint() {
             "--quiet",
         ])
         .arg("--config")
-        .arg(&cfg)
+        .arg(cfg)
         .arg("--out")
-        .arg(&out)
+        .arg(out)
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+#[test]
+fn a_short_run_writes_config_metrics_summary_curve_and_checkpoint() {
+    let dir = tmp("run");
+    let cfg = dir.join("small.toml");
+    std::fs::write(
+        &cfg,
+        "[agent]\nhidden = [16, 16]\nbatch_size = 32\n[train]\neval_interval = 100\neval_episodes = 2\n",
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let o = train_sac(&cfg, &out);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     for f in [
         "config.toml",
@@ -79,25 +84,7 @@ fn a_short_run_writes_config_metrics_summary_curve_and_checkpoint() {
 
     // The same seed again: identical metrics.
     let out2 = dir.join("out2");
-    let o = tandem()
-        .args([
-            "train",
-            "--algo",
-            "sac",
-            "--env",
-            "Pendulum-v1",
-            "--steps",
-            "300",
-            "--seed",
-            "3",
-            "--quiet",
-        ])
-        .arg("--config")
-        .arg(&cfg)
-        .arg("--out")
-        .arg(&out2)
-        .output()
-        .unwrap();
+    let o = train_sac(&cfg, &out2);
     assert!(o.status.success());
     assert_eq!(
         metrics,
