@@ -147,6 +147,9 @@ pub fn mean_stderr(v: &[f64]) -> (f64, f64) {
 /// reached, reached, searched_up_to}.
 pub fn table_json(records: &[RunRecord], cfg: &P0Config) -> Value {
     let mut out = serde_json::Map::new();
+    // Per method: mean true samples to the target with a seed that never reached it counted at
+    // the samples it used, whether any seed did so, and the mean return at the budget.
+    let mut summary: Vec<(Method, f64, bool, f64)> = Vec::new();
     for m in Method::ALL {
         let runs: Vec<&RunRecord> = records.iter().filter(|r| r.method == m).collect();
         if runs.is_empty() {
@@ -164,6 +167,13 @@ pub fn table_json(records: &[RunRecord], cfg: &P0Config) -> Value {
         let reached: Vec<f64> = to.iter().flatten().map(|v| *v as f64).collect();
         let (tm, tse) = mean_stderr(&reached);
         let searched = runs.iter().map(|r| r.true_samples).max().unwrap_or(0);
+        let used: Vec<f64> = runs
+            .iter()
+            .zip(&to)
+            .map(|(r, t)| t.unwrap_or(r.true_samples) as f64)
+            .collect();
+        let used_mean = used.iter().sum::<f64>() / used.len() as f64;
+        summary.push((m, used_mean, reached.len() < runs.len(), mean));
         out.insert(
             m.name().into(),
             json!({
@@ -192,10 +202,10 @@ pub fn table_json(records: &[RunRecord], cfg: &P0Config) -> Value {
             .map(|r| r.final_return(cfg.reference_evals))
             .collect();
         let (mean, se) = mean_stderr(&per_seed);
-        let gap = out
-            .get("difference")
-            .and_then(|d| d["return_at_budget"]["mean"].as_f64())
-            .map(|d| (d - mean).abs() / mean.abs());
+        let gap = summary
+            .iter()
+            .find(|x| x.0 == Method::Difference)
+            .map(|x| (x.3 - mean).abs() / mean.abs());
         out.insert(
             "reference".into(),
             json!({
@@ -210,38 +220,21 @@ pub fn table_json(records: &[RunRecord], cfg: &P0Config) -> Value {
         );
     }
     // How many times more true samples a baseline needed than the difference method. A seed
-    // that never reached the target counts with the samples it searched, so the ratio is then a
+    // that never reached the target counts with the samples it used, so the ratio is then a
     // lower bound.
-    let bounded = |m: &str| -> Option<(f64, bool)> {
-        let r = &out.get(m)?["samples_to_target"];
-        let searched = r["searched_up_to"].as_f64()?;
-        let v: Vec<(f64, bool)> = r["per_seed"]
-            .as_array()?
-            .iter()
-            .map(|x| x.as_f64().map_or((searched, true), |v| (v, false)))
-            .collect();
-        let mean = v.iter().map(|p| p.0).sum::<f64>() / v.len() as f64;
-        Some((mean, v.iter().any(|p| p.1)))
-    };
-    let found: Vec<(&str, Option<(f64, bool)>)> = ["difference", "cold", "warm"]
-        .into_iter()
-        .map(|m| (m, bounded(m)))
-        .collect();
-    if let Some((d, d_bound)) = found[0].1 {
-        for &(m, b) in &found[1..] {
-            if let Some((b, b_bound)) = b {
-                let ratio = if d > 0.0 { json!(b / d) } else { Value::Null };
-                out.insert(
-                    format!("{m}_over_difference"),
-                    json!({
-                        "ratio": ratio,
-                        "baseline_mean_samples": b,
-                        "difference_mean_samples": d,
-                        "lower_bound": b_bound && !d_bound,
-                        "note": "per-seed samples to the target, a seed that never reached it counted at the samples it used",
-                    }),
-                );
-            }
+    if let Some(&(_, d, d_bound, _)) = summary.iter().find(|x| x.0 == Method::Difference) {
+        for &(m, b, b_bound, _) in summary.iter().filter(|x| x.0 != Method::Difference) {
+            let ratio = if d > 0.0 { json!(b / d) } else { Value::Null };
+            out.insert(
+                format!("{}_over_difference", m.name()),
+                json!({
+                    "ratio": ratio,
+                    "baseline_mean_samples": b,
+                    "difference_mean_samples": d,
+                    "lower_bound": b_bound && !d_bound,
+                    "note": "per-seed samples to the target, a seed that never reached it counted at the samples it used",
+                }),
+            );
         }
     }
     Value::Object(out)
