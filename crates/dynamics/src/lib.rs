@@ -17,7 +17,9 @@
 //! parameters are readable from configs), `thiserror` (error types), `urdf-rs` (the only reader of
 //! robot files), `quick-xml` (already under urdf-rs: a light pre-pass over the XML so that an
 //! unknown joint type or an `<inertial>` without `<mass>`/`<inertia>` is reported with the
-//! element's name, which urdf-rs's serde errors do not give).
+//! element's name, which urdf-rs's serde errors do not give), `libm` (pure-Rust `sincos` of the
+//! joint angles: inlinable and free of glibc's rounding-mode save and restore, it made the CRBA on
+//! the 7-DoF arm ~7% faster; musl's kernels, under 1 ulp).
 
 pub mod actuators;
 pub mod biped;

@@ -80,6 +80,11 @@ pub struct Data {
     pub(crate) df: Vec<Force>,
     /// Cholesky scratch (nv x nv).
     pub(crate) chol: DMatrix<f64>,
+    /// CRBA: the forces `F_c = Ycrb_c S_c` of a subtree's joints as six rows of `nv` columns
+    /// (linear x, y, z, then angular), each column in the frame of the joint being processed.
+    pub(crate) fcrb: [Vec<f64>; 6],
+    /// CRBA: one past the last joint of each joint's subtree (joints are in depth-first order).
+    pub(crate) subtree_end: Vec<usize>,
 }
 
 impl Data {
@@ -126,6 +131,8 @@ impl Data {
             da: vec![Motion::zero(); n],
             df: vec![Force::zero(); n],
             chol: DMatrix::zeros(n, n),
+            fcrb: std::array::from_fn(|_| vec![0.0; n]),
+            subtree_end: vec![0; n],
         }
     }
 }

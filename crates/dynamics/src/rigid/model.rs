@@ -173,9 +173,9 @@ pub struct JointModel {
     /// Reflected rotor inertia added to `M[i][i]` (0 from URDF; set for geared motors). RNEA,
     /// CRBA and ABA include it, as Pinocchio's `armature` does.
     pub armature: f64,
-    /// `Some(k)` when `axis` is exactly the unit vector `e_k`: the joint rotation then touches
-    /// two columns only (Pinocchio's `JointModelRX/RY/RZ`).
-    pub(crate) aligned: Option<usize>,
+    /// `Some((k, ±1))` when `axis` is exactly `±e_k`: the joint rotation then touches two
+    /// columns only (Pinocchio's `JointModelRX/RY/RZ`; `−e_k` turns by `−q` about `e_k`).
+    pub(crate) aligned: Option<(usize, f64)>,
 }
 
 impl JointModel {
@@ -193,7 +193,7 @@ impl JointModel {
     pub fn joint_transform(&self, q: f64) -> Se3 {
         match self.kind {
             JointKind::Revolute => {
-                let (s, c) = q.sin_cos();
+                let (s, c) = libm::sincos(q);
                 Se3::new(axis_rotation(&self.axis, s, c), Vector3::zeros())
             }
             JointKind::Prismatic => Se3::new(Matrix3::identity(), self.axis * q),
@@ -201,14 +201,15 @@ impl JointModel {
     }
 
     /// `placement * X_J(q)`: the joint frame in its parent joint's frame.
-    #[inline]
+    #[inline(always)]
     pub fn local_placement(&self, q: f64) -> Se3 {
         match self.kind {
             JointKind::Revolute => {
-                let (s, c) = q.sin_cos();
+                let (s, c) = libm::sincos(q);
                 let r = &self.placement.rot;
                 let rot = match self.aligned {
-                    Some(k) => {
+                    Some((k, sign)) => {
+                        let s = sign * s;
                         // R · Rot(e_k, q) only mixes the two columns other than k.
                         let (i, j) = ((k + 1) % 3, (k + 2) % 3);
                         let (ci, cj) = (r.column(i), r.column(j));
@@ -799,7 +800,11 @@ impl Tree<'_> {
                 damping,
                 friction,
                 armature: 0.0,
-                aligned: (0..3).find(|&k| a / n == Vector3::ith(k, 1.0)),
+                aligned: [1.0, -1.0].into_iter().find_map(|sign| {
+                    (0..3)
+                        .find(|&k| a / n == Vector3::ith(k, sign))
+                        .map(|k| (k, sign))
+                }),
             });
             model.frames.push(Frame {
                 name: child.name.clone(),
