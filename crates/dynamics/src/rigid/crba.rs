@@ -81,14 +81,20 @@ pub fn crba<'d>(model: &Model, data: &'d mut Data, q: &[f64]) -> &'d DMatrix<f64
         let j = &model.joints[i];
         // Every descendant has a larger index, so the subtree's extent is final here.
         let end = data.subtree_end[i];
-        let yi = data.ycrb[i];
-        let f = yi.mul_motion(&j.subspace());
-        (fx[i], fy[i], fz[i]) = (f.f.x, f.f.y, f.f.z);
-        (nx[i], ny[i], nz[i]) = (f.n.x, f.n.y, f.n.z);
+        // Parents come first, so ycrb[i] is read while its parent's entry is written.
+        let (before, from_i) = data.ycrb.split_at_mut(i);
+        let yi = &from_i[0];
+        // F_i = Ycrb_i S_i: (a × h, Ī a) for a revolute axis a, (m a, h × a) for a prismatic one.
+        let (a, h) = (&j.axis, &yi.h);
+        let (f, n) = match j.kind {
+            JointKind::Revolute => (a.cross(h), yi.ibar * a),
+            JointKind::Prismatic => (a * yi.mass, h.cross(a)),
+        };
+        (fx[i], fy[i], fz[i]) = (f.x, f.y, f.z);
+        (nx[i], ny[i], nz[i]) = (n.x, n.y, n.z);
 
         // Row i over the subtree: S_i · F_c (S is angular for a revolute joint, linear for a
         // prismatic one).
-        let a = &j.axis;
         let (rx, ry, rz) = match j.kind {
             JointKind::Revolute => (&nx[i..end], &ny[i..end], &nz[i..end]),
             JointKind::Prismatic => (&fx[i..end], &fy[i..end], &fz[i..end]),
@@ -112,7 +118,7 @@ pub fn crba<'d>(model: &Model, data: &'d mut Data, q: &[f64]) -> &'d DMatrix<f64
                 &mut ny[i..end],
                 &mut nz[i..end],
             );
-            add_act_inertia(x, &yi, &mut data.ycrb[p]);
+            add_act_inertia(x, yi, &mut before[p]);
             data.subtree_end[p] = data.subtree_end[p].max(end);
         }
     }
@@ -150,5 +156,24 @@ fn transform_forces(
         ny[c] = r[(1, 0)] * a + r[(1, 1)] * b + r[(1, 2)] * d + (p.z * gx - p.x * gz);
         nz[c] = r[(2, 0)] * a + r[(2, 1)] * b + r[(2, 2)] * d + (p.x * gy - p.y * gx);
         (fx[c], fy[c], fz[c]) = (gx, gy, gz);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix3, Vector3};
+
+    #[test]
+    fn written_out_inertia_transform_matches_the_generic_one() {
+        let x = Se3::from_xyz_rpy([0.3, -0.7, 1.1], [0.4, -1.2, 2.5]);
+        let ic = Matrix3::new(0.9, 0.05, -0.02, 0.05, 0.7, 0.03, -0.02, 0.03, 0.4);
+        let y = Inertia::from_com(2.5, Vector3::new(0.1, -0.2, 0.35), ic);
+        let mut acc = Inertia::from_com(1.3, Vector3::new(-0.4, 0.2, 0.1), ic * 0.5);
+        let want = acc + x.act_inertia(&y);
+        add_act_inertia(&x, &y, &mut acc);
+        assert!((acc.mass - want.mass).abs() < 1e-14);
+        assert!((acc.h - want.h).abs().max() < 1e-14);
+        assert!((acc.ibar - want.ibar).abs().max() < 1e-13);
     }
 }
