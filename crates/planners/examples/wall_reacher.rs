@@ -31,12 +31,14 @@
 #[path = "../tests/common/reacher.rs"]
 mod reacher;
 
-use reacher::{evaluate, objective, Reacher};
+use reacher::{evaluate, objective, push_objective_dim, Reacher};
 use tandem_core::seeding::rng_from_seed;
-use tandem_models::{TvlgConfig, TvlgFit};
+use tandem_models::{TvlgConfig, TvlgDynamics, TvlgFit};
+use tandem_planners::Dynamics;
 use tandem_planners::{
-    pi2_update, quadratize_cost, sample_trajectories, LqrFlm, LqrFlmConfig, Objective, Pi2Config,
-    Pilqr, PilqrConfig, SampleConfig, TvlgController,
+    expected_cost, forward_moments, pi2_update, quadratize_cost, sample_trajectories, LqrFlm,
+    LqrFlmConfig, Objective, Pi2Config, Pilqr, PilqrConfig, QuadraticCost, SampleConfig,
+    TvlgController,
 };
 
 fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
@@ -46,19 +48,53 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
         .unwrap_or(default)
 }
 
-fn run(method: &str, seed: u64, sys: &Reacher, obj: &Objective) -> Vec<f64> {
-    let x0 = [0.0; 4];
+/// GPS's step-size rule for LQR-FLM (Levine & Abbeel 2014 §3.1; GPS `AlgorithmTrajOpt._stepadjust`
+/// and `_set_new_mult`): with `L(p, dyn, cost)` the expected quadratic cost of a controller under
+/// fitted dynamics, the predicted improvement `L(p̄, dyn̄) − L(p, dyn̄)` (last iteration's model)
+/// and the actual one `L(p̄, dyn̄) − L(p, dyn)` (this iteration's model) scale the KL step by
+/// `predicted / (2 max(predicted − actual, 1e-4))`, clamped to `[0.1, 5]`; the multiplier stays in
+/// `[0.01, 10]`.
+fn classic_step(
+    mult: f64,
+    prev_ctrl: &TvlgController,
+    prev_dyn: &TvlgDynamics,
+    prev_cost: &[QuadraticCost],
+    ctrl: &TvlgController,
+    dynamics: &TvlgDynamics,
+    cost: &[QuadraticCost],
+) -> tandem_planners::Result<f64> {
+    let l = |c: &TvlgController, d: &TvlgDynamics, q: &[QuadraticCost]| {
+        forward_moments(c, d).map(|m| expected_cost(&m, q))
+    };
+    let before = l(prev_ctrl, prev_dyn, prev_cost)?;
+    let predicted = before - l(ctrl, prev_dyn, prev_cost)?;
+    let actual = before - l(ctrl, dynamics, cost)?;
+    let f = (predicted / (2.0 * (predicted - actual).max(1e-4))).clamp(0.1, 5.0);
+    if std::env::var("DEBUG").is_ok() {
+        eprintln!(
+            "classic: predicted {predicted:.2} actual {actual:.2} factor {f:.2} mult {:.2}",
+            (mult * f).clamp(0.01, 10.0)
+        );
+    }
+    Ok((mult * f).clamp(0.01, 10.0))
+}
+
+fn run(method: &str, seed: u64, sys: &Reacher, obj: &Objective, x0: &[f64]) -> Vec<f64> {
+    let n = x0.len();
     let scfg = SampleConfig {
         samples: env_or("SAMPLES", 20),
         ..Default::default()
     };
     let kl_lqr = env_or("KL_LQR", 1.0);
+    let base = Pilqr::default_pi2();
     let pi2_cfg = Pi2Config {
-        kl_step: env_or("KL_PI2", 0.5),
-        ..Pi2Config::default()
+        kl_step: env_or("KL_PI2", base.kl_step),
+        update_gains: env_or("PI2_GAINS", base.update_gains as u8) == 1,
+        covariance_damping: env_or("DAMP", base.covariance_damping),
+        ..base
     };
-    let mut ctrl =
-        TvlgController::constant(30, 4, &[0.0, 0.0], env_or("VAR", 2.0)).expect("controller");
+    let mut ctrl = TvlgController::constant(env_or("T", 30), n, &[0.0, 0.0], env_or("VAR", 2.0))
+        .expect("controller");
     let mut rng = rng_from_seed(seed);
     let mut fit = TvlgFit::new(TvlgConfig::default());
     let lqr = LqrFlm::new(LqrFlmConfig {
@@ -72,12 +108,17 @@ fn run(method: &str, seed: u64, sys: &Reacher, obj: &Objective) -> Vec<f64> {
             ..Default::default()
         },
         pi2: pi2_cfg.clone(),
+        adjust_step: env_or("ADJUST", 1u8) == 1,
         ..Default::default()
     })
     .expect("PILQR");
-    let mut evals = vec![evaluate(&ctrl, sys, obj, &x0)];
+    // GPS's step adjustment for LQR-FLM alone ("classic": predicted vs actual improvement).
+    let classic = env_or("LQR_STEP", String::from("classic")) == "classic";
+    let mut step_mult = 1.0;
+    let mut prev: Option<(TvlgController, TvlgDynamics, Vec<QuadraticCost>)> = None;
+    let mut evals = vec![evaluate(&ctrl, sys, obj, x0)];
     for _ in 0..env_or("ITERS", 10) {
-        let samples = sample_trajectories(&ctrl, sys, obj, &x0, &scfg, &mut rng).expect("samples");
+        let samples = sample_trajectories(&ctrl, sys, obj, x0, &scfg, &mut rng).expect("samples");
         let next = match method {
             "pi2" => pi2_update(
                 &ctrl,
@@ -93,12 +134,28 @@ fn run(method: &str, seed: u64, sys: &Reacher, obj: &Objective) -> Vec<f64> {
                 .and_then(|dynamics| {
                     if method == "lqr" {
                         let cost = quadratize_cost(obj, &samples)?;
-                        lqr.update(&ctrl, &dynamics, &cost, None)
+                        if classic {
+                            if let Some((pc, pd, pq)) = &prev {
+                                step_mult =
+                                    classic_step(step_mult, pc, pd, pq, &ctrl, &dynamics, &cost)?;
+                            }
+                            prev = Some((ctrl.clone(), dynamics.clone(), cost.clone()));
+                        }
+                        lqr.update(&ctrl, &dynamics, &cost, Some(kl_lqr * step_mult))
                             .map(|s| s.controller)
                     } else {
-                        pilqr
-                            .update(&ctrl, &samples, &dynamics, obj)
-                            .map(|s| s.controller)
+                        pilqr.update(&ctrl, &samples, &dynamics, obj).map(|s| {
+                            if std::env::var("DEBUG").is_ok() {
+                                let t = s.step_mult.len() as f64;
+                                eprintln!(
+                                    "seed {seed}: mean ratio {:.3} mean mult {:.2} min mult {:.2}",
+                                    s.residual_ratio.iter().sum::<f64>() / t,
+                                    s.step_mult.iter().sum::<f64>() / t,
+                                    s.step_mult.iter().copied().fold(f64::INFINITY, f64::min)
+                                );
+                            }
+                            s.controller
+                        })
                     }
                 }),
         };
@@ -108,42 +165,83 @@ fn run(method: &str, seed: u64, sys: &Reacher, obj: &Objective) -> Vec<f64> {
                 eprintln!("{method} seed {seed}: update failed ({e}); keeping the controller")
             }
         }
-        evals.push(evaluate(&ctrl, sys, obj, &x0));
+        evals.push(evaluate(&ctrl, sys, obj, x0));
     }
     evals
 }
 
 fn main() {
-    let sys = Reacher {
-        wall: Some(env_or("WALL", 0.6)),
-        bounce: env_or("BOUNCE", 0.0),
+    let push = std::env::var("TASK").map(|t| t == "push").unwrap_or(false);
+    let (sys, obj) = if push {
+        let sys = Reacher::hockey(env_or("LOSS", 0.5), env_or("KICK", 0.0));
+        let n = sys.state_dim();
+        (sys, push_objective_dim(env_or("GOAL", 0.8), n))
+    } else {
+        (
+            Reacher::walled(env_or("WALL", 0.6), env_or("BOUNCE", 0.0)),
+            objective([env_or("TX", 0.55), env_or("TY", 1.45)]),
+        )
     };
-    let obj = objective([env_or("TX", 0.55), env_or("TY", 1.45)]);
+    let x0 = sys.x0(env_or("BLOCK", 0.3));
     let seeds: u64 = env_or("SEEDS", 3);
     let curves = std::env::var("CURVES").is_ok();
     println!(
-        "wall {:?} bounce {} samples/iter {} iterations {}",
+        "wall {:?} bounce {} push_loss {:?} samples/iter {} iterations {}",
         sys.wall,
         sys.bounce,
+        sys.push_loss,
         env_or("SAMPLES", 20),
         env_or("ITERS", 10)
     );
-    for method in ["lqr", "pi2", "pilqr"] {
-        let finals: Vec<f64> = (0..seeds)
+    let methods = ["lqr", "pi2", "pilqr"];
+    // curves[method][seed][iteration]
+    let mut all: Vec<Vec<Vec<f64>>> = Vec::new();
+    let only = std::env::var("METHODS").unwrap_or_default();
+    for method in methods {
+        if !only.is_empty() && !only.split(',').any(|m| m == method) {
+            all.push(vec![
+                vec![f64::NAN; env_or::<usize>("ITERS", 10) + 1];
+                seeds as usize
+            ]);
+            continue;
+        }
+        let per_seed: Vec<Vec<f64>> = (0..seeds)
             .map(|seed| {
-                let ev = run(method, seed, &sys, &obj);
+                let ev = run(method, seed, &sys, &obj, &x0);
                 if curves {
                     let c: Vec<String> = ev.iter().map(|v| format!("{v:.1}")).collect();
                     println!("  {method} seed {seed}: {}", c.join(" "));
                 }
-                *ev.last().expect("at least the initial evaluation")
+                ev
             })
+            .collect();
+        let finals: Vec<f64> = per_seed
+            .iter()
+            .map(|ev| *ev.last().expect("at least the initial evaluation"))
             .collect();
         let mean = finals.iter().sum::<f64>() / finals.len() as f64;
         let f: Vec<String> = finals.iter().map(|v| format!("{v:.1}")).collect();
         println!(
             "{method:>6}: final cost mean {mean:.1} (seeds: {})",
             f.join(", ")
+        );
+        all.push(per_seed);
+    }
+    // Seed-mean learning curves and, per iteration, the seeds on which PILQR is below both.
+    let iters = all[0][0].len();
+    let samples: usize = env_or("SAMPLES", 20);
+    println!("iteration samples | LQR-FLM PI2 PILQR (seed means) | seeds with PILQR best");
+    for it in 0..iters {
+        let mean = |m: usize| all[m].iter().map(|ev| ev[it]).sum::<f64>() / seeds as f64;
+        let best = (0..seeds as usize)
+            .filter(|&s| all[2][s][it] < all[0][s][it] && all[2][s][it] < all[1][s][it])
+            .count();
+        println!(
+            "{it:>9} {:>7} | {:>7.1} {:>5.1} {:>5.1} | {best}/{seeds}",
+            it * samples,
+            mean(0),
+            mean(1),
+            mean(2)
         );
     }
 }
