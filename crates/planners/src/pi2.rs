@@ -6,7 +6,8 @@
 //! `KL(P_t ‖ uniform) ≤ ε` (Theorem 1), found by bisection in log space (the dual is convex and its
 //! derivative is `ε − KL`). The new `K_t, k_t, Σ_t` are the weighted maximum-likelihood fit of
 //! the sampled `u_{i,t}` on `x_{i,t}` (ridge-regularized towards the previous gains so that few
-//! effective samples still give a well-posed fit; `Σ_t` floored at `min_variance`).
+//! effective samples still give a well-posed fit; `Σ_t` floored at `min_variance`, optionally
+//! damped towards the previous `Σ_t` as in the authors' GPS code, `covariance_damping`).
 
 use nalgebra::{DMatrix, DVector};
 use ndarray::{Array2, Array3};

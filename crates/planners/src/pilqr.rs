@@ -16,7 +16,14 @@
 //! 4. `p = PI²(p̂)` on `(x, û)` weighted by the residuals `S̃`, at the temperatures `η_t` that the
 //!    PI² KL bound gives on the full cost-to-go `S` (the authors' code: `fixed_eta`). Residuals
 //!    that are small next to the spread of `S` then move the controller little, while a poor
-//!    model (large residuals) hands the step over to PI².
+//!    model (large residuals) hands the step over to PI². As in the authors' `TrajOptPI2`
+//!    ([`Pilqr::default_pi2`]), this stage keeps `K̂_t` and refits only `k_t` and `Σ_t`, the
+//!    latter damped towards `Σ̂_t`.
+//!
+//! p4's text states the step adjustment only in words (§V); the per-step residual-ratio rule
+//! above is the authors' PILQR code. GPS's other rule, from the predicted and the actual
+//! improvement of the expected cost, is the authors' rule for LQR-FLM alone
+//! ([`crate::classic_step_mult`]), not PILQR's.
 
 use ndarray::{Array2, Array3};
 use tandem_models::TvlgDynamics;

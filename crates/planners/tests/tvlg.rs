@@ -11,9 +11,9 @@ use ndarray::Array2;
 use tandem_core::seeding::rng_from_seed;
 use tandem_models::{TvlgConfig, TvlgFit};
 use tandem_planners::{
-    pi2_update, pi2_update_with_temperatures, pi2_weights, quadratize_cost, sample_trajectories,
-    Dynamics, LqrFlm, LqrFlmConfig, ModelDynamics, Objective, Pi2Config, Pilqr, PilqrConfig,
-    SampleConfig, TvlgController,
+    classic_step_mult, pi2_update, pi2_update_with_temperatures, pi2_weights, quadratize_cost,
+    sample_trajectories, Dynamics, LqrFlm, LqrFlmConfig, ModelDynamics, Objective, Pi2Config,
+    Pilqr, PilqrConfig, SampleConfig, TvlgController,
 };
 
 const T: usize = 20;
@@ -138,8 +138,8 @@ fn pi2_temperature_meets_the_kl_bound() {
 /// cost the fitted model and the quadratic cost are exact, the residual cost-to-go vanishes, and
 /// every step's multiplier doubles per update (after the first, which keeps 1); with strong
 /// process noise the model's mean prediction explains little of each sample's cost-to-go, the
-/// residuals stay large and the multipliers halve. The comparison with LQR-FLM and PI² on the wall reacher is the
-/// `wall_reacher` example (tens of seconds in release).
+/// residuals stay large and the multipliers halve. The comparison with LQR-FLM and PI² on the
+/// pusher and the walled reacher is the `wall_reacher` example (seconds to a minute in release).
 #[test]
 fn pilqr_step_multipliers_follow_the_residual_ratio() {
     let m = LinearModel::double_integrator();
@@ -418,4 +418,40 @@ fn pusher_contact_happens_at_different_steps() {
     println!("first contact steps {first_contact:?}");
     assert!(steps.len() >= 5, "{first_contact:?}");
     assert!(steps[steps.len() - 1] - steps[0] >= 5, "{first_contact:?}");
+}
+
+/// GPS's classic step rule for LQR-FLM: when the new model agrees with the old one (same fit and
+/// cost), the actual improvement equals the predicted one and the multiplier grows by the
+/// maximum factor 5 (capped at 10); when the "new" controller is the old one, nothing was
+/// predicted and it shrinks by the minimum factor 0.1.
+#[test]
+fn classic_step_rule_on_agreeing_and_null_predictions() {
+    let m = LinearModel::double_integrator();
+    let sys = ModelDynamics::new(&m, 0);
+    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
+    let r = DMatrix::from_element(1, 1, 0.01);
+    let obj = quadratic_objective(&q, &r, &(&q * 10.0));
+    let ctrl = TvlgController::constant(T, 2, &[0.0], 1.0).unwrap();
+    let scfg = SampleConfig {
+        process_std: 0.01,
+        ..Default::default()
+    };
+    let samples =
+        sample_trajectories(&ctrl, &sys, &obj, &[1.0, 0.0], &scfg, &mut rng_from_seed(4)).unwrap();
+    let dynamics = TvlgFit::new(TvlgConfig::default())
+        .fit(samples.states.view(), samples.actions.view())
+        .unwrap();
+    let cost = quadratize_cost(&obj, &samples).unwrap();
+    let next = LqrFlm::new(LqrFlmConfig::default())
+        .unwrap()
+        .update(&ctrl, &dynamics, &cost, None)
+        .unwrap()
+        .controller;
+    let grow = classic_step_mult(1.0, &ctrl, &dynamics, &cost, &next, &dynamics, &cost).unwrap();
+    assert_eq!(grow, 5.0);
+    let capped = classic_step_mult(3.0, &ctrl, &dynamics, &cost, &next, &dynamics, &cost).unwrap();
+    assert_eq!(capped, 10.0);
+    let shrink = classic_step_mult(1.0, &ctrl, &dynamics, &cost, &ctrl, &dynamics, &cost).unwrap();
+    assert!((shrink - 0.1).abs() < 1e-12);
+    assert!(classic_step_mult(0.0, &ctrl, &dynamics, &cost, &next, &dynamics, &cost).is_err());
 }

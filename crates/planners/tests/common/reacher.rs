@@ -12,6 +12,8 @@
 //! does not depend on the arm at all, in contact it moves one for one with `q₁`, so a
 //! time-indexed linear fit of samples that touch the block at different steps mixes two modes.
 //! [`push_objective`] scores the arm-to-block and block-to-goal distances, as p4's pusher does.
+//! The hockey variant ([`Reacher::hockey`]) lets the hit block slide on (a sixth state, its
+//! velocity), decelerated by friction.
 #![allow(dead_code)]
 
 use ndarray::{Array2, ArrayView2};
