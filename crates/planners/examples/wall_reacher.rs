@@ -72,8 +72,9 @@
 //! baseline: it is faster over the first 2–5 iterations (its multiplier grows ×5 per iteration,
 //! PILQR's ×2) and afterwards PILQR's seed mean is lower (7.0 vs 7.3 at 400 samples, driven by
 //! LQR-FLM's bad seeds 1 and 2) but PILQR is below it on only about half the seeds. The sliding
-//! block (`KICK=1`) makes LQR-FLM erratic (seed-mean spikes) but PILQR's lead over it is not
-//! consistent per seed either (2–8/10 seeds).
+//! block (`KICK=1`, seeds 0–9) makes LQR-FLM erratic (seed-mean spikes) but PILQR's lead is not
+//! consistent per seed either: below fixed-ε LQR-FLM and PI² on 10/10 seeds at 40 samples, 2/10
+//! at 400 (seed means 9.0 / 13.4 / 9.3 there); below GPS-step LQR-FLM on 3–8/10.
 //!
 //! Environment overrides: `TASK` (`push`, `wall`), `LOSS`, `KICK`, `BLOCK`, `GOAL`, `WALL`,
 //! `BOUNCE`, `TX`, `TY`, `SAMPLES`, `ITERS`, `SEEDS`, `SEED0` (first seed), `T`, `VAR`, `KL_LQR`, `LQR_STEP`
