@@ -71,11 +71,11 @@
 //! (37.2, 50.3 at 20 iterations). LQR-FLM with GPS's own adaptive step rule is the stronger
 //! baseline: it is faster over the first 2–5 iterations (its multiplier grows ×5 per iteration,
 //! PILQR's ×2) and afterwards PILQR's seed mean is lower (7.0 vs 7.3 at 400 samples, driven by
-//! LQR-FLM's bad seeds 1 and 2) but PILQR is below it on only about half the seeds. The sliding
-//! block far from the arm (`BLOCK=1.2 GOAL=1.6`, seeds 0–5; p4's hard pusher condition) keeps
+//! LQR-FLM's bad seeds 1 and 2) but PILQR is below it on only about half the seeds. A block
+//! far from the arm (`BLOCK=1.2 GOAL=1.6`, seeds 0–5; p4's hard pusher condition) keeps
 //! PILQR below fixed-ε LQR-FLM and PI² on 6/6 seeds from 40 to 240 samples and 5/6 to 400
 //! (seed means 13.2 / 25.4 / 12.9 there), and lowers the seed mean below GPS-step LQR-FLM from
-//! 160 samples on (12.8 vs 14.4 at 400) on 4–5 of 6 seeds. The sliding
+//! 160 samples on (12.9 vs 14.4 at 400), below it on 4–5 of 6 seeds. The sliding
 //! block (`KICK=1`, seeds 0–9) makes LQR-FLM erratic (seed-mean spikes) but PILQR's lead is not
 //! consistent per seed either: below fixed-ε LQR-FLM and PI² on 10/10 seeds at 40 samples, 2/10
 //! at 400 (seed means 9.0 / 13.4 / 9.3 there); below GPS-step LQR-FLM on 3–8/10.
