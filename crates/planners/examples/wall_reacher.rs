@@ -66,7 +66,7 @@
 //! 400; wall: 6/6 from 40 to 400). Where the lead comes from: PILQR with its step rule switched
 //! off (`ADJUST=0`, seeds 0–9) ends the pusher at 9.0 (7.4–13.0), no better than LQR-FLM, so the
 //! gain is the residual-driven per-step bound (steps whose cost the model predicts grow their ε,
-//! up to 10×; steps with large residuals, around contact, shrink theirs) with PI² on the residuals
+//! up to 10×; the few steps whose residual ratio passes 0.2 halve theirs) with PI² on the residuals
 //! keeping those larger steps stable — LQR-FLM alone at a fixed ε of 4 or 8 diverges on seed 2
 //! (37.2, 50.3 at 20 iterations). LQR-FLM with GPS's own adaptive step rule is the stronger
 //! baseline: it is faster over the first 2–5 iterations (its multiplier grows ×5 per iteration,
