@@ -256,3 +256,41 @@ impl LqrFlm {
         }
     }
 }
+
+/// GPS's step-size rule for LQR-FLM on its own ("classic", Levine & Abbeel 2014 §3.1; GPS
+/// `AlgorithmTrajOpt._stepadjust` and `_set_new_mult`), for a baseline whose KL bound adapts as
+/// PILQR's does. With `L(p, f, c)` the expected quadratic cost of controller `p` under fitted
+/// dynamics `f` and cost expansion `c`, the improvement the last model predicted,
+/// `L(p̄, f̄, c̄) − L(p, f̄, c̄)`, and the one the new model sees, `L(p̄, f̄, c̄) − L(p, f, c)`, scale
+/// the multiplier of `ε` by `predicted / (2 max(predicted − actual, 1e-4))`, clamped to
+/// `[0.1, 5]`; the multiplier stays in `[0.01, 10]`. `p̄, f̄, c̄` are the previous iteration's
+/// controller, fit and cost; `p, f, c` the current controller (the one just sampled) and the fit
+/// and cost from its samples. Returns the new multiplier.
+#[allow(clippy::too_many_arguments)]
+pub fn classic_step_mult(
+    mult: f64,
+    prev_controller: &TvlgController,
+    prev_dynamics: &TvlgDynamics,
+    prev_cost: &[QuadraticCost],
+    controller: &TvlgController,
+    dynamics: &TvlgDynamics,
+    cost: &[QuadraticCost],
+) -> Result<f64> {
+    positive("step multiplier", mult)?;
+    let l = |p: &TvlgController, f: &TvlgDynamics, c: &[QuadraticCost]| -> Result<f64> {
+        check_len(
+            "cost terms (T running + terminal)",
+            p.horizon() + 1,
+            c.len(),
+        )?;
+        Ok(expected_cost(&forward_moments(p, f)?, c))
+    };
+    let before = l(prev_controller, prev_dynamics, prev_cost)?;
+    let predicted = before - l(controller, prev_dynamics, prev_cost)?;
+    let actual = before - l(controller, dynamics, cost)?;
+    if !(predicted.is_finite() && actual.is_finite()) {
+        return Err(PlanError::NonFinite("LQR-FLM step adjustment costs".into()));
+    }
+    let factor = (predicted / (2.0 * (predicted - actual).max(1e-4))).clamp(0.1, 5.0);
+    Ok((mult * factor).clamp(0.01, 10.0))
+}

@@ -6,7 +6,8 @@
 //! `KL(P_t ‖ uniform) ≤ ε` (Theorem 1), found by bisection in log space (the dual is convex and its
 //! derivative is `ε − KL`). The new `K_t, k_t, Σ_t` are the weighted maximum-likelihood fit of
 //! the sampled `u_{i,t}` on `x_{i,t}` (ridge-regularized towards the previous gains so that few
-//! effective samples still give a well-posed fit; `Σ_t` floored at `min_variance`).
+//! effective samples still give a well-posed fit; `Σ_t` floored at `min_variance`, optionally
+//! damped towards the previous `Σ_t` as in the authors' GPS code, `covariance_damping`).
 
 use nalgebra::{DMatrix, DVector};
 use ndarray::{Array2, Array3};
@@ -27,6 +28,11 @@ pub struct Pi2Config {
     pub min_variance: f64,
     /// Whether to refit the gains `K_t` (otherwise only `k_t` and `Σ_t` move).
     pub update_gains: bool,
+    /// Covariance damping `d` (the authors' GPS `TrajOptPI2`, `covariance_damping`): with `d > 0`
+    /// the new `Σ_t` is the old one scaled by `s^{1/d}`, `s = tr(Σ_old⁻¹ Σ_ML)/A`, instead of the
+    /// weighted maximum-likelihood `Σ_ML` itself (`0`: plain ML). Keeps exploration from
+    /// collapsing on a few effective samples.
+    pub covariance_damping: f64,
 }
 
 impl Default for Pi2Config {
@@ -36,6 +42,7 @@ impl Default for Pi2Config {
             ridge: 1e-3,
             min_variance: 1e-6,
             update_gains: true,
+            covariance_damping: 0.0,
         }
     }
 }
@@ -128,6 +135,12 @@ pub fn pi2_update_with_temperatures(
     temperatures: Option<&[f64]>,
 ) -> Result<Pi2Step> {
     positive("kl_step", cfg.kl_step)?;
+    if !(cfg.covariance_damping >= 0.0 && cfg.covariance_damping.is_finite()) {
+        return Err(crate::PlanError::Config(format!(
+            "covariance_damping must be finite and non-negative, got {}",
+            cfg.covariance_damping
+        )));
+    }
     let (n_s, t_len, m) = actions.dim();
     let n = prev.state_dim();
     check_len("controller horizon", prev.horizon(), t_len)?;
@@ -207,6 +220,10 @@ pub fn pi2_update_with_temperatures(
             let u = DVector::from_iterator(m, (0..m).map(|j| actions[(i, t, j)]));
             let r = u - &kt * x - &kk;
             cov += &r * r.transpose() * w[i];
+        }
+        if cfg.covariance_damping > 0.0 {
+            let ratio = (prev.inv_cov(t) * &cov).trace() / m as f64;
+            cov = &prev.cov[t] * ratio.powf(1.0 / cfg.covariance_damping);
         }
         gains.push(kt);
         offsets.push(kk);

@@ -16,7 +16,14 @@
 //! 4. `p = PI²(p̂)` on `(x, û)` weighted by the residuals `S̃`, at the temperatures `η_t` that the
 //!    PI² KL bound gives on the full cost-to-go `S` (the authors' code: `fixed_eta`). Residuals
 //!    that are small next to the spread of `S` then move the controller little, while a poor
-//!    model (large residuals) hands the step over to PI².
+//!    model (large residuals) hands the step over to PI². As in the authors' `TrajOptPI2`
+//!    ([`Pilqr::default_pi2`]), this stage keeps `K̂_t` and refits only `k_t` and `Σ_t`, the
+//!    latter damped towards `Σ̂_t`.
+//!
+//! p4's text states the step adjustment only in words (§V); the per-step residual-ratio rule
+//! above is the authors' PILQR code. GPS's other rule, from the predicted and the actual
+//! improvement of the expected cost, is the authors' rule for LQR-FLM alone
+//! ([`crate::classic_step_mult`]), not PILQR's.
 
 use ndarray::{Array2, Array3};
 use tandem_models::TvlgDynamics;
@@ -30,7 +37,9 @@ use nalgebra::DVector;
 
 /// Settings of [`Pilqr`]. The step-adjustment defaults are the authors' (GPS `ALG_PILQR`:
 /// `step_rule_res_ratio_dec = 0.2`, `step_rule_res_ratio_inc = 0.05`, step multipliers in
-/// `[0.01, 10]`).
+/// `[0.01, 10]`). The PI² stage defaults to the authors' `TrajOptPI2` as PILQR calls it
+/// ([`Pilqr::default_pi2`]): it keeps the LQR-FLM gains `K̂_t` and moves only `k_t` and `Σ_t`, with
+/// covariance damping 2.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PilqrConfig {
@@ -54,7 +63,7 @@ impl Default for PilqrConfig {
     fn default() -> Self {
         Self {
             lqr: LqrFlmConfig::default(),
-            pi2: Pi2Config::default(),
+            pi2: Pilqr::default_pi2(),
             adjust_step: true,
             res_ratio_dec: 0.2,
             res_ratio_inc: 0.05,
@@ -89,6 +98,19 @@ pub struct Pilqr {
 }
 
 impl Pilqr {
+    /// The PI² stage's defaults: the authors' GPS `TrajOptPI2` with `use_lqr_actions` ("we only
+    /// optimize feedforward controls with PI2": the feedback gains stay the LQR-FLM stage's
+    /// `K̂_t`) and `covariance_damping = 2`; `kl_step` as [`Pi2Config::default`]. Refitting
+    /// `K_t` by weighted regression on a few effective samples adds noise to gains the model-based
+    /// stage already fits well.
+    pub fn default_pi2() -> Pi2Config {
+        Pi2Config {
+            update_gains: false,
+            covariance_damping: 2.0,
+            ..Pi2Config::default()
+        }
+    }
+
     /// An optimizer with these settings (checked here).
     pub fn new(cfg: PilqrConfig) -> Result<Self> {
         crate::mpc::positive("min_step_mult", cfg.min_step_mult)?;

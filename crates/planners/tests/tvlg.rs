@@ -4,16 +4,16 @@
 
 mod common;
 
-use common::reacher::{evaluate, objective, Reacher};
+use common::reacher::{evaluate, objective, push_objective, Reacher};
 use common::{quadratic_objective, riccati, LinearModel};
 use nalgebra::{DMatrix, DVector};
 use ndarray::Array2;
 use tandem_core::seeding::rng_from_seed;
 use tandem_models::{TvlgConfig, TvlgFit};
 use tandem_planners::{
-    pi2_update, pi2_update_with_temperatures, pi2_weights, quadratize_cost, sample_trajectories,
-    Dynamics, LqrFlm, LqrFlmConfig, ModelDynamics, Objective, Pi2Config, Pilqr, PilqrConfig,
-    SampleConfig, TvlgController,
+    classic_step_mult, pi2_update, pi2_update_with_temperatures, pi2_weights, quadratize_cost,
+    sample_trajectories, Dynamics, LqrFlm, LqrFlmConfig, ModelDynamics, Objective, Pi2Config,
+    Pilqr, PilqrConfig, SampleConfig, TvlgController,
 };
 
 const T: usize = 20;
@@ -84,10 +84,7 @@ fn lqr_flm_with_fitted_dynamics_reaches_the_lqr_cost() {
 
 #[test]
 fn pi2_improves_a_reacher_monotonically() {
-    let sys = Reacher {
-        wall: None,
-        bounce: 0.0,
-    };
+    let sys = Reacher::free();
     let obj = objective([0.2, 1.2]);
     let x0 = [0.0, 0.0, 0.0, 0.0];
     let mut ctrl = TvlgController::constant(30, 4, &[0.0, 0.0], 4.0).unwrap();
@@ -141,8 +138,8 @@ fn pi2_temperature_meets_the_kl_bound() {
 /// cost the fitted model and the quadratic cost are exact, the residual cost-to-go vanishes, and
 /// every step's multiplier doubles per update (after the first, which keeps 1); with strong
 /// process noise the model's mean prediction explains little of each sample's cost-to-go, the
-/// residuals stay large and the multipliers halve. The comparison with LQR-FLM and PI² on the wall reacher is the
-/// `wall_reacher` example (tens of seconds in release).
+/// residuals stay large and the multipliers halve. The comparison with LQR-FLM and PI² on the
+/// pusher and the walled reacher is the `wall_reacher` example (seconds to a minute in release).
 #[test]
 fn pilqr_step_multipliers_follow_the_residual_ratio() {
     let m = LinearModel::double_integrator();
@@ -276,4 +273,185 @@ fn pi2_at_given_temperatures() {
         Some(&[1.0]),
     )
     .is_err());
+}
+
+/// Covariance damping (the authors' `TrajOptPI2`): `Σ_new = Σ_old s^{1/d}` with
+/// `s = tr(Σ_old⁻¹ Σ_ML)/A`. With one action and uniform weights `Σ_ML` is the plain variance of
+/// the sampled actions around their mean (plus the floor), so `d = 1` gives `Σ_ML` itself and
+/// `d = 2` the geometric mean `√(Σ_old Σ_ML)`.
+#[test]
+fn pi2_covariance_damping_scales_the_old_covariance() {
+    let m = LinearModel::double_integrator();
+    let sys = ModelDynamics::new(&m, 0);
+    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
+    let r = DMatrix::from_element(1, 1, 0.01);
+    let obj = quadratic_objective(&q, &r, &(&q * 10.0));
+    let ctrl = TvlgController::constant(T, 2, &[0.3], 1.7).unwrap();
+    let samples = sample_trajectories(
+        &ctrl,
+        &sys,
+        &obj,
+        &[1.0, 0.0],
+        &SampleConfig::default(),
+        &mut rng_from_seed(5),
+    )
+    .unwrap();
+    let s = samples.cost_to_go();
+    let uniform = vec![f64::INFINITY; T];
+    let update = |d: f64| {
+        let cfg = Pi2Config {
+            update_gains: false,
+            covariance_damping: d,
+            ..Default::default()
+        };
+        pi2_update_with_temperatures(
+            &ctrl,
+            &samples.states,
+            &samples.actions,
+            &s,
+            &cfg,
+            Some(&uniform),
+        )
+        .unwrap()
+        .controller
+    };
+    let (plain, d1, d2) = (update(0.0), update(1.0), update(2.0));
+    let n = samples.len() as f64;
+    for t in 0..T {
+        let u = samples.actions.slice(ndarray::s![.., t, 0]);
+        let mean = u.sum() / n;
+        let var = u.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n + 1e-6;
+        assert!((plain.cov[t][(0, 0)] - var).abs() < 1e-12);
+        assert!((d1.cov[t][(0, 0)] - var).abs() < 1e-12);
+        assert!((d2.cov[t][(0, 0)] - (1.7 * var).sqrt()).abs() < 1e-12);
+    }
+    let bad = Pi2Config {
+        covariance_damping: -1.0,
+        ..Default::default()
+    };
+    assert!(pi2_update(&ctrl, &samples.states, &samples.actions, &s, &bad).is_err());
+}
+
+/// PILQR's PI² stage (the authors' `use_lqr_actions` update) keeps the LQR-FLM stage's gains
+/// `K̂_t` and moves only the offsets and covariances.
+#[test]
+fn pilqr_pi2_stage_keeps_the_lqr_gains() {
+    let sys = Reacher::pusher(0.5);
+    let obj = push_objective(0.8);
+    let x0 = sys.x0(0.3);
+    let ctrl = TvlgController::constant(30, 5, &[0.0, 0.0], 2.0).unwrap();
+    let samples = sample_trajectories(
+        &ctrl,
+        &sys,
+        &obj,
+        &x0,
+        &SampleConfig::default(),
+        &mut rng_from_seed(0),
+    )
+    .unwrap();
+    let dynamics = TvlgFit::new(TvlgConfig::default())
+        .fit(samples.states.view(), samples.actions.view())
+        .unwrap();
+    let step = Pilqr::new(PilqrConfig::default())
+        .unwrap()
+        .update(&ctrl, &samples, &dynamics, &obj)
+        .unwrap();
+    assert_eq!(step.controller.gains, step.lqr.controller.gains);
+    assert!(step
+        .controller
+        .offsets
+        .iter()
+        .zip(&step.lqr.controller.offsets)
+        .any(|(a, b)| (a - b).norm() > 1e-6));
+}
+
+/// The pusher and hockey variants against hand-computed steps: the block stays put until link 1
+/// passes it, is then carried to `q₁` while the arm loses `push_loss` of its velocity; in the
+/// hockey variant it also slides on with `kick · q̇₁`, decelerated by friction.
+#[test]
+fn pusher_block_moves_only_in_contact() {
+    let step = |sys: &Reacher, x: &[f64]| {
+        let s = Array2::from_shape_vec((1, x.len()), x.to_vec()).unwrap();
+        let a = Array2::zeros((1, 2));
+        sys.step_batch(s.view(), a.view()).unwrap().row(0).to_vec()
+    };
+    let push = Reacher::pusher(0.5);
+    // Free: v₁' = 2 − 0.05·0.5·2 = 1.95, q₁' = 0.1 + 0.05·1.95 = 0.1975 < 0.3.
+    let y = step(&push, &[0.1, 0.0, 2.0, 0.0, 0.3]);
+    assert!((y[0] - 0.1975).abs() < 1e-12 && (y[2] - 1.95).abs() < 1e-12);
+    assert_eq!(y[4], 0.3);
+    // Contact: q₁' = 0.25 + 0.0975 = 0.3475 > 0.3 carries the block; v₁' = 1.95 · 0.5.
+    let y = step(&push, &[0.25, 0.0, 2.0, 0.0, 0.3]);
+    assert!((y[4] - 0.3475).abs() < 1e-12 && (y[2] - 0.975).abs() < 1e-12);
+    let hockey = Reacher::hockey(0.5, 1.5);
+    // Hit: the block takes 1.5 · 1.95 = 2.925 rad/s.
+    let y = step(&hockey, &[0.25, 0.0, 2.0, 0.0, 0.3, 0.0]);
+    assert!((y[4] - 0.3475).abs() < 1e-12 && (y[5] - 2.925).abs() < 1e-12);
+    // Sliding ahead of the arm: v_b' = 2.925 − 0.05·2 = 2.825, b' = 0.5 + 0.05·2.825.
+    let y = step(&hockey, &[0.0, 0.0, 0.0, 0.0, 0.5, 2.925]);
+    assert!((y[5] - 2.825).abs() < 1e-12 && (y[4] - 0.64125).abs() < 1e-12);
+}
+
+/// The pusher's point (p4 Fig. 3): a controller that drives link 1 towards the block, with the
+/// examples' exploration noise, reaches it at many different time steps across samples, so each
+/// step's linear fit mixes contact and free motion.
+#[test]
+fn pusher_contact_happens_at_different_steps() {
+    let sys = Reacher::pusher(0.5);
+    let obj = push_objective(0.8);
+    let ctrl = TvlgController::constant(30, 5, &[1.5, 0.0], 2.0).unwrap();
+    let samples = sample_trajectories(
+        &ctrl,
+        &sys,
+        &obj,
+        &sys.x0(0.3),
+        &SampleConfig::default(),
+        &mut rng_from_seed(0),
+    )
+    .unwrap();
+    let first_contact: Vec<Option<usize>> = (0..samples.len())
+        .map(|i| (1..=30).find(|&t| samples.states[(i, t, 4)] > 0.3))
+        .collect();
+    let mut steps: Vec<usize> = first_contact.iter().flatten().copied().collect();
+    steps.sort_unstable();
+    steps.dedup();
+    println!("first contact steps {first_contact:?}");
+    assert!(steps.len() >= 5, "{first_contact:?}");
+    assert!(steps[steps.len() - 1] - steps[0] >= 5, "{first_contact:?}");
+}
+
+/// GPS's classic step rule for LQR-FLM: when the new model agrees with the old one (same fit and
+/// cost), the actual improvement equals the predicted one and the multiplier grows by the
+/// maximum factor 5 (capped at 10); when the "new" controller is the old one, nothing was
+/// predicted and it shrinks by the minimum factor 0.1.
+#[test]
+fn classic_step_rule_on_agreeing_and_null_predictions() {
+    let m = LinearModel::double_integrator();
+    let sys = ModelDynamics::new(&m, 0);
+    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
+    let r = DMatrix::from_element(1, 1, 0.01);
+    let obj = quadratic_objective(&q, &r, &(&q * 10.0));
+    let ctrl = TvlgController::constant(T, 2, &[0.0], 1.0).unwrap();
+    let scfg = SampleConfig {
+        process_std: 0.01,
+        ..Default::default()
+    };
+    let samples =
+        sample_trajectories(&ctrl, &sys, &obj, &[1.0, 0.0], &scfg, &mut rng_from_seed(4)).unwrap();
+    let dynamics = TvlgFit::new(TvlgConfig::default())
+        .fit(samples.states.view(), samples.actions.view())
+        .unwrap();
+    let cost = quadratize_cost(&obj, &samples).unwrap();
+    let next = LqrFlm::new(LqrFlmConfig::default())
+        .unwrap()
+        .update(&ctrl, &dynamics, &cost, None)
+        .unwrap()
+        .controller;
+    let grow = classic_step_mult(1.0, &ctrl, &dynamics, &cost, &next, &dynamics, &cost).unwrap();
+    assert_eq!(grow, 5.0);
+    let capped = classic_step_mult(3.0, &ctrl, &dynamics, &cost, &next, &dynamics, &cost).unwrap();
+    assert_eq!(capped, 10.0);
+    let shrink = classic_step_mult(1.0, &ctrl, &dynamics, &cost, &ctrl, &dynamics, &cost).unwrap();
+    assert!((shrink - 0.1).abs() < 1e-12);
+    assert!(classic_step_mult(0.0, &ctrl, &dynamics, &cost, &next, &dynamics, &cost).is_err());
 }
