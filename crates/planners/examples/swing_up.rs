@@ -37,7 +37,7 @@ use std::time::Instant;
 use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 use tandem_models::PlantModel;
 use tandem_planners::{
-    Bounds, Cem, CemConfig, DmdMpc, DmdMpcConfig, Ilqr, IlqrConfig, Mppi, MppiConfig, Noise,
+    Bounds, Cem, CemConfig, DmdMpc, DmdMpcConfig, Ilqr, IlqrConfig, Knots, Mppi, MppiConfig, Noise,
     Objective, Planner, Temperature, Utility,
 };
 
@@ -66,6 +66,11 @@ fn planner(name: &str, seed: u64) -> Box<dyn Planner> {
     // 200 samples.
     let iterations = env_or("ITERS", if name == "mppi" { 3 } else { 8 });
     let std = env_or("STD", 1.5);
+    let spacing = env_or("KNOTS", 1);
+    let knots = match std::env::var("INTERP").as_deref() {
+        Ok("hold") => Knots::hold(spacing),
+        _ => Knots::linear(spacing),
+    };
     match name {
         "cem" => Box::new(
             Cem::new(CemConfig {
@@ -76,6 +81,7 @@ fn planner(name: &str, seed: u64) -> Box<dyn Planner> {
                 alpha: env_or("ALPHA", 0.1),
                 elite_fraction: env_or("ELITE", 0.1),
                 correlation: env_or("BETA", 0.8),
+                knots,
                 bounds,
                 seed,
                 ..CemConfig::default()
@@ -95,6 +101,7 @@ fn planner(name: &str, seed: u64) -> Box<dyn Planner> {
                 noise: Noise::Isotropic(std),
                 iterations,
                 correlation: env_or("BETA", 0.8),
+                knots,
                 bounds,
                 seed,
                 ..MppiConfig::default()
@@ -108,6 +115,7 @@ fn planner(name: &str, seed: u64) -> Box<dyn Planner> {
                 iterations,
                 seed,
                 correlation: env_or("BETA", 0.8),
+                knots,
                 noise: Noise::Isotropic(std),
                 adapt_covariance: true,
                 utility: Utility::CemElite {
@@ -176,15 +184,31 @@ fn episode(
             "{name} seed {seed}: open-loop plan cost from (pi, 0): {:.1}",
             plan.total_cost
         );
+        if std::env::var("TRACE").is_ok() {
+            let u: Vec<String> = plan.actions.iter().map(|v| format!("{v:.1}")).collect();
+            println!("  u {}", u.join(" "));
+            let phi: Vec<String> = plan
+                .states
+                .column(0)
+                .iter()
+                .map(|v| format!("{:.1}", wrap(*v)))
+                .collect();
+            println!("  phi {}", phi.join(" "));
+        }
         return;
     }
     let mut x = [PI, 0.0];
-    let (mut ret, mut worst_late) = (0.0, 0.0f64);
+    let (mut ret, mut worst_late, mut late_ret) = (0.0, 0.0f64, 0.0);
     let start = Instant::now();
-    for t in 0..400 {
+    let steps = env_or("STEPS", 400);
+    for t in 0..steps {
         let u = p.plan(&x, model, objective).expect("plan").first_action();
         assert!(u[0].abs() <= 3.0);
-        ret += reward(&x, &u);
+        let r = reward(&x, &u);
+        ret += r;
+        if t >= 100 {
+            late_ret += r;
+        }
         x = plant.step_array(&x, u[0]);
         if std::env::var("TRACE").is_ok() && t % 5 == 0 {
             println!(
@@ -199,7 +223,7 @@ fn episode(
         }
     }
     println!(
-        "{name} seed {seed}: return {ret:.1}, max |phi| over the last 100 steps {worst_late:.4}, {:.2} s",
+        "{name} seed {seed}: return {ret:.1} (last 300 steps {late_ret:.1}), max |phi| over the last 100 steps {worst_late:.4}, {:.2} s",
         start.elapsed().as_secs_f64()
     );
 }

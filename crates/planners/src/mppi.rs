@@ -15,7 +15,7 @@ use tandem_models::DynamicsModel;
 use crate::error::Result;
 use crate::mpc::{
     check_problem, clamp_opt, nonzero, plan_from_actions, positive, rollout_population, shift_plan,
-    Bounds, Noise, Plan, Planner,
+    Bounds, Knots, Noise, Plan, Planner,
 };
 use crate::objective::Objective;
 
@@ -37,6 +37,8 @@ pub struct MppiConfig {
     /// Correlation `β ∈ [0, 1)` of the sampling noise between consecutive steps (AR(1); 0 is
     /// white noise, the original algorithm).
     pub correlation: f64,
+    /// Where the sampling noise is drawn along the horizon (default: every step).
+    pub knots: Knots,
     /// Updates per call.
     pub iterations: usize,
     /// Whether to add the control-cost term `λ μᵀ Σ⁻¹ ε` to each sample's cost.
@@ -58,6 +60,7 @@ impl Default for MppiConfig {
             iterations: 1,
             control_cost: false,
             correlation: 0.0,
+            knots: Knots::default(),
             bounds: None,
             seed: 0,
         }
@@ -146,6 +149,7 @@ impl Mppi {
         nonzero("samples", cfg.samples)?;
         nonzero("iterations", cfg.iterations)?;
         crate::mpc::correlation(cfg.correlation)?;
+        cfg.knots.validate()?;
         positive("lambda", cfg.lambda)?;
         cfg.temperature.validate(cfg.lambda)?;
         let rng = rng_from_seed(cfg.seed);
@@ -195,7 +199,12 @@ impl Planner for Mppi {
         let mut z = Array3::zeros((h, n, a));
         let mut acts = Array3::zeros((h, n, a));
         for _ in 0..self.cfg.iterations {
-            crate::mpc::fill_correlated_normal(&mut self.rng, &mut z, self.cfg.correlation);
+            crate::mpc::fill_knot_noise(
+                &mut self.rng,
+                &mut z,
+                self.cfg.correlation,
+                &self.cfg.knots,
+            );
             for t in 0..h {
                 for i in 0..n {
                     for j in 0..a {
