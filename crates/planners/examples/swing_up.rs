@@ -2,34 +2,61 @@
 //! each MPC planner planning through the true plant (`PlantModel`): 400 steps of 0.05 s from
 //! `(π, 0)`, reward `−5 φ² − 0.1 φ̇² − 0.01 u²` with φ wrapped, `|u| ≤ 3 V`.
 //!
-//! `cargo run --release -p tandem-planners --example swing_up [-- cem|mppi|dmd|ilqr ...]`
-//! prints each planner's episode return (p0: about −660 for its best learned policy; the issue
-//! asks for ≥ −800), the largest |φ| over the last 100 steps, and the wall time.
+//! `cargo run --release -p tandem-planners --example swing_up [-- cem|mppi|dmd|ilqr ...]` prints
+//! each planner's episode return (p0: about −660 for its best learned policy; the issue asks for ≥
+//! −800), the part of it from the last 300 steps (balancing), the largest |φ| over the last 100
+//! steps, and the wall time.
 //!
-//! Defaults: horizon 30 (iLQR 40), 100 samples (MPPI 200), 8 iterations (MPPI 3), noise std 1.5 with
-//! AR(1) correlation 0.8 between steps (white noise does not find the swing-up with these
-//! budgets). MPPI uses the spread-normalized temperature `λ (max S − min S)` with `λ = 0.05`
-//! (PI²'s cost normalization, `h = 20`). Override with the environment: `H`, `N`, `ITERS`, `STD`,
-//! `BETA`, `LAMBDA`, `TEMP` (`fixed`, `spread`, `ess`), `ALPHA`, `ELITE`, `SEED` or `SEEDS=n`
-//! (seeds 0..n), `MAXIT`; `TRACE=1` prints the trajectory, `ONESHOT=1` one open-loop plan's cost.
+//! Defaults: horizon 30 (iLQR 40); CEM and DMD-MPC 8 iterations of 100 samples, MPPI 4 updates of
+//! 200. The sampling noise (std 1.5) is drawn at knots every 5 steps and held in between (move
+//! blocking, `Knots::hold`), independent between knots: 5 steps is half the period of small swings
+//! about the bottom, `π/ω₀` computed from the plant's parameters, and the bang-bang swing-up
+//! switches once per half swing, so each block can carry one pump. MPPI sets its temperature at
+//! every update so that the effective sample size is 5% of the samples
+//! (`Temperature::EffectiveSamples`, `λ = 0.05`). Override with the environment: `H`, `N`, `ITERS`,
+//! `STD`, `KNOTS` (steps per knot; `KNOTS=1 BETA=0.8` is the former per-step AR(1) noise), `INTERP`
+//! (`hold`, `linear`), `BETA`, `LAMBDA`, `TEMP` (`fixed`, `spread`, `ess`), `ALPHA`, `ELITE`,
+//! `SEED` or `SEEDS=n` (seeds 0..n), `MAXIT`, `STEPS` (episode length); `TRACE=1` prints the
+//! trajectory, `ONESHOT=1` one open-loop plan's cost (with `TRACE=1` its actions and angles).
 //!
-//! Measured (`SEEDS=3 … cem mppi dmd ilqr`, 2 shared cores at load 9–12; seeds 0, 1, 2; wall time
-//! per 400-step episode): iLQR −606, −603, −600 (|φ| < 1e-4 over the last 100 steps, ~1 s);
-//! MPPI −1107, −738, −693 (37–50 s). CEM and DMD-MPC with 8 iterations (load 12–13): CEM −773,
-//! −698, −706 (45–54 s); DMD-MPC −787, −877, −734 (31–45 s); with 3 iterations CEM −761, −872,
-//! −1030 (14–25 s) and DMD-MPC −747, −1173, −736 (11–13 s), with 5 CEM −728, −946, −722 and
-//! DMD-MPC −769, −1139, −719.
+//! Measured (`SEEDS=5 … cem mppi` beside `SEEDS=5 … dmd`, 2 shared cores at load 3.3–3.7; seeds 0,
+//! 1, 2 and held-out 3, 4; wall time per 400-step episode):
+//! - CEM −672, −712, −724, −717, −715 (26–43 s);
+//! - MPPI −698, −705, −676, −683, −687 (14–18 s);
+//! - DMD-MPC −724, −725, −727, −711, −723 (28–44 s);
+//! - iLQR −606, −603, −600 (|φ| < 1e-4 over the last 100 steps, under 1 s).
+//!
+//! The last 300 steps cost 28–62 of each sampled return: balancing with std-1.5 blocks leaves |φ|
+//! up to 0.3 rad. Before knots (per-step noise with β = 0.8; MPPI with the spread-normalized
+//! temperature and 3 updates), same seeds 0–4: CEM −773, −698, −706, −996, −867; MPPI −1107, −738,
+//! −693, −944, −955; DMD-MPC −787, −877, −734, −1014, −765.
+//!
+//! More seeds, first 60 steps only (`STEPS=60`; a miss is a 60-step return below −750, as the other
+//! 340 steps cost 40–70): with knots CEM misses 2 of seeds 0–19 (8, 19), MPPI 2 (13, 15), DMD-MPC 2
+//! (10, 15; and 22 of 20–24); before, CEM missed 8 of 20, MPPI 12 and DMD-MPC 8 (seeds 0–4 counted
+//! by their full returns). A miss is the same local optimum as before, rarer: arriving short of the
+//! top, the pendulum is held at |φ| ≈ 0.5–0.7 rad with saturated voltage (3 V gives 45% of the
+//! gravity torque) and falls back for another swing. Knot spacing matters: held knots of 4 or 6
+//! steps missed more (CEM, seeds 0–4: 2 misses each), linear interpolation between knots every 3
+//! steps was no better than per-step noise.
+//!
+//! Tried and dropped: longer horizons with per-step noise (MPPI with 60 steps never left the
+//! bottom, seed 0; one open-loop plan from the bottom by CEM over 60 steps costs 1500–1800 against
+//! about 620 for iLQR's, the needle is too small for 100–300 samples); with knots, horizon 40 (CEM
+//! 5 misses in seeds 5–14, DMD-MPC 1 in 10–19 against 2); carrying CEM elites to the next iteration
+//! and call (iCEM's keep/shift elites: 3 kept, 9 misses in seeds 0–19; 1 kept, 3 in 0–9) — it
+//! commits to the first plan found; a terminal cost of 10× the state cost at the horizon (punishes
+//! plans that end mid-swing: most seeds miss); noise std 2 (DMD-MPC recovered seeds 10, 15, 22 but
+//! missed 3; CEM still missed 8, and 6 too).
 //!
 //! Why MPPI failed with a fixed temperature (best −2455 before): the sampled cost spread is
 //! hundreds while swinging and below one while balancing, so no single `λ` fits. Raw `λ = 1` is
-//! greedy (one sample carries the update): it swings up, but the noisy first action cannot
-//! balance. Hotter, it averages mirror-image swing-ups (left first / right first) from the
-//! symmetric start into nothing and never leaves the bottom (−13 000 with `λ = 0.1 × spread`, or
-//! with `σ = 3` where clamped ±3 V samples cancel). Normalizing by the spread fixes both phases;
-//! the remaining misses are a local optimum the 1.5 s horizon cannot see past: arriving short of
-//! the top, the pendulum is held at |φ| ≈ 0.5 rad with saturated voltage (3 V gives 45% of the
-//! gravity torque) before falling back for another swing. Longer horizons (45) and single-update
-//! MPPI (300 samples, 1 iteration) were worse; 200 samples helped.
+//! greedy (one sample carries the update): it swings up, but the noisy first action cannot balance.
+//! Hotter, it averages mirror-image swing-ups (left first / right first) from the symmetric start
+//! into nothing and never leaves the bottom (−13 000 with `λ = 0.1 × spread`, or with `σ = 3` where
+//! clamped ±3 V samples cancel). Normalizing by the spread or fixing the effective sample size
+//! fixes both phases; with knots the effective-sample rule (5%) missed 0 of seeds 0–4 in 60 steps
+//! against 3–4 for spread normalization (`λ` 0.02–0.1).
 
 use std::f64::consts::PI;
 use std::time::Instant;
@@ -58,19 +85,31 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
         .unwrap_or(default)
 }
 
+/// Steps per knot: half the period of small swings about the hanging equilibrium,
+/// `π / ω₀` with `ω₀ = √(m g l / J)` (0.26 s, 5 steps of 0.05 s for the true pendulum). The
+/// time-optimal swing-up under the voltage bound is bang-bang with one switch per half swing
+/// (each pump pushes with the motion), so blocks of this length can express it with about one
+/// random number per pump instead of one per step.
+fn half_swing_steps(p: &DcMotorPendulumParams) -> usize {
+    let omega0 = (p.m * p.g * p.l / p.j).sqrt();
+    ((PI / omega0) / p.dt).round().max(1.0) as usize
+}
+
 fn planner(name: &str, seed: u64) -> Box<dyn Planner> {
     let bounds = Some(Bounds::symmetric(1, 3.0));
     let horizon = env_or("H", if name == "ilqr" { 40 } else { 30 });
     let n = env_or("N", 100);
-    // CEM and DMD-MPC: 8 refits per step (3 left seeds 1–2 short of −800); MPPI: 3 updates of
-    // 200 samples.
-    let iterations = env_or("ITERS", if name == "mppi" { 3 } else { 8 });
+    // CEM and DMD-MPC: 8 refits of 100 samples per step; MPPI: 4 updates of 200 samples.
+    let iterations = env_or("ITERS", if name == "mppi" { 4 } else { 8 });
     let std = env_or("STD", 1.5);
-    let spacing = env_or("KNOTS", 1);
+    // Noise held over knots of half a swing, independent between knots (β = 0); `KNOTS=1
+    // BETA=0.8` is the former per-step AR(1) noise.
+    let spacing = env_or("KNOTS", half_swing_steps(&DcMotorPendulumParams::real()));
     let knots = match std::env::var("INTERP").as_deref() {
-        Ok("hold") => Knots::hold(spacing),
-        _ => Knots::linear(spacing),
+        Ok("linear") => Knots::linear(spacing),
+        _ => Knots::hold(spacing),
     };
+    let beta = env_or("BETA", 0.0);
     match name {
         "cem" => Box::new(
             Cem::new(CemConfig {
@@ -80,7 +119,7 @@ fn planner(name: &str, seed: u64) -> Box<dyn Planner> {
                 init_std: Some(vec![std]),
                 alpha: env_or("ALPHA", 0.1),
                 elite_fraction: env_or("ELITE", 0.1),
-                correlation: env_or("BETA", 0.8),
+                correlation: beta,
                 knots,
                 bounds,
                 seed,
@@ -95,12 +134,12 @@ fn planner(name: &str, seed: u64) -> Box<dyn Planner> {
                 lambda: env_or("LAMBDA", 0.05),
                 temperature: match std::env::var("TEMP").as_deref() {
                     Ok("fixed") => Temperature::Fixed,
-                    Ok("ess") => Temperature::EffectiveSamples,
-                    _ => Temperature::Spread,
+                    Ok("spread") => Temperature::Spread,
+                    _ => Temperature::EffectiveSamples,
                 },
                 noise: Noise::Isotropic(std),
                 iterations,
-                correlation: env_or("BETA", 0.8),
+                correlation: beta,
                 knots,
                 bounds,
                 seed,
@@ -114,7 +153,7 @@ fn planner(name: &str, seed: u64) -> Box<dyn Planner> {
                 samples: n,
                 iterations,
                 seed,
-                correlation: env_or("BETA", 0.8),
+                correlation: beta,
                 knots,
                 noise: Noise::Isotropic(std),
                 adapt_covariance: true,

@@ -6,7 +6,8 @@
 //! `σ ≥ min_std`. Sample 0 of every round is the current mean itself, so the mean is always
 //! evaluated. The plan is the cheapest sequence sampled over all rounds (mbrl-lib's default,
 //! `return_mean_elites = false`), or the final mean with `return_mean`; the warm start of the next
-//! call is the final mean either way.
+//! call is the final mean either way. The sampling noise may be time-correlated (`correlation`)
+//! and drawn at [`Knots`] (held or interpolated between them); mean and σ stay per step.
 
 use ndarray::{s, Array2, Array3, Axis};
 use tandem_core::{seeding::rng_from_seed, Rng};

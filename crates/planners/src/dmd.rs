@@ -12,6 +12,9 @@
 //!    the elite mean (CEM utility, eq. 13; optionally reward-weighted among the elites, eq. 14) or
 //!    the exponentially weighted mean `Σ e^{−C_i/λ} u_i / Σ e^{−C_i/λ}` (MPPI's utility).
 //!
+//! The sampling noise may be time-correlated (`correlation`) and drawn at [`Knots`] (held or
+//! interpolated between them); `μ` and `Σ` stay per step.
+//!
 //! The returned [`Plan`] is the model rollout of `μ` (p3 Algorithm 1, line 14); its
 //! [`Plan::transitions`] are what p3 adds to the MPC replay buffer (line 15). A terminal value
 //! `−V` enters through the [`Objective`].

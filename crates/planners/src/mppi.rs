@@ -5,8 +5,11 @@
 //! `ε ~ N(0, Σ)` per step, clamp `μ + ε` into the bounds (the perturbation used in the update is
 //! the clamped one), roll out, weight each sample by `exp(−(S_i − min S)/λ_eff)`, and move the
 //! mean by the weighted perturbation. `λ_eff` is `λ` itself (Williams et al.) or, with
-//! [`Temperature::Spread`] / [`Temperature::EffectiveSamples`], scaled to the sampled costs. Sample 0 is the unperturbed mean. With `control_cost` the
-//! sample cost gains Williams et al.'s importance-sampling term `λ Σ_h μ_hᵀ Σ⁻¹ ε_h`.
+//! [`Temperature::Spread`] / [`Temperature::EffectiveSamples`], scaled to the sampled costs.
+//! Sample 0 is the unperturbed mean. With `control_cost` the sample cost gains Williams et al.'s
+//! importance-sampling term `λ Σ_h μ_hᵀ Σ⁻¹ ε_h`. The perturbations may be time-correlated
+//! (`correlation`) and drawn at [`Knots`] (held or interpolated between them); the mean itself
+//! stays one action per step.
 
 use ndarray::{s, Array1, Array2, Array3};
 use tandem_core::{seeding::rng_from_seed, Rng};
