@@ -40,7 +40,9 @@ pub struct MppiConfig {
     /// Correlation `β ∈ [0, 1)` of the sampling noise between consecutive steps (AR(1); 0 is
     /// white noise, the original algorithm).
     pub correlation: f64,
-    /// Where the sampling noise is drawn along the horizon (default: every step).
+    /// Where the sampling noise is drawn along the horizon (default: every step). Like
+    /// `correlation`, knots make the noise dependent across steps, which `control_cost` (derived
+    /// for independent per-step noise) does not account for.
     pub knots: Knots,
     /// Updates per call.
     pub iterations: usize,
