@@ -6,7 +6,8 @@
 //! `σ ≥ min_std`. Sample 0 of every round is the current mean itself, so the mean is always
 //! evaluated. The plan is the cheapest sequence sampled over all rounds (mbrl-lib's default,
 //! `return_mean_elites = false`), or the final mean with `return_mean`; the warm start of the next
-//! call is the final mean either way.
+//! call is the final mean either way. The sampling noise may be time-correlated (`correlation`)
+//! and drawn at [`Knots`] (held or interpolated between them); mean and σ stay per step.
 
 use ndarray::{s, Array2, Array3, Axis};
 use tandem_core::{seeding::rng_from_seed, Rng};
@@ -15,7 +16,7 @@ use tandem_models::DynamicsModel;
 use crate::error::Result;
 use crate::mpc::{
     check_problem, clamp_opt, fraction, lowest_k, nonzero, plan_from_actions, positive,
-    rollout_population, shift_plan, Bounds, Plan, Planner,
+    rollout_population, shift_plan, Bounds, Knots, Plan, Planner,
 };
 use crate::objective::Objective;
 
@@ -40,6 +41,8 @@ pub struct CemConfig {
     /// Correlation `β ∈ [0, 1)` of the sampling noise between consecutive steps (AR(1); 0 is
     /// white noise, the original algorithm).
     pub correlation: f64,
+    /// Where the sampling noise is drawn along the horizon (default: every step).
+    pub knots: Knots,
     /// Floor on the standard deviation.
     pub min_std: f64,
     /// Action bounds; samples are clamped into them.
@@ -61,6 +64,7 @@ impl Default for CemConfig {
             init_std: None,
             min_std: 1e-3,
             correlation: 0.0,
+            knots: Knots::default(),
             bounds: None,
             return_mean: false,
             seed: 0,
@@ -83,6 +87,7 @@ impl Cem {
         nonzero("population", cfg.population)?;
         nonzero("iterations", cfg.iterations)?;
         crate::mpc::correlation(cfg.correlation)?;
+        cfg.knots.validate()?;
         fraction("elite fraction", cfg.elite_fraction)?;
         if !(0.0..1.0).contains(&cfg.alpha) {
             return Err(crate::PlanError::Config(format!(
@@ -166,7 +171,12 @@ impl Planner for Cem {
         let mut acts = Array3::zeros((h, n, a));
         let mut best: Option<(f64, Array2<f64>)> = None;
         for _ in 0..self.cfg.iterations {
-            crate::mpc::fill_correlated_normal(&mut self.rng, &mut acts, self.cfg.correlation);
+            crate::mpc::fill_knot_noise(
+                &mut self.rng,
+                &mut acts,
+                self.cfg.correlation,
+                &self.cfg.knots,
+            );
             for t in 0..h {
                 for i in 0..n {
                     for j in 0..a {

@@ -12,6 +12,9 @@
 //!    the elite mean (CEM utility, eq. 13; optionally reward-weighted among the elites, eq. 14) or
 //!    the exponentially weighted mean `Σ e^{−C_i/λ} u_i / Σ e^{−C_i/λ}` (MPPI's utility).
 //!
+//! The sampling noise may be time-correlated (`correlation`) and drawn at [`Knots`] (held or
+//! interpolated between them); `μ` and `Σ` stay per step.
+//!
 //! The returned [`Plan`] is the model rollout of `μ` (p3 Algorithm 1, line 14); its
 //! [`Plan::transitions`] are what p3 adds to the MPC replay buffer (line 15). A terminal value
 //! `−V` enters through the [`Objective`].
@@ -24,7 +27,7 @@ use tandem_models::DynamicsModel;
 use crate::error::{check_len, PlanError, Result};
 use crate::mpc::{
     check_problem, clamp_opt, fraction, lowest_k, nonzero, plan_from_actions, positive,
-    rollout_population, shift_plan, Bounds, Noise, Plan, Planner,
+    rollout_population, shift_plan, Bounds, Knots, Noise, Plan, Planner,
 };
 use crate::objective::Objective;
 
@@ -73,6 +76,8 @@ pub struct DmdMpcConfig {
     /// Correlation `β ∈ [0, 1)` of the sampling noise between consecutive steps (AR(1); 0 is
     /// white noise, the original algorithm).
     pub correlation: f64,
+    /// Where the sampling noise is drawn along the horizon (default: every step).
+    pub knots: Knots,
     /// Rounds per call (the first uses the shift operator; later ones re-sample around `μ`).
     pub iterations: usize,
     /// Also take the mirror-descent step on the second moment (the Gaussian's other expectation
@@ -104,6 +109,7 @@ impl Default for DmdMpcConfig {
             adapt_covariance: false,
             min_std: 0.05,
             correlation: 0.0,
+            knots: Knots::default(),
             bounds: None,
             seed: 0,
         }
@@ -134,6 +140,7 @@ impl DmdMpc {
         nonzero("samples", cfg.samples)?;
         nonzero("iterations", cfg.iterations)?;
         crate::mpc::correlation(cfg.correlation)?;
+        cfg.knots.validate()?;
         fraction("step size alpha", cfg.step_size)?;
         if cfg.adapt_covariance {
             positive("min_std", cfg.min_std)?;
@@ -214,7 +221,12 @@ impl DmdMpc {
         let mut z = Array3::zeros((h, n, a));
         let mut acts = Array3::zeros((h, n, a));
         for it in 0..self.cfg.iterations {
-            crate::mpc::fill_correlated_normal(&mut self.rng, &mut z, self.cfg.correlation);
+            crate::mpc::fill_knot_noise(
+                &mut self.rng,
+                &mut z,
+                self.cfg.correlation,
+                &self.cfg.knots,
+            );
             // Sample 0 carries no noise: it is the shifted mean μ̃ itself.
             z.slice_mut(s![.., 0, ..]).fill(0.0);
             let bounds = self.cfg.bounds.clone();

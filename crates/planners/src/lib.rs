@@ -39,7 +39,7 @@ pub use dynamics::{Dynamics, ModelDynamics, PlantDynamics};
 pub use error::{PlanError, Result};
 pub use ilqr::{backward_pass, BackwardPass, Ilqr, IlqrConfig, IlqrSolution};
 pub use lqr_flm::{classic_step_mult, LqrFlm, LqrFlmConfig, LqrFlmStep};
-pub use mpc::{Bounds, Noise, Plan, Planner};
+pub use mpc::{Bounds, Interpolation, Knots, Noise, Plan, Planner};
 pub use mppi::{Mppi, MppiConfig, Temperature};
 pub use objective::{
     CostFn, Objective, QuadCost, QuadTerminal, RunningDerivFn, TerminalDerivFn, TerminalFn, ValueFn,

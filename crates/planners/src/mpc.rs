@@ -285,6 +285,108 @@ pub(crate) fn fill_correlated_normal(rng: &mut Rng, z: &mut Array3<f64>, beta: f
     }
 }
 
+/// Where the sampling noise is drawn along the horizon: at knots every `spacing` steps, held or
+/// linearly interpolated in between (move blocking, Cagienard et al. 2007; the spline policies of
+/// MJPC's predictive sampling, Howell et al. 2022). A sampled perturbation then has
+/// `⌈H / spacing⌉` (held) or `⌈(H − 1) / spacing⌉ + 1` (linear) degrees of freedom per action
+/// component instead of `H`, so the same samples cover a longer horizon. The AR(1) correlation
+/// `β` of the planners acts between consecutive knots. `spacing = 1` (the default) is one knot per
+/// step, the original algorithms, and draws exactly the same numbers as before knots existed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Knots {
+    /// Steps between knots (at least 1).
+    pub spacing: usize,
+    /// How the noise between two knots is filled in.
+    pub interpolation: Interpolation,
+}
+
+impl Default for Knots {
+    fn default() -> Self {
+        Self {
+            spacing: 1,
+            interpolation: Interpolation::Linear,
+        }
+    }
+}
+
+/// How [`Knots`] fill the steps between two knots.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "snake_case")]
+pub enum Interpolation {
+    /// Zero-order hold: each knot's value for `spacing` steps.
+    Hold,
+    /// Linear between knots, rescaled so every step keeps unit marginal variance.
+    Linear,
+}
+
+impl Knots {
+    /// Knots every `spacing` steps with linear interpolation.
+    pub fn linear(spacing: usize) -> Self {
+        Self {
+            spacing,
+            interpolation: Interpolation::Linear,
+        }
+    }
+
+    /// Knots every `spacing` steps, each held until the next.
+    pub fn hold(spacing: usize) -> Self {
+        Self {
+            spacing,
+            interpolation: Interpolation::Hold,
+        }
+    }
+
+    /// Checks `spacing ≥ 1`.
+    pub fn validate(&self) -> Result<()> {
+        nonzero("knot spacing", self.spacing)
+    }
+
+    /// Number of knots that cover a horizon of `h` steps.
+    pub fn count(&self, h: usize) -> usize {
+        let s = self.spacing.max(1);
+        match self.interpolation {
+            Interpolation::Hold => h.div_ceil(s),
+            Interpolation::Linear => (h.saturating_sub(1)).div_ceil(s) + 1,
+        }
+    }
+}
+
+/// Fills `z` (`H x N x A`) with unit-variance standard normal sequences drawn at `knots`,
+/// AR(1)-correlated between knots with `beta` (see [`fill_correlated_normal`] and [`Knots`]).
+pub(crate) fn fill_knot_noise(rng: &mut Rng, z: &mut Array3<f64>, beta: f64, knots: &Knots) {
+    let s = knots.spacing.max(1);
+    if s == 1 {
+        fill_correlated_normal(rng, z, beta);
+        return;
+    }
+    let (h, n, a) = z.dim();
+    let mut zk = Array3::zeros((knots.count(h), n, a));
+    fill_correlated_normal(rng, &mut zk, beta);
+    for t in 0..h {
+        let (k, r) = (t / s, t % s);
+        let mut out = z.index_axis_mut(ndarray::Axis(0), t);
+        match knots.interpolation {
+            Interpolation::Hold => out.assign(&zk.index_axis(ndarray::Axis(0), k)),
+            Interpolation::Linear if r == 0 => out.assign(&zk.index_axis(ndarray::Axis(0), k)),
+            Interpolation::Linear => {
+                // (1 − w) z_k + w z_{k+1} has variance (1 − w)² + w² + 2 w (1 − w) β.
+                let w = r as f64 / s as f64;
+                let norm = ((1.0 - w).powi(2) + w * w + 2.0 * w * (1.0 - w) * beta).sqrt();
+                let (c0, c1) = ((1.0 - w) / norm, w / norm);
+                let (z0, z1) = (
+                    zk.index_axis(ndarray::Axis(0), k),
+                    zk.index_axis(ndarray::Axis(0), k + 1),
+                );
+                ndarray::Zip::from(&mut out)
+                    .and(&z0)
+                    .and(&z1)
+                    .for_each(|o, &p, &q| *o = c0 * p + c1 * q);
+            }
+        }
+    }
+}
+
 pub(crate) fn correlation(v: f64) -> Result<()> {
     if (0.0..1.0).contains(&v) {
         Ok(())
@@ -434,4 +536,79 @@ pub(crate) fn lowest_k(costs: &Array1<f64>, k: usize) -> Vec<usize> {
     idx.sort_by(|&i, &j| costs[i].total_cmp(&costs[j]).then(i.cmp(&j)));
     idx.truncate(k);
     idx
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Axis;
+    use tandem_core::seeding::rng_from_seed;
+
+    fn knot_noise(h: usize, n: usize, beta: f64, knots: Knots, seed: u64) -> Array3<f64> {
+        let mut z = Array3::zeros((h, n, 1));
+        fill_knot_noise(&mut rng_from_seed(seed), &mut z, beta, &knots);
+        z
+    }
+
+    #[test]
+    fn knot_counts_cover_the_horizon() {
+        // Hold: knots at 0, s, 2s, … below H. Linear: the last knot at or beyond H − 1.
+        assert_eq!(Knots::hold(5).count(30), 6);
+        assert_eq!(Knots::hold(4).count(30), 8);
+        assert_eq!(Knots::linear(3).count(31), 11);
+        assert_eq!(Knots::linear(3).count(30), 11);
+        assert_eq!(Knots::linear(1).count(30), 30);
+        assert_eq!(Knots::hold(50).count(30), 1);
+        assert_eq!(Knots::linear(50).count(30), 2);
+        assert!(Knots::hold(0).validate().is_err());
+        assert!(Knots::default().validate().is_ok());
+    }
+
+    #[test]
+    fn one_knot_per_step_draws_the_old_stream() {
+        let mut old = Array3::zeros((12, 7, 2));
+        fill_correlated_normal(&mut rng_from_seed(4), &mut old, 0.6);
+        let mut new = Array3::zeros((12, 7, 2));
+        fill_knot_noise(&mut rng_from_seed(4), &mut new, 0.6, &Knots::default());
+        assert_eq!(old, new);
+    }
+
+    #[test]
+    fn held_knots_are_constant_within_blocks_with_unit_variance() {
+        let (h, n, s, beta) = (13, 20_000, 4, 0.5);
+        let z = knot_noise(h, n, beta, Knots::hold(s), 1);
+        for t in 0..h {
+            if t % s != 0 {
+                assert_eq!(z.index_axis(Axis(0), t), z.index_axis(Axis(0), t - 1));
+            }
+            let var = z.index_axis(Axis(0), t).mapv(|v| v * v).mean().unwrap();
+            assert!((var - 1.0).abs() < 0.05, "step {t}: variance {var}");
+        }
+        // Consecutive blocks carry the AR(1) correlation β.
+        let corr = (&z.index_axis(Axis(0), 3) * &z.index_axis(Axis(0), 4))
+            .mean()
+            .unwrap();
+        assert!((corr - beta).abs() < 0.05, "{corr}");
+    }
+
+    #[test]
+    fn linear_knots_interpolate_with_unit_variance() {
+        let (h, n, s, beta) = (10, 20_000, 3, 0.3);
+        let z = knot_noise(h, n, beta, Knots::linear(s), 2);
+        for t in 0..h {
+            let var = z.index_axis(Axis(0), t).mapv(|v| v * v).mean().unwrap();
+            assert!((var - 1.0).abs() < 0.05, "step {t}: variance {var}");
+            let (k, r) = (t / s, t % s);
+            if r == 0 || (k + 1) * s >= h {
+                continue;
+            }
+            // Between knots at ks and (k+1)s: the normalized convex combination of the two.
+            let w = r as f64 / s as f64;
+            let norm = ((1.0 - w).powi(2) + w * w + 2.0 * w * (1.0 - w) * beta).sqrt();
+            for i in 0..n {
+                let want = ((1.0 - w) * z[(k * s, i, 0)] + w * z[((k + 1) * s, i, 0)]) / norm;
+                assert!((z[(t, i, 0)] - want).abs() < 1e-12);
+            }
+        }
+    }
 }

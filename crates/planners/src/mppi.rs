@@ -5,8 +5,11 @@
 //! `ε ~ N(0, Σ)` per step, clamp `μ + ε` into the bounds (the perturbation used in the update is
 //! the clamped one), roll out, weight each sample by `exp(−(S_i − min S)/λ_eff)`, and move the
 //! mean by the weighted perturbation. `λ_eff` is `λ` itself (Williams et al.) or, with
-//! [`Temperature::Spread`] / [`Temperature::EffectiveSamples`], scaled to the sampled costs. Sample 0 is the unperturbed mean. With `control_cost` the
-//! sample cost gains Williams et al.'s importance-sampling term `λ Σ_h μ_hᵀ Σ⁻¹ ε_h`.
+//! [`Temperature::Spread`] / [`Temperature::EffectiveSamples`], scaled to the sampled costs.
+//! Sample 0 is the unperturbed mean. With `control_cost` the sample cost gains Williams et al.'s
+//! importance-sampling term `λ Σ_h μ_hᵀ Σ⁻¹ ε_h`. The perturbations may be time-correlated
+//! (`correlation`) and drawn at [`Knots`] (held or interpolated between them); the mean itself
+//! stays one action per step.
 
 use ndarray::{s, Array1, Array2, Array3};
 use tandem_core::{seeding::rng_from_seed, Rng};
@@ -15,7 +18,7 @@ use tandem_models::DynamicsModel;
 use crate::error::Result;
 use crate::mpc::{
     check_problem, clamp_opt, nonzero, plan_from_actions, positive, rollout_population, shift_plan,
-    Bounds, Noise, Plan, Planner,
+    Bounds, Knots, Noise, Plan, Planner,
 };
 use crate::objective::Objective;
 
@@ -37,6 +40,10 @@ pub struct MppiConfig {
     /// Correlation `β ∈ [0, 1)` of the sampling noise between consecutive steps (AR(1); 0 is
     /// white noise, the original algorithm).
     pub correlation: f64,
+    /// Where the sampling noise is drawn along the horizon (default: every step). Like
+    /// `correlation`, knots make the noise dependent across steps, which `control_cost` (derived
+    /// for independent per-step noise) does not account for.
+    pub knots: Knots,
     /// Updates per call.
     pub iterations: usize,
     /// Whether to add the control-cost term `λ μᵀ Σ⁻¹ ε` to each sample's cost.
@@ -58,6 +65,7 @@ impl Default for MppiConfig {
             iterations: 1,
             control_cost: false,
             correlation: 0.0,
+            knots: Knots::default(),
             bounds: None,
             seed: 0,
         }
@@ -146,6 +154,7 @@ impl Mppi {
         nonzero("samples", cfg.samples)?;
         nonzero("iterations", cfg.iterations)?;
         crate::mpc::correlation(cfg.correlation)?;
+        cfg.knots.validate()?;
         positive("lambda", cfg.lambda)?;
         cfg.temperature.validate(cfg.lambda)?;
         let rng = rng_from_seed(cfg.seed);
@@ -195,7 +204,12 @@ impl Planner for Mppi {
         let mut z = Array3::zeros((h, n, a));
         let mut acts = Array3::zeros((h, n, a));
         for _ in 0..self.cfg.iterations {
-            crate::mpc::fill_correlated_normal(&mut self.rng, &mut z, self.cfg.correlation);
+            crate::mpc::fill_knot_noise(
+                &mut self.rng,
+                &mut z,
+                self.cfg.correlation,
+                &self.cfg.knots,
+            );
             for t in 0..h {
                 for i in 0..n {
                     for j in 0..a {

@@ -10,8 +10,8 @@ use nalgebra::{DMatrix, DVector};
 use ndarray::{Array1, Array2};
 use tandem_models::DynamicsModel;
 use tandem_planners::{
-    Bounds, Cem, CemConfig, DmdMpc, DmdMpcConfig, Mppi, MppiConfig, Noise, Objective, PlanError,
-    Planner, Utility,
+    Bounds, Cem, CemConfig, DmdMpc, DmdMpcConfig, Knots, Mppi, MppiConfig, Noise, Objective,
+    PlanError, Planner, Utility,
 };
 
 const H: usize = 15;
@@ -206,6 +206,187 @@ fn bounds_hold() {
                 );
             }
         }
+    }
+}
+
+/// The three planners with noise drawn at knots (held or interpolated) built for the bounded LQR
+/// problem.
+fn knotted(knots: Knots, seed: u64, b: &Bounds) -> Vec<Box<dyn Planner>> {
+    vec![
+        Box::new(
+            Cem::new(CemConfig {
+                horizon: H,
+                population: 100,
+                iterations: 4,
+                init_std: Some(vec![2.0]),
+                knots,
+                bounds: Some(b.clone()),
+                seed,
+                ..Default::default()
+            })
+            .unwrap(),
+        ),
+        Box::new(
+            Mppi::new(MppiConfig {
+                horizon: H,
+                samples: 100,
+                iterations: 4,
+                lambda: 0.05,
+                noise: Noise::Isotropic(2.0),
+                knots,
+                bounds: Some(b.clone()),
+                seed,
+                ..Default::default()
+            })
+            .unwrap(),
+        ),
+        Box::new(
+            DmdMpc::new(DmdMpcConfig {
+                horizon: H,
+                samples: 100,
+                iterations: 4,
+                noise: Noise::Isotropic(2.0),
+                adapt_covariance: true,
+                knots,
+                bounds: Some(b.clone()),
+                seed,
+                ..Default::default()
+            })
+            .unwrap(),
+        ),
+    ]
+}
+
+/// Noise at knots (every 4 steps held, every 3 steps interpolated): every plan stays within the
+/// bounds and never beats the LQR optimum, equal seeds give equal actions, different seeds differ.
+#[test]
+fn knotted_noise_keeps_bounds_and_determinism() {
+    let (m, obj, jstar, _) = lqr_problem();
+    let b = Bounds::new(vec![-0.8], vec![0.5]);
+    let x0 = [1.0, 0.0];
+    for knots in [Knots::hold(4), Knots::linear(3)] {
+        let run = |seed: u64| -> Vec<(Array2<f64>, f64)> {
+            knotted(knots, seed, &b)
+                .into_iter()
+                .flat_map(|mut p| {
+                    (0..3)
+                        .map(|_| {
+                            let plan = p.plan(&x0, &m, &obj).unwrap();
+                            (plan.actions, plan.total_cost)
+                        })
+                        .collect::<Vec<_>>()
+                })
+                .collect()
+        };
+        let (a, a2, c) = (run(5), run(5), run(6));
+        assert_eq!(a, a2);
+        assert_ne!(a, c);
+        for (acts, cost) in &a {
+            assert!(acts.iter().all(|u| (-0.8..=0.5).contains(u)), "{knots:?}");
+            assert!(*cost >= jstar - 1e-9);
+        }
+    }
+}
+
+/// With held knots every 3 steps and a cold start, every sample is constant over blocks of 3
+/// steps, and so is every update: one plan's cost falls to the optimum over block-constant
+/// sequences (move blocking), found here in closed form by least squares on the stacked linear
+/// dynamics `X = Φ x0 + Γ E v`, and stays above it (and above the unblocked LQR optimum).
+#[test]
+fn held_knots_reach_the_move_blocked_optimum() {
+    let (m, obj, jstar, _) = lqr_problem();
+    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
+    let (r, qf) = (0.01, &q * 10.0);
+    let (s_dim, spacing) = (2, 3);
+    let k_blocks = H.div_ceil(spacing);
+    // Stacked states x_0 .. x_H = Φ x0 + Γ u and the block-to-step map E (u = E v).
+    let x0 = DVector::from_vec(vec![1.0, 0.0]);
+    let mut phi = DMatrix::zeros((H + 1) * s_dim, s_dim);
+    let mut gamma = DMatrix::zeros((H + 1) * s_dim, H);
+    let mut at = DMatrix::identity(s_dim, s_dim);
+    for t in 0..=H {
+        phi.view_mut((t * s_dim, 0), (s_dim, s_dim)).copy_from(&at);
+        for j in 0..t {
+            let mut blk = m.b.clone();
+            for _ in 0..(t - 1 - j) {
+                blk = &m.a * blk;
+            }
+            gamma.view_mut((t * s_dim, j), (s_dim, 1)).copy_from(&blk);
+        }
+        at = &m.a * at;
+    }
+    let mut qbar = DMatrix::zeros((H + 1) * s_dim, (H + 1) * s_dim);
+    for t in 0..=H {
+        let w = if t == H { &qf } else { &q };
+        qbar.view_mut((t * s_dim, t * s_dim), (s_dim, s_dim))
+            .copy_from(w);
+    }
+    let e = DMatrix::from_fn(H, k_blocks, |t, k| if t / spacing == k { 1.0 } else { 0.0 });
+    let ge = &gamma * &e;
+    let hess = ge.transpose() * &qbar * &ge + e.transpose() * &e * r;
+    let grad = ge.transpose() * &qbar * &phi * &x0;
+    let v = -hess.cholesky().unwrap().solve(&grad);
+    let xs = &phi * &x0 + &ge * &v;
+    let u = &e * &v;
+    let jblock = (xs.transpose() * &qbar * &xs)[0] + r * u.norm_squared();
+    assert!(jblock > jstar * 1.001, "blocking should cost something");
+    let knots = Knots::hold(spacing);
+    type Make = fn(usize, Knots) -> Box<dyn Planner>;
+    let makers: [(&str, Make, usize); 3] = [
+        (
+            "cem",
+            |i, k| {
+                Box::new(
+                    Cem::new(CemConfig {
+                        knots: k,
+                        ..cem(i, 3).config().clone()
+                    })
+                    .unwrap(),
+                )
+            },
+            12,
+        ),
+        (
+            "mppi",
+            |i, k| {
+                Box::new(
+                    Mppi::new(MppiConfig {
+                        knots: k,
+                        ..mppi(i, 3).config().clone()
+                    })
+                    .unwrap(),
+                )
+            },
+            30,
+        ),
+        (
+            "dmd",
+            |i, k| {
+                Box::new(
+                    DmdMpc::new(DmdMpcConfig {
+                        knots: k,
+                        ..dmd(i, 3).config().clone()
+                    })
+                    .unwrap(),
+                )
+            },
+            20,
+        ),
+    ];
+    for (name, make, many) in makers {
+        let plan = make(many, knots).plan(x0.as_slice(), &m, &obj).unwrap();
+        let cost = plan.total_cost;
+        println!("{name}: block optimum {jblock:.5} (LQR {jstar:.5}), plan {cost:.5}");
+        for t in 0..H {
+            if t % spacing != 0 {
+                assert!((plan.actions[(t, 0)] - plan.actions[(t - 1, 0)]).abs() < 1e-12);
+            }
+        }
+        assert!(cost >= jblock - 1e-9, "{name} beat the blocked optimum");
+        assert!(
+            cost < 1.03 * jblock,
+            "{name}: {cost} not within 3% of {jblock}"
+        );
     }
 }
 
@@ -444,6 +625,13 @@ fn bad_inputs_are_clear_errors() {
     assert!(matches!(
         DmdMpc::new(DmdMpcConfig {
             step_size: 1.5,
+            ..Default::default()
+        }),
+        Err(PlanError::Config(_))
+    ));
+    assert!(matches!(
+        Mppi::new(MppiConfig {
+            knots: Knots::hold(0),
             ..Default::default()
         }),
         Err(PlanError::Config(_))
