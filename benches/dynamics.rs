@@ -5,6 +5,18 @@
 //! URDF: ABA 2.06 µs, RNEA 1.01 µs, CRBA 0.54 µs per call; ABA derivatives about 5 µs for a 6-DoF
 //! arm through its Python binding.
 //!
+//! Side by side on one 2-core machine at one time (2026-11-21; the host's speed drifts by ±30%
+//! over hours, so only same-run comparisons are meaningful): Pinocchio 4.1 from the `pin` wheel,
+//! its algorithms compiled from the headers with `g++ -O3` (baseline x86-64, as tandem is built;
+//! a `-march=native` build crashed against the wheel's libraries), against
+//! `rigid_timing` (example of `tandem-dynamics`), same URDF and state, per call:
+//!
+//! | | Pinocchio min-of-N CPU | tandem min-of-N CPU | Pinocchio 5×100k wall median | tandem 5×100k wall median |
+//! |---|---|---|---|---|
+//! | ABA | 2.35 µs | 1.19 µs | 2.60–2.98 µs | 1.23–1.52 µs |
+//! | RNEA | 1.08–1.23 µs | 0.54 µs | 1.33–1.44 µs | 0.55–0.60 µs |
+//! | CRBA | 0.60–0.61 µs | 0.445 µs | 0.64–0.66 µs | 0.47–0.78 µs |
+//!
 //! The `biped` group times `RigidBodyPlant::linearize` of one 30 ms control period (30 RK4 steps
 //! with contact) of the Leo-like biped (10 DoF, 6 actions): analytical (ABA derivatives chained
 //! with the actuator and contact partials through the RK4 stages) against central differences
