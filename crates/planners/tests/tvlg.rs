@@ -18,6 +18,15 @@ use tandem_planners::{
 
 const T: usize = 20;
 
+/// The quadratic cost the double-integrator tests share: `Q = diag(1, 0.1)`, `R = 0.01`,
+/// terminal `10 Q` (as in `lqr_flm_with_fitted_dynamics_reaches_the_lqr_cost`, which needs the
+/// matrices themselves for the Riccati optimum).
+fn double_integrator_objective() -> Objective {
+    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
+    let r = DMatrix::from_element(1, 1, 0.01);
+    quadratic_objective(&q, &r, &(&q * 10.0))
+}
+
 /// Cost of the controller's mean (no action noise) on a deterministic system from `x0`.
 fn mean_cost(ctrl: &TvlgController, sys: &dyn Dynamics, obj: &Objective, x0: &[f64]) -> f64 {
     let mut x = DVector::from_column_slice(x0);
@@ -145,9 +154,7 @@ fn pilqr_step_multipliers_follow_the_residual_ratio() {
     let m = LinearModel::double_integrator();
     let sys = ModelDynamics::new(&m, 0);
     let x0 = [1.0, 0.0];
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let quadratic = quadratic_objective(&q, &r, &(&q * 10.0));
+    let quadratic = double_integrator_objective();
     let obj = &quadratic;
     for (process_std, expect_up) in [(1e-4, true), (0.3, false)] {
         let scfg = SampleConfig {
@@ -208,9 +215,7 @@ fn pilqr_step_multipliers_follow_the_residual_ratio() {
 fn pi2_at_given_temperatures() {
     let m = LinearModel::double_integrator();
     let sys = ModelDynamics::new(&m, 0);
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let obj = quadratic_objective(&q, &r, &(&q * 10.0));
+    let obj = double_integrator_objective();
     let ctrl = TvlgController::constant(T, 2, &[0.0], 1.0).unwrap();
     let samples = sample_trajectories(
         &ctrl,
@@ -283,9 +288,7 @@ fn pi2_at_given_temperatures() {
 fn pi2_covariance_damping_scales_the_old_covariance() {
     let m = LinearModel::double_integrator();
     let sys = ModelDynamics::new(&m, 0);
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let obj = quadratic_objective(&q, &r, &(&q * 10.0));
+    let obj = double_integrator_objective();
     let ctrl = TvlgController::constant(T, 2, &[0.3], 1.7).unwrap();
     let samples = sample_trajectories(
         &ctrl,
@@ -428,9 +431,7 @@ fn pusher_contact_happens_at_different_steps() {
 fn classic_step_rule_on_agreeing_and_null_predictions() {
     let m = LinearModel::double_integrator();
     let sys = ModelDynamics::new(&m, 0);
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let obj = quadratic_objective(&q, &r, &(&q * 10.0));
+    let obj = double_integrator_objective();
     let ctrl = TvlgController::constant(T, 2, &[0.0], 1.0).unwrap();
     let scfg = SampleConfig {
         process_std: 0.01,
