@@ -84,14 +84,9 @@ pub fn crba<'d>(model: &Model, data: &'d mut Data, q: &[f64]) -> &'d DMatrix<f64
         // Parents come first, so ycrb[i] is read while its parent's entry is written.
         let (before, from_i) = data.ycrb.split_at_mut(i);
         let yi = &from_i[0];
-        // F_i = Ycrb_i S_i: (a × h, Ī a) for a revolute axis a, (m a, h × a) for a prismatic one.
-        let (a, h) = (&j.axis, &yi.h);
-        let (f, n) = match j.kind {
-            JointKind::Revolute => (a.cross(h), yi.ibar * a),
-            JointKind::Prismatic => (a * yi.mass, h.cross(a)),
-        };
-        (fx[i], fy[i], fz[i]) = (f.x, f.y, f.z);
-        (nx[i], ny[i], nz[i]) = (n.x, n.y, n.z);
+        let f = yi.mul_motion(&j.subspace());
+        (fx[i], fy[i], fz[i]) = (f.f.x, f.f.y, f.f.z);
+        (nx[i], ny[i], nz[i]) = (f.n.x, f.n.y, f.n.z);
 
         // Row i over the subtree: S_i · F_c (S is angular for a revolute joint, linear for a
         // prismatic one).
@@ -100,7 +95,7 @@ pub fn crba<'d>(model: &Model, data: &'d mut Data, q: &[f64]) -> &'d DMatrix<f64
             JointKind::Prismatic => (&fx[i..end], &fy[i..end], &fz[i..end]),
         };
         for (k, ((x, y), z)) in rx.iter().zip(ry).zip(rz).enumerate() {
-            let mic = a.x * x + a.y * y + a.z * z;
+            let mic = j.axis.x * x + j.axis.y * y + j.axis.z * z;
             let c = i + k;
             m[c * nv + i] = mic;
             m[i * nv + c] = mic;
