@@ -7,11 +7,12 @@
 //! `cargo run --release --example p0_difference_models [iterations] [seed]` (defaults 4, 0).
 //! The comparison with cold and warm start over seeds is `tandem reproduce p0-pendulum`.
 
+use tandem::agents::{EpisodeRunner, StepOptions};
 use tandem::envs::{make, SampleCounter};
-use tandem::models::{DynamicsModel, FitConfig, ResidualModel, Transitions};
-use tandem::pipelines::model_env::ModelEnv;
+use tandem::models::{DynamicsModel, FitConfig, ModelEnv, ResidualModel, Transitions};
 use tandem::pipelines::p0::{
-    collect, ddpg_agent, evaluate, pendulum_problem, pretrain, Method, P0Config, Rollout, Trainee,
+    agent_spaces, collect, ddpg_agent, mean_return, p0_loop, pendulum_problem, pretrain, Method,
+    P0Config,
 };
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -26,13 +27,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let problem = pendulum_problem();
     let task = problem.task.clone();
     let agent = ddpg_agent(&cfg, &task, Method::Difference, seed)?;
-    let mut ddpg = Trainee::new(
-        agent,
-        &cfg.ddpg,
-        2,
-        1,
-        tandem::core::seeding::rng_from_seed(seed),
-    )?;
+    let (obs, act) = agent_spaces(&task);
+    let rng = tandem::core::seeding::rng_from_seed(seed);
+    let mut ddpg = p0_loop(agent, &cfg.ddpg, &obs, &act, rng)?;
     let (mut true_system, count) = SampleCounter::new(make("DcMotorPendulum-real-v0")?);
     let mut eval_system = make("DcMotorPendulum-real-v0")?; // evaluation only, not counted
     let t0 = std::time::Instant::now();
@@ -47,7 +44,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &mut || {},
     )?;
     ddpg.agent.set_noise(cfg.ddpg.noise)?;
-    let r = evaluate(&mut ddpg.agent, eval_system.as_mut(), 1)?;
+    let r = mean_return(&mut ddpg.agent, eval_system.as_mut(), 1)?;
     println!(
         "μ_idl on the true system: return {r:.1} ({:.0} s)",
         t0.elapsed().as_secs_f64()
@@ -57,11 +54,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let model = ResidualModel::new(problem.idealized, cfg.residual.clone())?;
     let mut idealized_plus_d = ModelEnv::new(model, task.clone())?;
     let mut buffer_d: Option<Transitions> = None; // D: all true samples, no size limit
-    let mut rollout = Rollout::new(seed + 1);
+    let mut episodes = EpisodeRunner::new(seed + 1, "ep");
     for i in 0..iterations {
         // 1. Collect 3750 true samples with μ(s; θ_{i-1}) + N.
         let new = collect(
-            &mut ddpg.agent,
+            &mut ddpg,
             &mut true_system,
             &task,
             cfg.real_batch,
@@ -81,13 +78,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .model_mut()
             .fit(buffer_d.as_ref().unwrap(), &fit)?;
         // 3. DDPG on f_idl + d, bootstrapped from the previous actor, critic and replay buffer.
+        let sim = StepOptions::model();
         ddpg.train(
             &mut idealized_plus_d,
-            &mut rollout,
+            &mut episodes,
             cfg.model_steps,
-            &mut || {},
+            sim,
+            &mut |_| {},
         )?;
-        let r = evaluate(&mut ddpg.agent, eval_system.as_mut(), 1)?;
+        let r = mean_return(&mut ddpg.agent, eval_system.as_mut(), 1)?;
         println!(
             "update {}: {} true samples, model held-out loss {:.4}, return on the true system {r:.1} ({:.0} s)",
             i + 1,

@@ -5,7 +5,8 @@ use tandem::agents::NoiseConfig;
 use tandem::dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 use tandem::envs::{make, SampleCounter};
 use tandem::pipelines::p0::{
-    collect, ddpg_agent, pendulum_problem, run_seed, Method, P0Config, RunRecord,
+    agent_spaces, collect, ddpg_agent, p0_loop, pendulum_problem, run_seed, Method, P0Config,
+    RunRecord,
 };
 
 /// A configuration small enough for a test: tiny networks and budgets.
@@ -85,9 +86,15 @@ fn collected_transitions_are_true_plant_steps_from_wrapped_states() {
         dt: 1.0,
     };
     let problem = pendulum_problem();
-    let mut agent = ddpg_agent(&cfg, &problem.task, Method::Cold, 0).unwrap();
+    let agent = ddpg_agent(&cfg, &problem.task, Method::Cold, 0).unwrap();
+    let (obs, act) = agent_spaces(&problem.task);
+    let rng = tandem::core::seeding::rng_from_seed(0);
+    let mut lp = p0_loop(agent, &cfg.ddpg, &obs, &act, rng).unwrap();
     let (mut env, count) = SampleCounter::new(make("DcMotorPendulum-real-v0").unwrap());
-    let data = collect(&mut agent, &mut env, &problem.task, 900, 5, &mut || {}).unwrap();
+    let data = collect(&mut lp, &mut env, &problem.task, 900, 5, &mut || {}).unwrap();
+    // Collecting neither stores nor learns.
+    assert_eq!((lp.primary().len(), lp.counts().updates), (0, 0));
+    assert_eq!(lp.counts().real_steps, 900);
     assert_eq!((data.len(), count.get()), (900, 900));
     let real = DcMotorPendulum::new(DcMotorPendulumParams::real());
     let mut crossed = 0;

@@ -25,20 +25,19 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 use tandem_agents::{
-    AgentError, Batch, Ddpg, DdpgConfig, Mode, NoiseConfig, OffPolicyAgent, ReplayBuffer,
-    TransitionRef,
+    evaluate, Agent, AgentError, Ddpg, DdpgConfig, EpisodeRunner, NoiseConfig, OffPolicyAgent,
+    OffPolicyLoop, OffPolicySchedule, StepOptions, Store,
 };
-use tandem_core::{Rng, SeedStream};
+use tandem_core::{Rng, SeedStream, Space};
 use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 use tandem_dynamics::Plant;
-use tandem_envs::{DcMotorPendulumEnv, Env, EnvError, SampleCounter};
+use tandem_envs::{DcMotorPendulumEnv, DcMotorPendulumTask, Env, EnvError, SampleCounter, Task};
 use tandem_models::{
-    DynamicsModel, FitConfig, FitReport, ModelError, PlantModel, ResidualModel,
+    DynamicsModel, FitConfig, FitReport, ModelEnv, ModelError, PlantModel, ResidualModel,
     ResidualModelConfig, Transitions, TransitionsBuilder,
 };
 
 use super::adapter::{feature_dim, Adapted, Feature};
-use super::model_env::{clip_to, DcMotorPendulumTask, ModelEnv, Task};
 
 /// Why a pipeline stopped.
 #[derive(Debug, thiserror::Error)]
@@ -262,209 +261,74 @@ impl RunRecord {
     }
 }
 
-/// An agent in training: its replay buffer, minibatch scratch, sampling generator and
-/// schedule. [`Trainee::train`] is the one loop every phase of every method uses.
-#[derive(Debug, Clone)]
-pub struct Trainee<A> {
-    /// The agent.
-    pub agent: A,
-    /// Its replay buffer.
-    pub replay: ReplayBuffer,
-    batch: Batch,
+/// The shared off-policy loop as p0 runs it: DDPG's schedule, acting with the agent from the
+/// first step (no random warm-up), updates once the buffer holds a full minibatch and
+/// `learning_starts` transitions.
+pub fn p0_loop<A: OffPolicyAgent>(
+    agent: A,
+    cfg: &DdpgConfig,
+    obs_space: &Space,
+    act_space: &Space,
     rng: Rng,
-    learning_starts: usize,
-    train_freq: usize,
-    gradient_steps: usize,
-    /// Gradient updates so far.
-    pub updates: u64,
-    /// Environment steps trained on so far.
-    pub steps: u64,
-}
-
-impl<A: OffPolicyAgent> Trainee<A> {
-    /// `agent` with an empty replay buffer, scheduled as `cfg` says (minibatch size, updates
-    /// begin once `learning_starts` transitions are stored, `gradient_steps` updates every
-    /// `train_freq` steps).
-    pub fn new(
-        agent: A,
-        cfg: &DdpgConfig,
-        obs_dim: usize,
-        act_dim: usize,
-        rng: Rng,
-    ) -> Result<Self> {
-        Ok(Self {
-            agent,
-            replay: ReplayBuffer::new(cfg.buffer_size, obs_dim, act_dim)?,
-            batch: Batch::zeros(cfg.batch_size, obs_dim, act_dim),
-            rng,
-            learning_starts: cfg.learning_starts.max(cfg.batch_size),
-            train_freq: cfg.train_freq,
-            gradient_steps: cfg.gradient_steps,
-            updates: 0,
-            steps: 0,
-        })
-    }
-
-    /// Empties the replay buffer (a new environment whose old transitions should not be reused).
-    pub fn clear_replay(&mut self) -> Result<()> {
-        self.replay = ReplayBuffer::new(
-            self.replay.capacity(),
-            self.replay.obs_dim(),
-            self.replay.act_dim(),
-        )?;
-        Ok(())
-    }
-
-    /// Takes `steps` exploring steps in `env` (continuing the episode in `rollout`), stores every
-    /// transition and updates the agent on the schedule; `tick` is called after every step.
-    pub fn train(
-        &mut self,
-        env: &mut dyn Env,
-        rollout: &mut Rollout,
-        steps: u64,
-        tick: &mut dyn FnMut(),
-    ) -> Result<()> {
-        for _ in 0..steps {
-            let obs = rollout.current(env, &mut self.agent);
-            let action = self.agent.act(&obs, Mode::Explore)?;
-            let a = action.as_continuous().unwrap_or_default().to_vec();
-            let st = env.step(&action)?;
-            self.replay.push(TransitionRef {
-                obs: &obs,
-                action: &a,
-                prev_action: &rollout.prev_action,
-                reward: st.reward,
-                next_obs: &st.observation,
-                terminated: st.terminated,
-            })?;
-            rollout.advance(a, st.observation, st.terminated || st.truncated);
-            self.steps += 1;
-            if self.replay.len() >= self.learning_starts && self.steps % self.train_freq as u64 == 0
-            {
-                for _ in 0..self.gradient_steps {
-                    let n = self.batch.len();
-                    self.replay
-                        .sample_into(&mut self.rng, &mut self.batch, 0..n)?;
-                    self.agent.update(&self.batch)?;
-                    self.updates += 1;
-                }
-            }
-            tick();
-        }
-        Ok(())
-    }
-}
-
-/// An episode in progress on one environment, so that training can stop and resume mid-episode.
-#[derive(Debug, Clone, Default)]
-pub struct Rollout {
-    obs: Option<Vec<f64>>,
-    prev_action: Vec<f64>,
-    episode: u64,
-    seed: u64,
-}
-
-impl Rollout {
-    /// No episode started yet; episode `k` is reset with a seed derived from `seed` and `k`.
-    pub fn new(seed: u64) -> Self {
-        Self {
-            seed,
-            ..Self::default()
-        }
-    }
-
-    fn current<A: OffPolicyAgent>(&mut self, env: &mut dyn Env, agent: &mut A) -> Vec<f64> {
-        if let Some(o) = self.obs.take() {
-            return o;
-        }
-        let o = env.reset(Some(
-            SeedStream::new(self.seed).derive(&format!("ep{}", self.episode)),
-        ));
-        self.episode += 1;
-        agent.reset_episode();
-        self.prev_action = vec![0.0; env.action_space().flat_dim()];
-        o
-    }
-
-    fn advance(&mut self, action: Vec<f64>, next_obs: Vec<f64>, done: bool) {
-        self.prev_action = action;
-        self.obs = (!done).then_some(next_obs);
-    }
+) -> Result<OffPolicyLoop<A>> {
+    let schedule = OffPolicySchedule {
+        // The loop updates once the buffer holds more than `learning_starts` transitions.
+        learning_starts: cfg.learning_starts.max(cfg.batch_size).max(1) - 1,
+        ..cfg.schedule()
+    };
+    Ok(OffPolicyLoop::new(agent, schedule, obs_space, act_space, rng)?.without_random_warmup())
 }
 
 /// Runs the agent with exploration on the (counted) true system for `n` steps, starting fresh
 /// episodes, and returns the transitions in the task's canonical state coordinates:
 /// `s = canon(x_t)`, `s' = s + (x_{t+1} − x_t)` from the environment's internal state, so that a
-/// wrapped angle never makes a difference jump by 2π.
+/// wrapped angle never makes a difference jump by 2π. The plant input is the task's
+/// [`Task::control`] of the action.
 pub fn collect<A: OffPolicyAgent, T: Task>(
-    agent: &mut A,
+    lp: &mut OffPolicyLoop<A>,
     env: &mut dyn Env,
     task: &T,
     n: u64,
     seed: u64,
     tick: &mut dyn FnMut(),
 ) -> Result<Transitions> {
-    let sd = env.state().len();
-    let ad = env.action_space().flat_dim();
-    let mut b = TransitionsBuilder::new(sd, ad);
-    let mut rollout = Rollout::new(seed);
+    let mut b = TransitionsBuilder::new(task.state_dim(), env.action_space().flat_dim());
+    let mut runner = EpisodeRunner::new(seed, "ep");
     for _ in 0..n {
-        let obs = rollout.current(env, agent);
-        let x = env.state();
-        let action = agent.act(&obs, Mode::Explore)?;
-        let a = clip_to(
-            task.action_space(),
-            action.as_continuous().unwrap_or_default(),
-        );
-        let st = env.step(&action)?;
-        let x1 = env.state();
+        let rec = lp.step(env, &mut runner, StepOptions::collect())?;
+        let (x, x1) = rec.states.as_ref().expect("collect records states");
         let mut s = x.clone();
         task.canonicalize(&mut s);
         let s1: Vec<f64> = s
             .iter()
-            .zip(x1.iter().zip(&x))
+            .zip(x1.iter().zip(x))
             .map(|(s, (a, b))| s + (a - b))
             .collect();
-        b.push(&s, &a, &s1, st.reward, st.terminated)?;
-        let done = st.terminated || st.truncated;
-        if done {
+        b.push(
+            &s,
+            &task.control(&rec.action),
+            &s1,
+            rec.reward,
+            rec.terminated,
+        )?;
+        if rec.done() {
             b.end_episode();
         }
-        rollout.advance(a, st.observation, done);
         tick();
     }
     Ok(b.build())
 }
 
-/// Mean return of `episodes` deterministic episodes of `agent` on `env` (episodes end at
-/// termination or the environment's time limit).
-pub fn evaluate<A: OffPolicyAgent>(
-    agent: &mut A,
-    env: &mut dyn Env,
-    episodes: usize,
-) -> Result<f64> {
-    let limit = env.max_episode_steps().unwrap_or(usize::MAX);
-    let mut total = 0.0;
-    for i in 0..episodes {
-        let mut obs = env.reset(Some(i as u64));
-        agent.reset_episode();
-        for _ in 0..limit {
-            let a = agent.act(&obs, Mode::Deterministic)?;
-            let st = env.step(&a)?;
-            total += st.reward;
-            if st.terminated || st.truncated {
-                break;
-            }
-            obs = st.observation;
-        }
-    }
-    Ok(total / episodes as f64)
+/// Mean return of `episodes` deterministic episodes of `agent` on `env`.
+pub fn mean_return(agent: &mut dyn Agent, env: &mut dyn Env, episodes: usize) -> Result<f64> {
+    let r = evaluate(agent, env, episodes, &SeedStream::new(0), None)?;
+    Ok(r.iter().sum::<f64>() / episodes as f64)
 }
 
-/// Pre-trains `trainee` for `steps` steps on the idealized plant (a [`ModelEnv`] over
+/// Pre-trains the loop's agent for `steps` steps on the idealized plant (a [`ModelEnv`] over
 /// [`PlantModel`]); the replay buffer is emptied afterwards (its transitions are idealized).
 pub fn pretrain<A, P, T>(
-    trainee: &mut Trainee<A>,
+    lp: &mut OffPolicyLoop<A>,
     idealized: P,
     task: T,
     steps: u64,
@@ -477,8 +341,15 @@ where
     T: Task,
 {
     let mut env = ModelEnv::new(PlantModel::new(idealized), task)?;
-    trainee.train(&mut env, &mut Rollout::new(seed), steps, tick)?;
-    trainee.clear_replay()
+    let mut runner = EpisodeRunner::new(seed, "ep");
+    lp.train(
+        &mut env,
+        &mut runner,
+        steps,
+        StepOptions::model(),
+        &mut |_| tick(),
+    )?;
+    Ok(lp.clear(Store::Primary)?)
 }
 
 /// Adds `new` to `all`.
@@ -497,7 +368,7 @@ pub fn run_method<A, P, T, F>(
     method: Method,
     problem: &Problem<P, T, F>,
     cfg: &P0Config,
-    mut start: Trainee<A>,
+    mut start: OffPolicyLoop<A>,
     seed: u64,
     tick: &mut dyn FnMut(u64),
 ) -> Result<RunRecord>
@@ -512,25 +383,26 @@ where
     let seeds = SeedStream::new(seed);
     let (mut env, count) = SampleCounter::new((problem.true_env)()?);
     let mut eval_env = (problem.true_env)()?;
-    let updates0 = start.updates;
+    let updates0 = start.counts().updates;
     let mut curve = vec![CurvePoint {
         true_samples: 0,
-        eval_return: evaluate(&mut start.agent, &mut eval_env, cfg.eval_episodes)?,
+        eval_return: mean_return(&mut start.agent, &mut eval_env, cfg.eval_episodes)?,
     }];
     let mut fit_losses = Vec::new();
     let mut simulated = 0;
     match method {
         Method::Cold | Method::Warm => {
-            start.clear_replay()?;
-            let mut rollout = Rollout::new(seeds.derive("true-episodes"));
+            start.clear(Store::Primary)?;
+            let mut runner = EpisodeRunner::new(seeds.derive("true-episodes"), "ep");
             let mut reached = false;
             while count.get() < cfg.baseline_max_samples {
                 let n = cfg
                     .eval_interval
                     .min(cfg.baseline_max_samples - count.get());
                 let c = count.clone();
-                start.train(&mut env, &mut rollout, n, &mut || tick(c.get()))?;
-                let r = evaluate(&mut start.agent, &mut eval_env, cfg.eval_episodes)?;
+                let real = StepOptions::real();
+                start.train(&mut env, &mut runner, n, real, &mut |_| tick(c.get()))?;
+                let r = mean_return(&mut start.agent, &mut eval_env, cfg.eval_episodes)?;
                 curve.push(CurvePoint {
                     true_samples: count.get(),
                     eval_return: r,
@@ -547,15 +419,15 @@ where
                 ResidualModel::new(problem.idealized.clone(), cfg.residual.clone())?,
                 problem.task.clone(),
             )?;
-            start.clear_replay()?;
+            start.clear(Store::Primary)?;
             let mut all: Option<Transitions> = None;
-            let mut rollout = Rollout::new(seeds.derive("model-episodes"));
+            let mut runner = EpisodeRunner::new(seeds.derive("model-episodes"), "ep");
             let mut k = 0u64;
             while count.get() + cfg.real_batch <= cfg.real_budget {
                 // 1. True samples with the previous policy plus exploration noise.
                 let c = count.clone();
                 let batch = collect(
-                    &mut start.agent,
+                    &mut start,
                     &mut env,
                     &problem.task,
                     cfg.real_batch,
@@ -573,11 +445,18 @@ where
                     .fit(all.as_ref().expect("appended"), &fit)?;
                 fit_losses.push(report.holdout_loss.last().copied().unwrap_or(f64::NAN));
                 // 3. DDPG on the idealized plant plus the difference model, bootstrapped.
-                start.train(&mut model_env, &mut rollout, cfg.model_steps, &mut || {})?;
+                let sim = StepOptions::model();
+                start.train(
+                    &mut model_env,
+                    &mut runner,
+                    cfg.model_steps,
+                    sim,
+                    &mut |_| {},
+                )?;
                 simulated += cfg.model_steps;
                 curve.push(CurvePoint {
                     true_samples: count.get(),
-                    eval_return: evaluate(&mut start.agent, &mut eval_env, cfg.eval_episodes)?,
+                    eval_return: mean_return(&mut start.agent, &mut eval_env, cfg.eval_episodes)?,
                 });
                 k += 1;
             }
@@ -589,17 +468,17 @@ where
         curve,
         true_samples: count.get(),
         simulated_steps: simulated,
-        updates: start.updates - updates0,
+        updates: start.counts().updates - updates0,
         fit_holdout_loss: fit_losses,
         wall_seconds: t0.elapsed().as_secs_f64(),
     })
 }
 
-/// Observation and action widths of the task.
-pub fn task_dims<T: Task>(task: &T) -> (usize, usize) {
+/// Observation and action spaces of the task: what the replay buffer stores.
+pub fn agent_spaces<T: Task>(task: &T) -> (Space, Space) {
     (
-        task.observation_space().flat_dim(),
-        task.action_space().flat_dim(),
+        task.observation_space().clone(),
+        task.action_space().clone(),
     )
 }
 
@@ -622,10 +501,10 @@ where
 {
     cfg.validate()?;
     let seeds = SeedStream::new(seed);
-    let (od, ad) = task_dims(&problem.task);
-    let trainee = |m: Method| -> Result<Trainee<A>> {
+    let (od, ad) = agent_spaces(&problem.task);
+    let trainee = |m: Method| -> Result<OffPolicyLoop<A>> {
         let agent = make_agent(m, seeds.derive("agent"))?;
-        Trainee::new(agent, &cfg.ddpg, od, ad, seeds.rng("minibatches"))
+        p0_loop(agent, &cfg.ddpg, &od, &ad, seeds.rng("minibatches"))
     };
     let pretrained = if methods.iter().any(|m| *m != Method::Cold) {
         let mut t = trainee(Method::Warm)?;
@@ -678,7 +557,7 @@ pub fn pendulum_problem() -> Problem<DcMotorPendulum, DcMotorPendulumTask, MakeE
     let params = DcMotorPendulumParams::idealized();
     Problem {
         idealized: DcMotorPendulum::new(params),
-        task: DcMotorPendulumTask::new(&params),
+        task: DcMotorPendulumTask::new(DcMotorPendulumEnv::ID_IDEALIZED, &params),
         true_env: || tandem_envs::make(DcMotorPendulumEnv::ID_REAL),
     }
 }

@@ -214,3 +214,26 @@ impl Learner {
         }
     }
 }
+
+/// The chosen agent acts as itself.
+impl Agent for Learner {
+    fn name(&self) -> &'static str {
+        self.agent_name()
+    }
+    fn act(&mut self, obs: &[f64], mode: Mode) -> Result<Action> {
+        self.agent().act(obs, mode)
+    }
+    fn reset_episode(&mut self) {
+        self.agent().reset_episode()
+    }
+    fn on_env_step(&mut self) {
+        self.agent().on_env_step()
+    }
+}
+
+/// The off-policy agents learn from minibatches; REINFORCE's `update` is an error.
+impl OffPolicyAgent for Learner {
+    fn update(&mut self, batch: &Batch) -> Result<Metrics> {
+        self.update_batch(batch)
+    }
+}

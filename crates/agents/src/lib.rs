@@ -10,7 +10,8 @@
 //! | [`Ddpg`], [`Sac`], [`Dqn`], [`Reinforce`] and their `*Config` | the agents; each `Default` cites its source |
 //! | [`Noise`], [`NoiseConfig`] | Ornstein–Uhlenbeck and Gaussian exploration |
 //! | [`Learner`], [`Algo`], [`AlgoConfig`] | "one of the four", chosen by name |
-//! | [`Trainer`], [`TrainSettings`], [`RunLog`] | the loop (stable-baselines3's off-policy schedule), evaluation, save/resume |
+//! | [`OffPolicyLoop`], [`EpisodeRunner`], [`evaluate`] | the one off-policy loop every pipeline runs: real and model steps, two replay buffers mixed at a set ratio, exact sample counts, stable-baselines3's schedule, evaluation, save/resume |
+//! | [`Trainer`], [`TrainSettings`], [`RunLog`] | `tandem train`'s loop: any of the four agents on one environment, on the shared loop |
 //!
 //! Networks are `tandem-nn`'s hand-derived [`tandem_nn::Mlp`]s with in-place Adam; the actor
 //! gradients (DDPG through the critic's input gradient, SAC's reparametrized tanh-Gaussian) are
@@ -45,6 +46,7 @@ pub mod dqn;
 pub mod error;
 pub mod learner;
 pub mod noise;
+pub mod off_policy;
 pub mod reinforce;
 pub mod replay;
 pub mod sac;
@@ -60,6 +62,9 @@ pub use dqn::Dqn;
 pub use error::{AgentError, Result};
 pub use learner::{Algo, AlgoConfig, Learner};
 pub use noise::{Noise, NoiseConfig};
+pub use off_policy::{
+    evaluate, EpisodeRunner, LoopCounts, OffPolicyLoop, Source, StepOptions, StepRecord, Store,
+};
 pub use reinforce::Reinforce;
 pub use replay::{MixedSampler, ReplayBuffer, TransitionRef};
 pub use sac::Sac;

@@ -1,5 +1,7 @@
-//! The training loop: an agent, an environment, replay (off-policy) or episode collection
-//! (REINFORCE), periodic deterministic evaluation, a run log, and checkpoints of all of it.
+//! The training loop of `tandem train`: one of the four agents ([`Learner`]) on one environment,
+//! periodic deterministic evaluation, a run log, and checkpoints of all of it. The off-policy
+//! agents run the shared [`OffPolicyLoop`] (the same loop every paper's pipeline runs);
+//! REINFORCE collects episodes with the same [`EpisodeRunner`].
 //!
 //! Reproducible by construction: every episode is reset with a seed derived from the run seed and
 //! the episode's index, warm-up actions and minibatches come from the trainer's own generator, and
@@ -16,15 +18,14 @@
 //! by any `TimeLimit` wrapper (so it survives a resume that restores the environment's state).
 
 use serde::{Deserialize, Serialize};
-use tandem_core::{Rng, SeedStream, Space};
+use tandem_core::SeedStream;
 use tandem_envs::Env;
 use tandem_nn::Checkpoint;
 
-use crate::agent::{action_row, Batch, Episode, Mode};
-use crate::ddpg::random_action;
+use crate::agent::{Episode, Mode};
 use crate::error::{ensure, AgentError, Result};
 use crate::learner::{AlgoConfig, Learner};
-use crate::replay::{ReplayBuffer, TransitionRef};
+use crate::off_policy::{env_err, evaluate, EpisodeRunner, OffPolicyLoop, StepOptions, StepRecord};
 
 /// Settings of the loop itself (not of the agent).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -129,37 +130,36 @@ pub struct RunLog {
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct Progress {
+    /// Environment steps (REINFORCE; the off-policy loop counts its own).
     step: u64,
-    episode: u64,
+    /// Gradient updates (REINFORCE).
     updates: u64,
-    obs: Option<Vec<f64>>,
+    last_update: Vec<(String, f64)>,
+    runner: EpisodeRunner,
     env_state: Option<Vec<f64>>,
-    prev_action: Vec<f64>,
-    ep_return: f64,
-    ep_len: usize,
     current: Episode,
     pending: Vec<Episode>,
-    last_update: Vec<(String, f64)>,
-    rng: Rng,
     log: RunLog,
+}
+
+/// The agent and how it learns.
+#[derive(Debug, Clone)]
+#[allow(clippy::large_enum_variant)]
+enum Core {
+    /// DDPG, SAC, DQN: the shared off-policy loop.
+    OffPolicy(OffPolicyLoop<Learner>),
+    /// REINFORCE: whole episodes.
+    Episodic(Learner),
 }
 
 /// A training run in progress.
 #[derive(Debug, Clone)]
 pub struct Trainer {
-    learner: Learner,
+    core: Core,
     config: AlgoConfig,
     settings: TrainSettings,
     seeds: SeedStream,
-    act_space: Space,
-    act_dim: usize,
-    replay: Option<ReplayBuffer>,
-    batch: Batch,
     p: Progress,
-}
-
-fn env_err(e: tandem_envs::EnvError) -> AgentError {
-    AgentError::Env(e.to_string())
 }
 
 impl Trainer {
@@ -171,59 +171,57 @@ impl Trainer {
         seed: u64,
     ) -> Result<Self> {
         settings.validate()?;
-        let obs_space = env.observation_space().clone();
-        let act_space = env.action_space().clone();
+        let (obs_space, act_space) = (env.observation_space(), env.action_space());
         let seeds = SeedStream::new(seed);
-        let learner = Learner::new(&config, &obs_space, &act_space, seeds.derive("agent"))?;
-        let act_dim = act_space.flat_dim();
-        let od = obs_space.flat_dim();
-        let (replay, batch) = match config.schedule() {
-            Some(s) => (
-                Some(ReplayBuffer::new(s.buffer_size, od, act_dim)?),
-                Batch::zeros(s.batch_size, od, act_dim),
-            ),
-            None => (None, Batch::zeros(0, od, act_dim)),
+        let learner = Learner::new(&config, obs_space, act_space, seeds.derive("agent"))?;
+        let core = match config.schedule() {
+            Some(s) => Core::OffPolicy(OffPolicyLoop::new(
+                learner,
+                s,
+                obs_space,
+                act_space,
+                seeds.rng("trainer"),
+            )?),
+            None => Core::Episodic(learner),
         };
         Ok(Self {
-            learner,
+            core,
             config,
-            settings,
-            act_space,
-            act_dim,
-            replay,
-            batch,
             p: Progress {
                 step: 0,
-                episode: 0,
                 updates: 0,
-                obs: None,
+                last_update: Vec::new(),
+                runner: EpisodeRunner::new(seed, "train-episode-")
+                    .with_limit(settings.max_episode_steps),
                 env_state: None,
-                prev_action: vec![0.0; act_dim],
-                ep_return: 0.0,
-                ep_len: 0,
                 current: Episode::default(),
                 pending: Vec::new(),
-                last_update: Vec::new(),
-                rng: seeds.rng("trainer"),
                 log: RunLog::default(),
             },
+            settings,
             seeds,
         })
     }
 
     /// Environment steps taken (the exact count of real samples used for training).
     pub fn steps(&self) -> u64 {
-        self.p.step
+        match &self.core {
+            Core::OffPolicy(l) => l.counts().real_steps,
+            Core::Episodic(_) => self.p.step,
+        }
     }
 
     /// Training episodes finished.
     pub fn episodes(&self) -> u64 {
-        self.p.episode
+        self.p.runner.episode()
     }
 
     /// Gradient updates made.
     pub fn updates(&self) -> u64 {
-        self.p.updates
+        match &self.core {
+            Core::OffPolicy(l) => l.counts().updates,
+            Core::Episodic(_) => self.p.updates,
+        }
     }
 
     /// The run log so far.
@@ -233,7 +231,10 @@ impl Trainer {
 
     /// The agent.
     pub fn learner(&mut self) -> &mut Learner {
-        &mut self.learner
+        match &mut self.core {
+            Core::OffPolicy(l) => &mut l.agent,
+            Core::Episodic(a) => a,
+        }
     }
 
     /// The agent's configuration.
@@ -250,11 +251,14 @@ impl Trainer {
     pub fn episodes_done(&self) -> bool {
         self.settings
             .max_episodes
-            .is_some_and(|m| self.p.episode >= m)
+            .is_some_and(|m| self.episodes() >= m)
     }
 
-    fn limit(&self, env: &dyn Env) -> Option<usize> {
-        self.settings.max_episode_steps.or(env.max_episode_steps())
+    fn last_update(&self) -> Vec<(String, f64)> {
+        match &self.core {
+            Core::OffPolicy(l) => l.last_update().to_vec(),
+            Core::Episodic(_) => self.p.last_update.clone(),
+        }
     }
 
     /// Trains until `until_step` environment steps (or `max_episodes`), evaluating on `eval_env`
@@ -266,75 +270,26 @@ impl Trainer {
         until_step: u64,
         progress: &mut dyn FnMut(&Trainer),
     ) -> Result<()> {
-        let limit = self.limit(env);
-        let schedule = self.config.schedule();
-        while self.p.step < until_step && !self.episodes_done() {
-            let obs = match self.p.obs.take() {
-                Some(o) => o,
-                None => {
-                    let seed = self
-                        .seeds
-                        .derive(&format!("train-episode-{}", self.p.episode));
-                    let o = env.reset(Some(seed));
-                    self.learner.agent().reset_episode();
-                    self.p.prev_action.iter_mut().for_each(|a| *a = 0.0);
-                    self.p.ep_return = 0.0;
-                    self.p.ep_len = 0;
-                    self.p.current = Episode::default();
-                    o
+        while self.steps() < until_step && !self.episodes_done() {
+            let rec = match &mut self.core {
+                Core::OffPolicy(l) => l.step(env, &mut self.p.runner, StepOptions::real())?,
+                Core::Episodic(agent) => {
+                    let obs = self.p.runner.observation(env, agent.agent());
+                    let action = agent.act(&obs, Mode::Explore)?;
+                    let rec = self.p.runner.step(env, obs, action, false)?;
+                    self.p.step += 1;
+                    agent.agent().on_env_step();
+                    self.p
+                        .current
+                        .push(rec.obs.clone(), rec.action.clone(), rec.reward);
+                    rec
                 }
             };
-            let warmup = schedule.is_some_and(|s| self.p.step < s.learning_starts as u64);
-            let action = if warmup {
-                random_action(&self.act_space, &mut self.p.rng)
-            } else {
-                self.learner.act(&obs, Mode::Explore)?
-            };
-            let st = env.step(&action).map_err(env_err)?;
-            self.p.step += 1;
-            self.learner.agent().on_env_step();
-            self.p.ep_len += 1;
-            self.p.ep_return += st.reward;
-            let truncated = st.truncated || limit.is_some_and(|m| self.p.ep_len >= m);
-            let mut a_row = vec![0.0f32; self.act_dim];
-            action_row(&action, &mut a_row);
-            let a64: Vec<f64> = a_row.iter().map(|v| f64::from(*v)).collect();
-            if let Some(r) = &mut self.replay {
-                r.push(TransitionRef {
-                    obs: &obs,
-                    action: &a64,
-                    prev_action: &self.p.prev_action,
-                    reward: st.reward,
-                    next_obs: &st.observation,
-                    terminated: st.terminated,
-                })?;
-            } else {
-                self.p.current.push(obs, action, st.reward);
-            }
-            self.p.prev_action = a64;
-            self.p.obs = Some(st.observation);
-
-            if let (Some(s), Some(r)) = (schedule, &self.replay) {
-                if self.p.step > s.learning_starts as u64 && self.p.step % s.train_freq as u64 == 0
-                {
-                    for _ in 0..s.gradient_steps {
-                        let n = self.batch.len();
-                        r.sample_into(&mut self.p.rng, &mut self.batch, 0..n)?;
-                        let m = self.learner.update_batch(&self.batch)?;
-                        self.p.updates += 1;
-                        if self.p.updates % 64 == 0 || s.gradient_steps == 1 {
-                            self.p.last_update =
-                                m.0.iter().map(|(k, v)| (k.to_string(), *v)).collect();
-                        }
-                    }
-                }
-            }
-
-            if st.terminated || truncated {
-                self.finish_episode(st.terminated)?;
+            if rec.done() {
+                self.finish_episode(&rec)?;
             }
             let ei = self.settings.eval_interval;
-            if ei > 0 && self.p.step % ei == 0 {
+            if ei > 0 && self.steps() % ei == 0 {
                 self.evaluate(eval_env)?;
             }
             progress(self);
@@ -342,33 +297,36 @@ impl Trainer {
         Ok(())
     }
 
-    fn finish_episode(&mut self, terminated: bool) -> Result<()> {
+    fn finish_episode(&mut self, rec: &StepRecord) -> Result<()> {
         let w = self.settings.solved_window;
         let log = &mut self.p.log;
         let k = log.episodes.len();
         let lo = (k + 1).saturating_sub(w);
-        let sum: f64 = log.episodes[lo..].iter().map(|e| e.ret).sum::<f64>() + self.p.ep_return;
+        let sum: f64 = log.episodes[lo..].iter().map(|e| e.ret).sum::<f64>() + rec.episode_return;
         let mean = sum / (k + 1 - lo) as f64;
+        // The runner has counted this episode already.
+        let episode = self.p.runner.episode() - 1;
         log.episodes.push(EpisodeRecord {
-            episode: self.p.episode,
-            step: self.p.step,
-            ret: self.p.ep_return,
-            length: self.p.ep_len,
+            episode,
+            step: match &self.core {
+                Core::OffPolicy(l) => l.counts().real_steps,
+                Core::Episodic(_) => self.p.step,
+            },
+            ret: rec.episode_return,
+            length: rec.episode_len,
             ret_window_mean: mean,
         });
         if let Some(t) = self.settings.solved_threshold {
             if log.solved_at_episode.is_none() && k + 1 >= w && mean >= t {
-                log.solved_at_episode = Some(self.p.episode);
+                log.solved_at_episode = Some(episode);
             }
         }
-        self.p.episode += 1;
-        self.p.obs = None;
-        if let AlgoConfig::Reinforce(c) = &self.config {
+        if let (Core::Episodic(agent), AlgoConfig::Reinforce(c)) = (&mut self.core, &self.config) {
             let mut e = std::mem::take(&mut self.p.current);
-            e.terminated = terminated;
+            e.terminated = rec.terminated;
             self.p.pending.push(e);
             if self.p.pending.len() >= c.episodes_per_update {
-                let m = self.learner.update_episodes(&self.p.pending)?;
+                let m = agent.update_episodes(&self.p.pending)?;
                 self.p.updates += 1;
                 self.p.last_update = m.0.iter().map(|(k, v)| (k.to_string(), *v)).collect();
                 self.p.pending.clear();
@@ -380,34 +338,20 @@ impl Trainer {
     /// Runs `eval_episodes` deterministic episodes on `env` (fixed seeds, the same at every
     /// evaluation), logs and returns the record. Does not touch the training generators.
     pub fn evaluate(&mut self, env: &mut dyn Env) -> Result<EvalRecord> {
-        let limit = self.limit(env);
-        let mut returns = Vec::with_capacity(self.settings.eval_episodes);
-        for i in 0..self.settings.eval_episodes {
-            let mut obs = env.reset(Some(self.seeds.derive(&format!("eval-episode-{i}"))));
-            let (mut ret, mut len) = (0.0, 0usize);
-            loop {
-                let a = self.learner.act(&obs, Mode::Deterministic)?;
-                let st = env.step(&a).map_err(env_err)?;
-                ret += st.reward;
-                len += 1;
-                if st.terminated || st.truncated || limit.is_some_and(|m| len >= m) {
-                    break;
-                }
-                obs = st.observation;
-            }
-            returns.push(ret);
-        }
+        let (episodes, limit) = (self.settings.eval_episodes, self.settings.max_episode_steps);
+        let seeds = self.seeds;
+        let returns = evaluate(self.learner().agent(), env, episodes, &seeds, limit)?;
         let n = returns.len() as f64;
         let mean = returns.iter().sum::<f64>() / n;
         let std = (returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
         let rec = EvalRecord {
-            step: self.p.step,
-            episodes: self.p.episode,
+            step: self.steps(),
+            episodes: self.episodes(),
             mean,
             std,
             returns,
-            updates: self.p.updates,
-            last_update: self.p.last_update.clone(),
+            updates: self.updates(),
+            last_update: self.last_update(),
         };
         self.p.log.evals.push(rec.clone());
         Ok(rec)
@@ -417,12 +361,15 @@ impl Trainer {
     /// `env`'s internal state), and log.
     pub fn save(&self, env: &dyn Env) -> Result<Checkpoint> {
         let mut ckpt = Checkpoint::new();
-        self.learner.save(&mut ckpt)?;
-        if let Some(r) = &self.replay {
-            r.save_to("replay", &mut ckpt)?;
+        match &self.core {
+            Core::OffPolicy(l) => {
+                l.agent.save(&mut ckpt)?;
+                l.save("trainer", &mut ckpt)?;
+            }
+            Core::Episodic(a) => a.save(&mut ckpt)?,
         }
         let mut p = self.p.clone();
-        p.env_state = p.obs.as_ref().map(|_| env.state());
+        p.env_state = p.runner.in_episode().then(|| env.state());
         ckpt.put_json("trainer", &p)?;
         ckpt.put_json("trainer_config", &(&self.config, &self.settings))?;
         Ok(ckpt)
@@ -440,14 +387,14 @@ impl Trainer {
                 self.config.algo().name()
             )));
         }
-        self.learner.load(ckpt)?;
+        self.learner().load(ckpt)?;
         if config != self.config || settings != self.settings {
             return Err(AgentError::Checkpoint(
                 "the run's configuration differs from this trainer's".into(),
             ));
         }
-        if let Some(r) = &mut self.replay {
-            r.load_from("replay", ckpt)?;
+        if let Core::OffPolicy(l) = &mut self.core {
+            l.load("trainer", ckpt)?;
         }
         let p: Progress = ckpt.get_json("trainer")?;
         if let Some(state) = &p.env_state {

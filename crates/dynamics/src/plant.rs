@@ -68,6 +68,17 @@ pub trait Plant {
     /// The state after applying action `u` for one control period from state `x`.
     fn step(&self, x: &DVector<f64>, u: &DVector<f64>) -> DVector<f64>;
 
+    /// [`Plant::step`] on slices, writing the next state into `next` (length
+    /// [`Plant::state_dim`]). The default copies through [`Plant::step`]; small plants override
+    /// it with an allocation-free path, which environments use on every step.
+    fn step_into(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        let y = self.step(
+            &DVector::from_column_slice(x),
+            &DVector::from_column_slice(u),
+        );
+        next.copy_from_slice(y.as_slice());
+    }
+
     /// Jacobians `(A, B) = (∂step/∂x, ∂step/∂u)` at `(x, u)`.
     ///
     /// The default uses central differences with a step scaled to each component's magnitude

@@ -1,35 +1,94 @@
-//! `CartPole-v1`, exact to gymnasium 1.x.
+//! `CartPole-v1`, exact to gymnasium 1.x: [`CartPoleTask`] over the [`CartPole`] plant.
 
 use rand::Rng as _;
-use tandem_core::seeding::{rng_from_seed, Rng};
+use tandem_core::seeding::Rng;
 use tandem_core::{Action, Space};
 use tandem_dynamics::classic::CartPole;
 
-use crate::env::{check_action, check_state, round_to_f32, Phase};
-use crate::{Env, EnvError, Step};
+use crate::env::round_to_f32;
+use crate::{PlantEnv, Task};
 
-/// Gymnasium's `CartPole-v1` without its time limit ([`crate::make`] adds the 500-step
-/// [`crate::TimeLimit`]).
+/// Gymnasium's `CartPole-v1` task over the [`CartPole`] plant:
 ///
-/// - state `(x, ẋ, θ, θ̇)` in `f64`, stepped by [`CartPole`]; observation = the state rounded to
-///   `f32` (gymnasium returns a `float32` array);
+/// - state `(x, ẋ, θ, θ̇)` in `f64`; observation = the state rounded to `f32` (gymnasium returns
+///   a `float32` array);
 /// - action `Discrete(2)`: 1 pushes with `+force_mag` = +10 N, 0 with −10 N;
 /// - reward 1.0 on every step, the terminating one included;
 /// - terminated when `|x| > 2.4` or `|θ| > 12°` (strict inequalities);
-/// - reset: every component uniform in `[-0.05, 0.05)` from the environment's own seeded
-///   generator (not numpy's stream: replay from a state with [`Env::set_state`] instead).
+/// - start: every component uniform in `[-0.05, 0.05)` from the environment's seeded generator
+///   (not numpy's stream: replay from a state with [`crate::Env::set_state`] instead);
+/// - 500 steps.
 #[derive(Debug, Clone)]
-pub struct CartPoleEnv {
-    plant: CartPole,
+pub struct CartPoleTask {
     force_mag: f64,
     x_threshold: f64,
     theta_threshold_radians: f64,
-    state: [f64; 4],
-    phase: Phase,
-    rng: Rng,
     observation_space: Space,
     action_space: Space,
 }
+
+impl Default for CartPoleTask {
+    fn default() -> Self {
+        // Computed as gymnasium does: 12 * 2 * math.pi / 360.
+        let theta_threshold_radians = 12.0 * 2.0 * std::f64::consts::PI / 360.0;
+        let x_threshold = 2.4;
+        let big = f32::MAX as f64;
+        let high = vec![x_threshold * 2.0, big, theta_threshold_radians * 2.0, big];
+        Self {
+            force_mag: 10.0,
+            x_threshold,
+            theta_threshold_radians,
+            observation_space: Space::boxed(high.iter().map(|h| -h).collect(), high),
+            action_space: Space::discrete(2),
+        }
+    }
+}
+
+impl Task for CartPoleTask {
+    fn id(&self) -> &str {
+        CartPoleEnv::ID
+    }
+    fn observation_space(&self) -> &Space {
+        &self.observation_space
+    }
+    fn action_space(&self) -> &Space {
+        &self.action_space
+    }
+    fn state_dim(&self) -> usize {
+        4
+    }
+    fn control(&self, action: &Action) -> Vec<f64> {
+        let push = if action.as_discrete() == Some(1) {
+            1.0
+        } else {
+            -1.0
+        };
+        vec![push * self.force_mag]
+    }
+    fn initial_state(&self, rng: &mut Rng) -> Vec<f64> {
+        (0..4).map(|_| rng.random_range(-0.05..0.05)).collect()
+    }
+    fn observe(&self, state: &[f64]) -> Vec<f64> {
+        round_to_f32(state)
+    }
+    fn reward(&self, _state: &[f64], _u: &[f64], _next: &[f64]) -> f64 {
+        1.0
+    }
+    fn terminated(&self, next: &[f64]) -> bool {
+        let (x, theta) = (next[0], next[2]);
+        x < -self.x_threshold
+            || x > self.x_threshold
+            || theta < -self.theta_threshold_radians
+            || theta > self.theta_threshold_radians
+    }
+    fn max_episode_steps(&self) -> Option<usize> {
+        Some(500)
+    }
+}
+
+/// Gymnasium's `CartPole-v1` without its time limit ([`crate::make`] adds the 500-step
+/// [`crate::TimeLimit`]): a [`PlantEnv`] of [`CartPoleTask`] over [`CartPole`].
+pub type CartPoleEnv = PlantEnv<CartPole, CartPoleTask>;
 
 impl Default for CartPoleEnv {
     fn default() -> Self {
@@ -44,98 +103,15 @@ impl CartPoleEnv {
     /// The environment with gymnasium's constants; its generator starts from seed 0 until a
     /// seeded `reset`.
     pub fn new() -> Self {
-        // Computed as gymnasium does: 12 * 2 * math.pi / 360.
-        let theta_threshold_radians = 12.0 * 2.0 * std::f64::consts::PI / 360.0;
-        let x_threshold = 2.4;
-        let big = f32::MAX as f64;
-        let high = vec![x_threshold * 2.0, big, theta_threshold_radians * 2.0, big];
-        Self {
-            plant: CartPole::default(),
-            force_mag: 10.0,
-            x_threshold,
-            theta_threshold_radians,
-            state: [0.0; 4],
-            phase: Phase::NotReset,
-            rng: rng_from_seed(0),
-            observation_space: Space::boxed(high.iter().map(|h| -h).collect(), high),
-            action_space: Space::discrete(2),
-        }
-    }
-
-    /// The plant it steps.
-    pub fn plant(&self) -> &CartPole {
-        &self.plant
-    }
-
-    fn terminated(&self) -> bool {
-        let [x, _, theta, _] = self.state;
-        x < -self.x_threshold
-            || x > self.x_threshold
-            || theta < -self.theta_threshold_radians
-            || theta > self.theta_threshold_radians
-    }
-}
-
-impl Env for CartPoleEnv {
-    fn id(&self) -> &str {
-        Self::ID
-    }
-
-    fn observation_space(&self) -> &Space {
-        &self.observation_space
-    }
-
-    fn action_space(&self) -> &Space {
-        &self.action_space
-    }
-
-    fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
-        if let Some(s) = seed {
-            self.rng = rng_from_seed(s);
-        }
-        for v in &mut self.state {
-            *v = self.rng.random_range(-0.05..0.05);
-        }
-        self.phase = Phase::Running;
-        round_to_f32(&self.state)
-    }
-
-    fn step(&mut self, action: &Action) -> Result<Step, EnvError> {
-        self.phase.check(Self::ID)?;
-        check_action(Self::ID, &self.action_space, action)?;
-        let force = if action.as_discrete() == Some(1) {
-            self.force_mag
-        } else {
-            -self.force_mag
-        };
-        self.state = self.plant.step_array(&self.state, force);
-        let terminated = self.terminated();
-        if terminated {
-            self.phase = Phase::Ended;
-        }
-        Ok(Step {
-            observation: round_to_f32(&self.state),
-            reward: 1.0,
-            terminated,
-            truncated: false,
-        })
-    }
-
-    fn state(&self) -> Vec<f64> {
-        self.state.to_vec()
-    }
-
-    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f64>, EnvError> {
-        check_state(Self::ID, state, 4)?;
-        self.state.copy_from_slice(state);
-        self.phase = Phase::Running;
-        Ok(round_to_f32(&self.state))
+        PlantEnv::from_parts(CartPole::default(), CartPoleTask::default())
+            .expect("CartPole's task and plant agree")
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::{Env, EnvError};
 
     #[test]
     fn seeded_resets_are_reproducible_and_in_range() {

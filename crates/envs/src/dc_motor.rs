@@ -1,12 +1,12 @@
 //! The swing-up task of paper p0 on the DC-motor pendulum, as an idealized/true pair.
 
 use std::f64::consts::PI;
-use tandem_core::{Action, Space};
+use tandem_core::{Action, Rng, Space};
 use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 
-use crate::env::{check_action, check_state, Phase};
 use crate::pendulum::angle_normalize;
-use crate::{Env, EnvError, Step};
+use crate::task::clip_to;
+use crate::{PlantEnv, Task};
 
 /// Episode length of the p0 swing-up: 20 s at `T_s` = 0.05 s.
 pub const DC_MOTOR_PENDULUM_STEPS: usize = 400;
@@ -45,24 +45,68 @@ pub enum PendulumModel {
     Real,
 }
 
-/// The p0 swing-up task over [`DcMotorPendulum`], without its time limit ([`crate::make`] adds
-/// the 400-step [`crate::TimeLimit`]).
+/// p0's swing-up task (Sec. IV-A) over a [`DcMotorPendulum`]:
 ///
 /// - state `(φ, φ̇)` (φ not wrapped; φ = 0 upright); start `(π, 0)` on every reset (the paper's
-///   `s_0`; the seed is accepted and unused);
+///   `s_0`; the generator is not used);
 /// - observation `(wrap(φ), φ̇)` in `f64`, φ wrapped to `[-π, π)`; the velocity bound of the
 ///   observation space is infinite (the motor's top speed at 3 V is about 55 rad/s);
-/// - action `Box(1)`: voltage in `[-3, 3]` V, clipped when outside;
-/// - reward [`dc_motor_pendulum_reward`] of the new state; never terminates.
+/// - action `Box(1)`: voltage in `[-u_max, u_max]` (3 V), clipped when outside;
+/// - reward [`dc_motor_pendulum_reward`] of the new state; never terminates; 400 steps.
 #[derive(Debug, Clone)]
-pub struct DcMotorPendulumEnv {
+pub struct DcMotorPendulumTask {
     id: &'static str,
-    plant: DcMotorPendulum,
-    state: [f64; 2],
-    phase: Phase,
     observation_space: Space,
     action_space: Space,
 }
+
+impl DcMotorPendulumTask {
+    /// The task, reported as `id`, for a pendulum whose voltage bound is `params.u_max`.
+    pub fn new(id: &'static str, params: &DcMotorPendulumParams) -> Self {
+        Self {
+            id,
+            observation_space: Space::boxed(vec![-PI, f64::NEG_INFINITY], vec![PI, f64::INFINITY]),
+            action_space: Space::symmetric(1, params.u_max),
+        }
+    }
+}
+
+impl Task for DcMotorPendulumTask {
+    fn id(&self) -> &str {
+        self.id
+    }
+    fn observation_space(&self) -> &Space {
+        &self.observation_space
+    }
+    fn action_space(&self) -> &Space {
+        &self.action_space
+    }
+    fn state_dim(&self) -> usize {
+        2
+    }
+    fn control(&self, action: &Action) -> Vec<f64> {
+        clip_to(&self.action_space, action.as_continuous().unwrap_or(&[0.0]))
+    }
+    fn initial_state(&self, _rng: &mut Rng) -> Vec<f64> {
+        vec![PI, 0.0]
+    }
+    fn observe(&self, state: &[f64]) -> Vec<f64> {
+        vec![wrap_angle(state[0]), state[1]]
+    }
+    fn canonicalize(&self, state: &mut [f64]) {
+        state[0] = wrap_angle(state[0]);
+    }
+    fn reward(&self, _state: &[f64], u: &[f64], next: &[f64]) -> f64 {
+        dc_motor_pendulum_reward(next, u[0])
+    }
+    fn max_episode_steps(&self) -> Option<usize> {
+        Some(DC_MOTOR_PENDULUM_STEPS)
+    }
+}
+
+/// The p0 swing-up over [`DcMotorPendulum`], without its time limit ([`crate::make`] adds the
+/// 400-step [`crate::TimeLimit`]): a [`PlantEnv`] of [`DcMotorPendulumTask`].
+pub type DcMotorPendulumEnv = PlantEnv<DcMotorPendulum, DcMotorPendulumTask>;
 
 impl DcMotorPendulumEnv {
     /// Id of the idealized task.
@@ -82,77 +126,18 @@ impl DcMotorPendulumEnv {
 
     /// The task on a pendulum with custom parameters, reported under `id`.
     pub fn with_params(id: &'static str, params: DcMotorPendulumParams) -> Self {
-        Self {
-            id,
-            plant: DcMotorPendulum::new(params),
-            state: [PI, 0.0],
-            phase: Phase::NotReset,
-            observation_space: Space::boxed(vec![-PI, f64::NEG_INFINITY], vec![PI, f64::INFINITY]),
-            action_space: Space::symmetric(1, params.u_max),
-        }
-    }
-
-    /// The plant it steps.
-    pub fn plant(&self) -> &DcMotorPendulum {
-        &self.plant
-    }
-
-    fn observation(&self) -> Vec<f64> {
-        vec![wrap_angle(self.state[0]), self.state[1]]
-    }
-}
-
-impl Env for DcMotorPendulumEnv {
-    fn id(&self) -> &str {
-        self.id
-    }
-
-    fn observation_space(&self) -> &Space {
-        &self.observation_space
-    }
-
-    fn action_space(&self) -> &Space {
-        &self.action_space
-    }
-
-    fn reset(&mut self, _seed: Option<u64>) -> Vec<f64> {
-        self.state = [PI, 0.0];
-        self.phase = Phase::Running;
-        self.observation()
-    }
-
-    fn step(&mut self, action: &Action) -> Result<Step, EnvError> {
-        self.phase.check(self.id)?;
-        check_action(self.id, &self.action_space, action)?;
-        let max = self.plant.params().u_max;
-        let u = action
-            .as_continuous()
-            .map_or(0.0, |a| a[0])
-            .clamp(-max, max);
-        self.state = self.plant.step_array(&self.state, u);
-        Ok(Step {
-            observation: self.observation(),
-            reward: dc_motor_pendulum_reward(&self.state, u),
-            terminated: false,
-            truncated: false,
-        })
-    }
-
-    fn state(&self) -> Vec<f64> {
-        self.state.to_vec()
-    }
-
-    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f64>, EnvError> {
-        check_state(self.id, state, 2)?;
-        self.state.copy_from_slice(state);
-        self.phase = Phase::Running;
-        Ok(self.observation())
+        PlantEnv::from_parts(
+            DcMotorPendulum::new(params),
+            DcMotorPendulumTask::new(id, &params),
+        )
+        .expect("the pendulum's task and plant agree")
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Env;
 
     #[test]
     fn starts_hanging_and_the_two_models_differ() {

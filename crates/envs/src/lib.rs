@@ -5,6 +5,7 @@
 //! | item | what |
 //! |---|---|
 //! | [`Env`], [`Step`], [`EnvError`] | the trait, with gymnasium's `terminated`/`truncated` |
+//! | [`Task`], [`PlantEnv`] | start, observation, control, reward, termination and episode length over a plant's state; an environment over any [`tandem_dynamics::Plant`] plus a task (the classic environments below are instances) |
 //! | [`CartPoleEnv`] (`CartPole-v1`), [`PendulumEnv`] (`Pendulum-v1`) | exact to gymnasium 1.x |
 //! | [`PixelMazeEnv`] (`PixelMaze-v0`) | p2's crowd-navigation maze as 16×16 RGB images, 5 discrete actions |
 //! | [`DcMotorPendulumEnv`] (`DcMotorPendulum-idealized-v0`, `DcMotorPendulum-real-v0`) | p0's swing-up pair; reward [`dc_motor_pendulum_reward`] |
@@ -20,18 +21,20 @@ mod env;
 mod pendulum;
 mod pixel_maze;
 mod registry;
+mod task;
 pub mod wrappers;
 
-pub use cartpole::CartPoleEnv;
+pub use cartpole::{CartPoleEnv, CartPoleTask};
 pub use dc_motor::{
-    dc_motor_pendulum_reward, wrap_angle, DcMotorPendulumEnv, PendulumModel,
+    dc_motor_pendulum_reward, wrap_angle, DcMotorPendulumEnv, DcMotorPendulumTask, PendulumModel,
     DC_MOTOR_PENDULUM_STEPS,
 };
 pub use env::{check_state, round_to_f32, Env, EnvError, Step};
-pub use pendulum::{angle_normalize, pendulum_reward, PendulumEnv};
+pub use pendulum::{angle_normalize, pendulum_reward, PendulumEnv, PendulumTask};
 pub use pixel_maze::{PixelMazeEnv, PIXEL_MAZE_GRID, PIXEL_MAZE_OBSTACLES, PIXEL_MAZE_PIXELS};
 pub use registry::{make, make_unwrapped, registered, EnvSpec};
 pub use tandem_core::{Action, Space};
+pub use task::{clip_to, PlantEnv, Task};
 pub use wrappers::{
     ClipAction, NormalizeObservation, ObservationHook, RescaleAction, RunningNormalizer,
     SampleCount, SampleCounter, TimeLimit, TransformObservation,

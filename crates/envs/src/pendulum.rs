@@ -1,13 +1,13 @@
-//! `Pendulum-v1`, exact to gymnasium 1.x.
+//! `Pendulum-v1`, exact to gymnasium 1.x: [`PendulumTask`] over the [`GymPendulum`] plant.
 
 use rand::Rng as _;
 use std::f64::consts::PI;
-use tandem_core::seeding::{rng_from_seed, Rng};
+use tandem_core::seeding::Rng;
 use tandem_core::{Action, Space};
-use tandem_dynamics::classic::GymPendulum;
+use tandem_dynamics::classic::{GymPendulum, GymPendulumParams};
 
-use crate::env::{check_action, check_state, Phase};
-use crate::{Env, EnvError, Step};
+use crate::task::clip_to;
+use crate::{PlantEnv, Task};
 
 /// Gymnasium's `angle_normalize`: `((x + π) mod 2π) − π` with numpy's floor modulo, in
 /// `[-π, π)`.
@@ -28,23 +28,73 @@ pub fn pendulum_reward(state: &[f64; 2], u: f64) -> f64 {
     -(angle_normalize(th).powi(2) + 0.1 * thdot.powi(2) + 0.001 * u.powi(2))
 }
 
-/// Gymnasium's `Pendulum-v1` without its time limit ([`crate::make`] adds the 200-step
-/// [`crate::TimeLimit`]).
+/// Gymnasium's `Pendulum-v1` task over the [`GymPendulum`] plant (g = 10):
 ///
-/// - state `(θ, θ̇)` in `f64` (θ not wrapped), stepped by [`GymPendulum`];
-/// - observation `f32`-rounded `(cos θ, sin θ, θ̇)` of the new state;
+/// - state `(θ, θ̇)` in `f64` (θ not wrapped);
+/// - observation `f32`-rounded `(cos θ, sin θ, θ̇)`;
 /// - action `Box(1)` in `[-2, 2]`, clipped (not rejected) when outside;
 /// - reward [`pendulum_reward`] of the state before the step; never terminates;
-/// - reset: `(θ, θ̇)` uniform in `[-π, π) × [-1, 1)` from the environment's own generator.
+/// - start: `(θ, θ̇)` uniform in `[-π, π) × [-1, 1)` from the environment's generator;
+/// - 200 steps.
 #[derive(Debug, Clone)]
-pub struct PendulumEnv {
-    plant: GymPendulum,
-    state: [f64; 2],
-    phase: Phase,
-    rng: Rng,
+pub struct PendulumTask {
     observation_space: Space,
     action_space: Space,
 }
+
+impl PendulumTask {
+    /// The task for a pendulum with `params`' speed and torque bounds.
+    pub fn new(params: &GymPendulumParams) -> Self {
+        Self {
+            observation_space: Space::boxed(
+                vec![-1.0, -1.0, -params.max_speed],
+                vec![1.0, 1.0, params.max_speed],
+            ),
+            action_space: Space::symmetric(1, params.max_torque),
+        }
+    }
+}
+
+impl Task for PendulumTask {
+    fn id(&self) -> &str {
+        PendulumEnv::ID
+    }
+    fn observation_space(&self) -> &Space {
+        &self.observation_space
+    }
+    fn action_space(&self) -> &Space {
+        &self.action_space
+    }
+    fn state_dim(&self) -> usize {
+        2
+    }
+    fn control(&self, action: &Action) -> Vec<f64> {
+        clip_to(&self.action_space, action.as_continuous().unwrap_or(&[0.0]))
+    }
+    fn initial_state(&self, rng: &mut Rng) -> Vec<f64> {
+        vec![rng.random_range(-PI..PI), rng.random_range(-1.0..1.0)]
+    }
+    fn observe(&self, state: &[f64]) -> Vec<f64> {
+        let (th, thdot) = (state[0], state[1]);
+        [th.cos(), th.sin(), thdot]
+            .iter()
+            .map(|&v| v as f32 as f64)
+            .collect()
+    }
+    fn canonicalize(&self, state: &mut [f64]) {
+        state[0] = angle_normalize(state[0]);
+    }
+    fn reward(&self, state: &[f64], u: &[f64], _next: &[f64]) -> f64 {
+        pendulum_reward(&[state[0], state[1]], u[0])
+    }
+    fn max_episode_steps(&self) -> Option<usize> {
+        Some(200)
+    }
+}
+
+/// Gymnasium's `Pendulum-v1` without its time limit ([`crate::make`] adds the 200-step
+/// [`crate::TimeLimit`]): a [`PlantEnv`] of [`PendulumTask`] over [`GymPendulum`].
+pub type PendulumEnv = PlantEnv<GymPendulum, PendulumTask>;
 
 impl Default for PendulumEnv {
     fn default() -> Self {
@@ -59,92 +109,15 @@ impl PendulumEnv {
     /// The environment with gymnasium's constants (g = 10); its generator starts from seed 0.
     pub fn new() -> Self {
         let plant = GymPendulum::default();
-        let p = *plant.params();
-        Self {
-            plant,
-            state: [0.0; 2],
-            phase: Phase::NotReset,
-            rng: rng_from_seed(0),
-            observation_space: Space::boxed(
-                vec![-1.0, -1.0, -p.max_speed],
-                vec![1.0, 1.0, p.max_speed],
-            ),
-            action_space: Space::symmetric(1, p.max_torque),
-        }
-    }
-
-    /// The plant it steps.
-    pub fn plant(&self) -> &GymPendulum {
-        &self.plant
-    }
-
-    fn observation(&self) -> Vec<f64> {
-        let [th, thdot] = self.state;
-        [th.cos(), th.sin(), thdot]
-            .iter()
-            .map(|&v| v as f32 as f64)
-            .collect()
-    }
-}
-
-impl Env for PendulumEnv {
-    fn id(&self) -> &str {
-        Self::ID
-    }
-
-    fn observation_space(&self) -> &Space {
-        &self.observation_space
-    }
-
-    fn action_space(&self) -> &Space {
-        &self.action_space
-    }
-
-    fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
-        if let Some(s) = seed {
-            self.rng = rng_from_seed(s);
-        }
-        self.state = [
-            self.rng.random_range(-PI..PI),
-            self.rng.random_range(-1.0..1.0),
-        ];
-        self.phase = Phase::Running;
-        self.observation()
-    }
-
-    fn step(&mut self, action: &Action) -> Result<Step, EnvError> {
-        self.phase.check(Self::ID)?;
-        check_action(Self::ID, &self.action_space, action)?;
-        let max = self.plant.params().max_torque;
-        let u = action
-            .as_continuous()
-            .map_or(0.0, |a| a[0])
-            .clamp(-max, max);
-        let reward = pendulum_reward(&self.state, u);
-        self.state = self.plant.step_array(&self.state, u);
-        Ok(Step {
-            observation: self.observation(),
-            reward,
-            terminated: false,
-            truncated: false,
-        })
-    }
-
-    fn state(&self) -> Vec<f64> {
-        self.state.to_vec()
-    }
-
-    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f64>, EnvError> {
-        check_state(Self::ID, state, 2)?;
-        self.state.copy_from_slice(state);
-        self.phase = Phase::Running;
-        Ok(self.observation())
+        let task = PendulumTask::new(plant.params());
+        PlantEnv::from_parts(plant, task).expect("the pendulum's task and plant agree")
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Env;
 
     #[test]
     fn angle_normalize_is_numpy_floor_mod() {

@@ -7,6 +7,9 @@
 //!   [`Transitions`] (which keep each transition's previous action: p1's one-step-back data),
 //!   returning a [`FitReport`] of training and held-out loss per epoch. Object-safe: planners
 //!   take `&dyn DynamicsModel`.
+//! * [`ModelEnv`] and [`branched_rollouts`]: any model under a `tandem_envs::Task`, one
+//!   imagined episode behind the `Env` trait or N branched rollouts from real states at once,
+//!   with reward and termination from the task or from the model ([`Judges`]).
 //! * [`PlantModel`]: any known [`tandem_dynamics::Plant`] as a deterministic model, so "plan on
 //!   the true physics" and "plan on a learned model" are the same call.
 //! * The learned models, each with a serde `Config` whose `Default` is its paper's setting:
@@ -86,7 +89,7 @@
 //! }
 //! ```
 //!
-//! Dependencies: `tandem-dynamics` (the plants residual and plant models wrap), `tandem-nn`
+//! Dependencies: `tandem-dynamics` (the plants residual and plant models wrap), `tandem-envs` (the `Task` model environments are judged by), `tandem-nn`
 //! (networks and optimizers), `ndarray` (batched data), `nalgebra` (plant states and the small
 //! matrices of the TVLG fit and its GMM: at most `2 dX + dU` square, where faer has no advantage,
 //! so faer is not used), `rand`/`rand_distr` (seeded sampling), `serde`, `thiserror`.
@@ -97,6 +100,7 @@ mod gmm;
 mod incremental;
 mod mlp_model;
 mod model;
+mod model_env;
 mod plant_model;
 mod residual;
 #[cfg(test)]
@@ -112,6 +116,7 @@ pub use mlp_model::{MlpModel, MlpModelConfig};
 pub use model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
+pub use model_env::{branched_rollouts, Imagined, Judge, Judges, ModelEnv, RolloutPolicy};
 pub use plant_model::PlantModel;
 pub use residual::{ResidualModel, ResidualModelConfig};
 pub use train::{OptimizerConfig, Standardizer};

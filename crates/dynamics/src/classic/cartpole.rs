@@ -108,6 +108,10 @@ impl Plant for CartPole {
         let s = self.step_array(&[x[0], x[1], x[2], x[3]], u[0]);
         DVector::from_row_slice(&s)
     }
+
+    fn step_into(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        next.copy_from_slice(&self.step_array(&[x[0], x[1], x[2], x[3]], u[0]));
+    }
 }
 
 #[cfg(test)]

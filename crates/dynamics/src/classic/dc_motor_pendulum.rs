@@ -209,6 +209,10 @@ impl Plant for DcMotorPendulum {
         let s = self.step_array(&[x[0], x[1]], u[0]);
         DVector::from_row_slice(&s)
     }
+
+    fn step_into(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        next.copy_from_slice(&self.step_array(&[x[0], x[1]], u[0]));
+    }
 }
 
 #[cfg(test)]

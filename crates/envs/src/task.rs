@@ -1,0 +1,275 @@
+//! [`Task`]: what an environment adds to dynamics, and [`PlantEnv`]: an environment over any
+//! [`Plant`] plus a task.
+//!
+//! A task says where episodes start, what the agent observes, how an action becomes the plant's
+//! input, the reward, termination and the episode length. It is written once and shared by the
+//! true system's environment ([`PlantEnv`]), an idealized simulator (the same `PlantEnv` over
+//! other parameters) and a learned model's environment (`tandem_models::ModelEnv`), so that all
+//! of them score and end episodes alike. The classic environments are `PlantEnv`s:
+//! [`crate::CartPoleEnv`], [`crate::PendulumEnv`], [`crate::DcMotorPendulumEnv`].
+//!
+//! ```
+//! use tandem_envs::{Action, DcMotorPendulumTask, Env, PlantEnv, Task};
+//! use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
+//!
+//! // p0's swing-up task over a heavier pendulum than the registered ones.
+//! let params = DcMotorPendulumParams { m: 0.2, ..DcMotorPendulumParams::real() };
+//! let task = DcMotorPendulumTask::new("HeavyPendulum-v0", &params);
+//! let mut env = PlantEnv::from_parts(DcMotorPendulum::new(params), task).unwrap();
+//! let obs = env.reset(Some(0));
+//! assert_eq!(obs.len(), 2);
+//! let step = env.step(&Action::Continuous(vec![3.0])).unwrap();
+//! assert!(step.reward < 0.0 && !step.terminated);
+//! ```
+
+use tandem_core::seeding::rng_from_seed;
+use tandem_core::{Action, Rng, Space};
+use tandem_dynamics::Plant;
+
+use crate::env::{check_action, check_state, Phase};
+use crate::{Env, EnvError, Step};
+
+/// Start, observation, plant input, reward, termination and episode length of an environment,
+/// over the plant's state.
+///
+/// States are the plant's (`tandem_dynamics::Plant::step`'s `x`); observations are what the agent
+/// sees; controls are the plant's inputs (`u`). Methods receive inputs of the right lengths
+/// (callers check at their boundary).
+pub trait Task {
+    /// The environment id this task is registered under (or reported as).
+    fn id(&self) -> &str;
+
+    /// Space of observations.
+    fn observation_space(&self) -> &Space;
+
+    /// Space of actions the agent picks from.
+    fn action_space(&self) -> &Space;
+
+    /// Length of the state.
+    fn state_dim(&self) -> usize;
+
+    /// The plant input for `action` (an element of [`Task::action_space`]): clipped into the
+    /// plant's limits, or a discrete choice turned into a force.
+    fn control(&self, action: &Action) -> Vec<f64>;
+
+    /// The state an episode starts from, drawn from `rng` where the start is random.
+    fn initial_state(&self, rng: &mut Rng) -> Vec<f64>;
+
+    /// The observation of `state`.
+    fn observe(&self, state: &[f64]) -> Vec<f64>;
+
+    /// Maps a state to its canonical representative in place (wrapping angles), so that a
+    /// learned model sees states from a bounded range. Default: nothing to do.
+    fn canonicalize(&self, _state: &mut [f64]) {}
+
+    /// Reward of the transition `state --u--> next`, `u` being [`Task::control`]'s output.
+    fn reward(&self, state: &[f64], u: &[f64], next: &[f64]) -> f64;
+
+    /// Whether `next` is terminal (a failure or a goal). Default: never.
+    fn terminated(&self, _next: &[f64]) -> bool {
+        false
+    }
+
+    /// The episode length after which the registered environment truncates.
+    fn max_episode_steps(&self) -> Option<usize>;
+}
+
+impl<T: Task + ?Sized> Task for Box<T> {
+    fn id(&self) -> &str {
+        (**self).id()
+    }
+    fn observation_space(&self) -> &Space {
+        (**self).observation_space()
+    }
+    fn action_space(&self) -> &Space {
+        (**self).action_space()
+    }
+    fn state_dim(&self) -> usize {
+        (**self).state_dim()
+    }
+    fn control(&self, action: &Action) -> Vec<f64> {
+        (**self).control(action)
+    }
+    fn initial_state(&self, rng: &mut Rng) -> Vec<f64> {
+        (**self).initial_state(rng)
+    }
+    fn observe(&self, state: &[f64]) -> Vec<f64> {
+        (**self).observe(state)
+    }
+    fn canonicalize(&self, state: &mut [f64]) {
+        (**self).canonicalize(state)
+    }
+    fn reward(&self, state: &[f64], u: &[f64], next: &[f64]) -> f64 {
+        (**self).reward(state, u, next)
+    }
+    fn terminated(&self, next: &[f64]) -> bool {
+        (**self).terminated(next)
+    }
+    fn max_episode_steps(&self) -> Option<usize> {
+        (**self).max_episode_steps()
+    }
+}
+
+/// Clips a continuous action into a box space's bounds (infinite bounds leave it as it is); the
+/// usual [`Task::control`] of a continuous task.
+pub fn clip_to(space: &Space, a: &[f64]) -> Vec<f64> {
+    match space {
+        Space::Box { low, high, .. } => a
+            .iter()
+            .zip(low.iter().zip(high))
+            .map(|(v, (l, h))| v.clamp(*l, *h))
+            .collect(),
+        Space::Discrete { .. } => a.to_vec(),
+    }
+}
+
+/// An environment stepping a [`Plant`] under a [`Task`], with gymnasium's semantics. It does not
+/// truncate by itself: [`crate::make`] (or the caller) adds a [`crate::TimeLimit`] of
+/// [`Task::max_episode_steps`].
+///
+/// `reset(Some(seed))` reseeds the environment's generator, which draws the initial state;
+/// `reset(None)` continues it.
+#[derive(Debug, Clone)]
+pub struct PlantEnv<P, T> {
+    plant: P,
+    task: T,
+    state: Vec<f64>,
+    next: Vec<f64>,
+    phase: Phase,
+    rng: Rng,
+}
+
+impl<P: Plant, T: Task> PlantEnv<P, T> {
+    /// The environment of `task` over `plant`; an error when their state or action dimensions
+    /// disagree.
+    pub fn from_parts(plant: P, task: T) -> Result<Self, EnvError> {
+        let probe = task.control(&probe_action(task.action_space()));
+        if plant.state_dim() != task.state_dim() || plant.action_dim() != probe.len() {
+            return Err(EnvError::Unsupported {
+                env: task.id().to_string(),
+                reason: format!(
+                    "the plant takes states of {} and inputs of {}, the task gives {} and {}",
+                    plant.state_dim(),
+                    plant.action_dim(),
+                    task.state_dim(),
+                    probe.len()
+                ),
+            });
+        }
+        let n = task.state_dim();
+        Ok(Self {
+            plant,
+            task,
+            state: vec![0.0; n],
+            next: vec![0.0; n],
+            phase: Phase::NotReset,
+            rng: rng_from_seed(0),
+        })
+    }
+
+    /// The plant it steps.
+    pub fn plant(&self) -> &P {
+        &self.plant
+    }
+
+    /// The task.
+    pub fn task(&self) -> &T {
+        &self.task
+    }
+}
+
+/// An action of `space` to probe a task's control dimension with.
+pub(crate) fn probe_action(space: &Space) -> Action {
+    match space {
+        Space::Discrete { .. } => Action::Discrete(0),
+        Space::Box { low, .. } => Action::Continuous(vec![0.0; low.len()]),
+    }
+}
+
+impl<P: Plant, T: Task> Env for PlantEnv<P, T> {
+    fn id(&self) -> &str {
+        self.task.id()
+    }
+
+    fn observation_space(&self) -> &Space {
+        self.task.observation_space()
+    }
+
+    fn action_space(&self) -> &Space {
+        self.task.action_space()
+    }
+
+    fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
+        if let Some(s) = seed {
+            self.rng = rng_from_seed(s);
+        }
+        self.state = self.task.initial_state(&mut self.rng);
+        self.phase = Phase::Running;
+        self.task.observe(&self.state)
+    }
+
+    fn step(&mut self, action: &Action) -> Result<Step, EnvError> {
+        let id = self.task.id();
+        self.phase.check(id)?;
+        check_action(id, self.task.action_space(), action)?;
+        let u = self.task.control(action);
+        self.plant.step_into(&self.state, &u, &mut self.next);
+        let reward = self.task.reward(&self.state, &u, &self.next);
+        let terminated = self.task.terminated(&self.next);
+        std::mem::swap(&mut self.state, &mut self.next);
+        if terminated {
+            self.phase = Phase::Ended;
+        }
+        Ok(Step {
+            observation: self.task.observe(&self.state),
+            reward,
+            terminated,
+            truncated: false,
+        })
+    }
+
+    fn state(&self) -> Vec<f64> {
+        self.state.clone()
+    }
+
+    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f64>, EnvError> {
+        check_state(self.task.id(), state, self.task.state_dim())?;
+        self.state.copy_from_slice(state);
+        self.phase = Phase::Running;
+        Ok(self.task.observe(&self.state))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{CartPoleTask, DcMotorPendulumTask, PendulumTask};
+    use tandem_dynamics::classic::{CartPole, DcMotorPendulumParams, GymPendulum};
+
+    #[test]
+    fn a_plant_and_task_of_different_sizes_are_refused() {
+        let err = PlantEnv::from_parts(GymPendulum::default(), CartPoleTask::default())
+            .err()
+            .unwrap();
+        assert!(err.to_string().contains("states of 2"), "{err}");
+        let params = DcMotorPendulumParams::idealized();
+        let task = DcMotorPendulumTask::new("x", &params);
+        assert!(PlantEnv::from_parts(CartPole::default(), task).is_err());
+    }
+
+    #[test]
+    fn a_task_env_steps_the_plant_and_scores_with_the_task() {
+        let plant = GymPendulum::default();
+        let task = PendulumTask::new(plant.params());
+        let mut env = PlantEnv::from_parts(plant, task.clone()).unwrap();
+        env.set_state(&[0.5, -0.25]).unwrap();
+        // 7 N m is clipped to the 2 N m bound before it reaches the plant and the reward.
+        let st = env.step(&Action::Continuous(vec![7.0])).unwrap();
+        assert_eq!(env.state(), plant.step_array(&[0.5, -0.25], 2.0).to_vec());
+        assert_eq!(st.reward, -(0.25 + 0.1 * 0.0625 + 0.001 * 4.0));
+        assert_eq!(st.observation, task.observe(&env.state()));
+        let mut s = vec![7.0, 0.0];
+        task.canonicalize(&mut s);
+        assert!((s[0] - (7.0 - 2.0 * std::f64::consts::PI)).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,749 @@
+//! Environments imagined by a model: any [`DynamicsModel`] under a [`Task`].
+//!
+//! The task gives starts, observations, the plant input of an action, and (by default) reward
+//! and termination, exactly as it does for the real system's `tandem_envs::PlantEnv`, so that
+//! real and imagined episodes are scored alike. Where the model learns them (p2's
+//! `(s', r, done)` model), reward and termination can come from the model's prediction instead
+//! ([`Judge::Model`]).
+//!
+//! Two shapes:
+//! - [`ModelEnv`]: one imagined episode at a time behind the `Env` trait, so every loop that
+//!   trains on an environment trains on a model (p0's `f_idl + d`, p2's imagined episodes);
+//! - [`branched_rollouts`]: N imagined rollouts at once, started from a batch of real states, one
+//!   `predict` call per step (MBPO's branched rollouts, p1's one-step Dyna).
+//!
+//! The model works in the task's state space. States are canonicalized by the task after every
+//! prediction ([`Task::canonicalize`]: wrapped angles), and the model also receives the control
+//! applied one step before (zeros at a start), which the incremental model (p1) needs and the
+//! others ignore.
+
+use ndarray::{Array1, Array2, ArrayView2};
+use serde::{Deserialize, Serialize};
+use tandem_core::seeding::rng_from_seed;
+use tandem_core::{Action, Rng, Space};
+use tandem_envs::{Env, EnvError, Step, Task};
+
+use crate::model::{DynamicsModel, ModelError, ModelInput, Prediction};
+
+/// Who decides a quantity of an imagined transition.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Judge {
+    /// The task's function of `(s, u, s')` (exact where the task is known: p0, p3).
+    Task,
+    /// The model's prediction (p2: a learned reward, and termination when the predicted
+    /// probability reaches [`Judges::terminal_threshold`]).
+    Model,
+}
+
+/// Where reward and termination of imagined transitions come from.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Judges {
+    /// The reward.
+    pub reward: Judge,
+    /// Termination.
+    pub termination: Judge,
+    /// A predicted terminal probability at or above this ends the episode (p2: 0.5).
+    pub terminal_threshold: f64,
+}
+
+impl Default for Judges {
+    /// Both from the task.
+    fn default() -> Self {
+        Self {
+            reward: Judge::Task,
+            termination: Judge::Task,
+            terminal_threshold: 0.5,
+        }
+    }
+}
+
+impl Judges {
+    /// Both from the model, terminal at a predicted probability of 0.5 (p2).
+    pub fn model() -> Self {
+        Self {
+            reward: Judge::Model,
+            termination: Judge::Model,
+            terminal_threshold: 0.5,
+        }
+    }
+
+    fn validate(&self) -> Result<(), ModelError> {
+        if !(self.terminal_threshold > 0.0 && self.terminal_threshold <= 1.0) {
+            return Err(ModelError::Other(format!(
+                "terminal_threshold must lie in (0, 1], got {}",
+                self.terminal_threshold
+            )));
+        }
+        Ok(())
+    }
+
+    /// Reward and termination of row `i` of `pred`, for the transition `s --u--> next`.
+    fn judge<T: Task + ?Sized>(
+        &self,
+        task: &T,
+        pred: &Prediction,
+        i: usize,
+        (s, u, next): (&[f64], &[f64], &[f64]),
+    ) -> Result<(f64, bool), ModelError> {
+        let reward = match self.reward {
+            Judge::Task => task.reward(s, u, next),
+            Judge::Model => pred
+                .rewards
+                .as_ref()
+                .ok_or_else(|| ModelError::MissingInput("the model predicts no reward".into()))?[i],
+        };
+        let terminated = match self.termination {
+            Judge::Task => task.terminated(next),
+            Judge::Model => {
+                pred.terminal_prob.as_ref().ok_or_else(|| {
+                    ModelError::MissingInput("the model predicts no termination".into())
+                })?[i]
+                    >= self.terminal_threshold
+            }
+        };
+        if !reward.is_finite() {
+            return Err(ModelError::NonFinite {
+                what: "imagined reward".into(),
+                row: i,
+            });
+        }
+        Ok((reward, terminated))
+    }
+}
+
+/// Checks that `model` and `task` agree on the state and control sizes.
+fn check_pair<M: DynamicsModel + ?Sized, T: Task + ?Sized>(
+    model: &M,
+    task: &T,
+) -> Result<usize, ModelError> {
+    let probe = match task.action_space() {
+        Space::Discrete { .. } => Action::Discrete(0),
+        Space::Box { low, .. } => Action::Continuous(vec![0.0; low.len()]),
+    };
+    let m = task.control(&probe).len();
+    for (what, want, got) in [
+        ("task state", model.state_dim(), task.state_dim()),
+        ("task control", model.action_dim(), m),
+    ] {
+        if want != got {
+            return Err(ModelError::Dim {
+                what: what.into(),
+                expected: want,
+                got,
+            });
+        }
+    }
+    Ok(m)
+}
+
+/// An environment whose transitions come from a [`DynamicsModel`] and whose starts,
+/// observations and plant inputs come from a [`Task`]; reward and termination as [`Judges`]
+/// say. Episodes truncate after [`Task::max_episode_steps`] (when the task has a limit).
+/// Stochastic models draw from the environment's generator (seeded by `reset`).
+///
+/// ```
+/// use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
+/// use tandem_envs::{Action, DcMotorPendulumTask, Env};
+/// use tandem_models::{ModelEnv, PlantModel};
+///
+/// // The idealized pendulum as a simulator: p0's pre-training environment.
+/// let p = DcMotorPendulumParams::idealized();
+/// let task = DcMotorPendulumTask::new("DcMotorPendulum-idealized-v0", &p);
+/// let mut env = ModelEnv::new(PlantModel::new(DcMotorPendulum::new(p)), task).unwrap();
+/// env.reset(Some(0));
+/// let step = env.step(&Action::Continuous(vec![3.0])).unwrap();
+/// assert!(step.reward < 0.0);
+/// ```
+#[derive(Debug, Clone)]
+pub struct ModelEnv<M, T> {
+    model: M,
+    task: T,
+    judges: Judges,
+    state: Vec<f64>,
+    prev_u: Vec<f64>,
+    rng: Rng,
+    elapsed: usize,
+    running: bool,
+}
+
+impl<M: DynamicsModel, T: Task> ModelEnv<M, T> {
+    /// The environment of `task` over `model`, judged by the task; an error when their
+    /// dimensions disagree.
+    pub fn new(model: M, task: T) -> Result<Self, EnvError> {
+        Self::with_judges(model, task, Judges::default())
+    }
+
+    /// The environment of `task` over `model`, with reward and termination from `judges`.
+    pub fn with_judges(model: M, task: T, judges: Judges) -> Result<Self, EnvError> {
+        let unsupported = |e: ModelError| EnvError::Unsupported {
+            env: task.id().to_string(),
+            reason: e.to_string(),
+        };
+        let m = check_pair(&model, &task).map_err(unsupported)?;
+        judges.validate().map_err(unsupported)?;
+        let n = task.state_dim();
+        Ok(Self {
+            model,
+            task,
+            judges,
+            state: vec![0.0; n],
+            prev_u: vec![0.0; m],
+            rng: rng_from_seed(0),
+            elapsed: 0,
+            running: false,
+        })
+    }
+
+    /// The model.
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+
+    /// The model, mutably (to refit it between training phases).
+    pub fn model_mut(&mut self) -> &mut M {
+        &mut self.model
+    }
+
+    /// The task.
+    pub fn task(&self) -> &T {
+        &self.task
+    }
+
+    fn start(&mut self) -> Vec<f64> {
+        self.task.canonicalize(&mut self.state);
+        self.prev_u.iter_mut().for_each(|u| *u = 0.0);
+        self.elapsed = 0;
+        self.running = true;
+        self.task.observe(&self.state)
+    }
+}
+
+fn model_failure(env: &str) -> impl Fn(ModelError) -> EnvError + '_ {
+    move |e| EnvError::Unsupported {
+        env: env.to_string(),
+        reason: format!("model prediction failed: {e}"),
+    }
+}
+
+impl<M: DynamicsModel, T: Task> Env for ModelEnv<M, T> {
+    fn id(&self) -> &str {
+        self.task.id()
+    }
+
+    fn observation_space(&self) -> &Space {
+        self.task.observation_space()
+    }
+
+    fn action_space(&self) -> &Space {
+        self.task.action_space()
+    }
+
+    fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
+        if let Some(s) = seed {
+            self.rng = rng_from_seed(s);
+        }
+        self.state = self.task.initial_state(&mut self.rng);
+        self.start()
+    }
+
+    fn step(&mut self, action: &Action) -> Result<Step, EnvError> {
+        let id = self.task.id();
+        if !self.running {
+            return Err(EnvError::NeedsReset {
+                env: id.to_string(),
+                when: "before reset or after the episode ended",
+            });
+        }
+        self.task
+            .action_space()
+            .check(action)
+            .map_err(|source| EnvError::InvalidAction {
+                env: id.to_string(),
+                source,
+            })?;
+        let u = self.task.control(action);
+        let row = |v: &[f64]| Array2::from_shape_vec((1, v.len()), v.to_vec());
+        let (s, a, p) = (row(&self.state), row(&u), row(&self.prev_u));
+        let (s, a, p) = (
+            s.expect("one row"),
+            a.expect("one row"),
+            p.expect("one row"),
+        );
+        let input = ModelInput::new(s.view(), a.view()).with_prev_actions(p.view());
+        let pred = self
+            .model
+            .predict(&input, &mut self.rng)
+            .map_err(model_failure(id))?;
+        let mut next: Vec<f64> = pred.next_states.row(0).to_vec();
+        if let Some(i) = next.iter().position(|v| !v.is_finite()) {
+            return Err(EnvError::InvalidState {
+                env: id.to_string(),
+                reason: format!("the model predicted a non-finite state component {i}"),
+            });
+        }
+        let (reward, terminated) = self
+            .judges
+            .judge(&self.task, &pred, 0, (&self.state, &u, &next))
+            .map_err(model_failure(id))?;
+        self.task.canonicalize(&mut next);
+        self.state = next;
+        self.prev_u = u;
+        self.elapsed += 1;
+        let truncated = self
+            .task
+            .max_episode_steps()
+            .is_some_and(|m| self.elapsed >= m);
+        self.running = !(terminated || truncated);
+        Ok(Step {
+            observation: self.task.observe(&self.state),
+            reward,
+            terminated,
+            truncated,
+        })
+    }
+
+    fn state(&self) -> Vec<f64> {
+        self.state.clone()
+    }
+
+    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f64>, EnvError> {
+        tandem_envs::check_state(self.task.id(), state, self.task.state_dim())?;
+        self.state = state.to_vec();
+        Ok(self.start())
+    }
+
+    fn max_episode_steps(&self) -> Option<usize> {
+        self.task.max_episode_steps()
+    }
+}
+
+/// Imagined transitions from [`branched_rollouts`], one row each, step-major: all rollouts'
+/// first steps, then the second steps of those that did not terminate, and so on.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Imagined {
+    /// States `s`, `N x S` (canonical).
+    pub states: Array2<f64>,
+    /// Observations of `s`, `N x O`: what the agent saw.
+    pub observations: Array2<f64>,
+    /// The agent's actions, `N x A` (for a discrete action space one column with the index).
+    pub actions: Array2<f64>,
+    /// The plant inputs they became, `N x U`.
+    pub controls: Array2<f64>,
+    /// Rewards, length `N`.
+    pub rewards: Array1<f64>,
+    /// Next states, `N x S` (canonical).
+    pub next_states: Array2<f64>,
+    /// Observations of the next states, `N x O`.
+    pub next_observations: Array2<f64>,
+    /// Whether the next state is terminal, length `N`.
+    pub terminated: Vec<bool>,
+    /// Index of the start (row of `starts`) each transition descends from.
+    pub origin: Vec<usize>,
+}
+
+impl Imagined {
+    /// Number of transitions.
+    pub fn len(&self) -> usize {
+        self.rewards.len()
+    }
+
+    /// `true` without transitions.
+    pub fn is_empty(&self) -> bool {
+        self.rewards.is_empty()
+    }
+}
+
+/// A batched policy for imagined rollouts: observations `B x O` to actions `B x A` (for a
+/// discrete action space one column holding the index), drawing any randomness from the
+/// generator it is given.
+pub type RolloutPolicy<'a> =
+    dyn FnMut(ArrayView2<'_, f64>, &mut Rng) -> Result<Array2<f64>, ModelError> + 'a;
+
+/// Rolls `horizon` steps of `model` under `task` from every row of `starts` at once (MBPO's
+/// branched rollouts; `horizon = 1` is p1's one-step Dyna). `prev_controls` are the plant inputs
+/// applied just before each start (zeros when `None`). Each step asks `policy` for the actions
+/// of the rollouts still running, makes one `predict` call for all of them, and judges reward
+/// and termination as `judges` say; a rollout that terminates stops. The model draws from
+/// `rng`, and so does the policy.
+///
+/// Errors for mismatched sizes, a policy returning the wrong shape or an action outside the
+/// task's action space, a model without the reward or termination `judges` ask of it, and
+/// non-finite predictions (naming the row).
+#[allow(clippy::too_many_arguments)]
+pub fn branched_rollouts<M, T>(
+    model: &M,
+    task: &T,
+    judges: &Judges,
+    starts: ArrayView2<'_, f64>,
+    prev_controls: Option<ArrayView2<'_, f64>>,
+    horizon: usize,
+    policy: &mut RolloutPolicy<'_>,
+    rng: &mut Rng,
+) -> Result<Imagined, ModelError>
+where
+    M: DynamicsModel + ?Sized,
+    T: Task + ?Sized,
+{
+    let m = check_pair(model, task)?;
+    judges.validate()?;
+    let (b, n) = (starts.nrows(), task.state_dim());
+    crate::data::check_array("start states", starts, b, n)?;
+    let mut state = starts.to_owned();
+    for mut r in state.rows_mut() {
+        task.canonicalize(r.as_slice_mut().expect("row-major"));
+    }
+    let mut prev = match prev_controls {
+        Some(p) => {
+            crate::data::check_array("previous controls", p, b, m)?;
+            p.to_owned()
+        }
+        None => Array2::zeros((b, m)),
+    };
+    let a_dim = match task.action_space() {
+        Space::Discrete { .. } => 1,
+        Space::Box { low, .. } => low.len(),
+    };
+    let o_dim = task.observation_space().flat_dim();
+    let mut alive: Vec<usize> = (0..b).collect();
+    let mut out = Rows::default();
+    for _ in 0..horizon {
+        if alive.is_empty() {
+            break;
+        }
+        let k = alive.len();
+        let obs = rows_of(k, o_dim, |i| {
+            task.observe(state.row(i).as_slice().expect("row"))
+        });
+        let actions = policy(obs.view(), rng)?;
+        if actions.dim() != (k, a_dim) {
+            return Err(ModelError::Dim {
+                what: "policy actions (rows x columns)".into(),
+                expected: k * a_dim,
+                got: actions.len(),
+            });
+        }
+        let mut controls = Array2::zeros((k, m));
+        for i in 0..k {
+            let action = to_action(task.action_space(), actions.row(i).as_slice().expect("row"));
+            task.action_space().check(&action).map_err(|e| {
+                ModelError::Other(format!("policy action of row {i} is invalid: {e}"))
+            })?;
+            controls
+                .row_mut(i)
+                .assign(&Array1::from(task.control(&action)));
+        }
+        let input = ModelInput::new(state.view(), controls.view()).with_prev_actions(prev.view());
+        let pred = model.predict(&input, rng)?;
+        crate::data::check_array("predicted next states", pred.next_states.view(), k, n)?;
+        let mut next = pred.next_states.clone();
+        let mut keep = Vec::with_capacity(k);
+        for (i, &origin) in alive.iter().enumerate() {
+            let (s, u) = (state.row(i), controls.row(i));
+            let (s, u) = (s.as_slice().expect("row"), u.as_slice().expect("row"));
+            let mut s1 = next.row_mut(i);
+            let s1 = s1.as_slice_mut().expect("row");
+            let (reward, done) = judges.judge(task, &pred, i, (s, u, s1))?;
+            task.canonicalize(s1);
+            out.push(Row {
+                state: s,
+                obs: obs.row(i).as_slice().expect("row"),
+                action: actions.row(i).as_slice().expect("row"),
+                control: u,
+                reward,
+                next: s1,
+                next_obs: &task.observe(s1),
+                terminated: done,
+                origin,
+            });
+            if !done {
+                keep.push(i);
+            }
+        }
+        alive = keep.iter().map(|&i| alive[i]).collect();
+        state = next.select(ndarray::Axis(0), &keep);
+        prev = controls.select(ndarray::Axis(0), &keep);
+    }
+    Ok(out.finish(o_dim, a_dim, m, n))
+}
+
+/// One imagined transition, borrowed.
+struct Row<'a> {
+    state: &'a [f64],
+    obs: &'a [f64],
+    action: &'a [f64],
+    control: &'a [f64],
+    reward: f64,
+    next: &'a [f64],
+    next_obs: &'a [f64],
+    terminated: bool,
+    origin: usize,
+}
+
+/// Imagined transitions accumulated row by row.
+#[derive(Default)]
+struct Rows {
+    states: Vec<f64>,
+    obs: Vec<f64>,
+    actions: Vec<f64>,
+    controls: Vec<f64>,
+    rewards: Vec<f64>,
+    next: Vec<f64>,
+    next_obs: Vec<f64>,
+    terminated: Vec<bool>,
+    origin: Vec<usize>,
+}
+
+impl Rows {
+    fn push(&mut self, r: Row<'_>) {
+        self.states.extend_from_slice(r.state);
+        self.obs.extend_from_slice(r.obs);
+        self.actions.extend_from_slice(r.action);
+        self.controls.extend_from_slice(r.control);
+        self.rewards.push(r.reward);
+        self.next.extend_from_slice(r.next);
+        self.next_obs.extend_from_slice(r.next_obs);
+        self.terminated.push(r.terminated);
+        self.origin.push(r.origin);
+    }
+
+    fn finish(self, o: usize, a: usize, m: usize, n: usize) -> Imagined {
+        let k = self.rewards.len();
+        let mat = |v: Vec<f64>, c: usize| Array2::from_shape_vec((k, c), v).expect("row sizes");
+        Imagined {
+            states: mat(self.states, n),
+            observations: mat(self.obs, o),
+            actions: mat(self.actions, a),
+            controls: mat(self.controls, m),
+            rewards: Array1::from(self.rewards),
+            next_states: mat(self.next, n),
+            next_observations: mat(self.next_obs, o),
+            terminated: self.terminated,
+            origin: self.origin,
+        }
+    }
+}
+
+/// A `k x c` matrix whose row `i` is `f(i)`.
+fn rows_of(k: usize, c: usize, f: impl Fn(usize) -> Vec<f64>) -> Array2<f64> {
+    let mut out = Array2::zeros((k, c));
+    for i in 0..k {
+        out.row_mut(i).assign(&Array1::from(f(i)));
+    }
+    out
+}
+
+/// The action a stored row stands for in `space`.
+fn to_action(space: &Space, row: &[f64]) -> Action {
+    match space {
+        Space::Discrete { .. } => {
+            let k = row[0];
+            if k >= 0.0 && k.fract() == 0.0 && k < usize::MAX as f64 {
+                Action::Discrete(k as usize)
+            } else {
+                // Not an index: let the space's check report it.
+                Action::Continuous(row.to_vec())
+            }
+        }
+        Space::Box { .. } => Action::Continuous(row.to_vec()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{FitConfig, FitReport, PlantModel, Transitions};
+    use ndarray::array;
+    use tandem_dynamics::classic::{CartPole, DcMotorPendulum, DcMotorPendulumParams};
+    use tandem_envs::{CartPoleEnv, CartPoleTask, DcMotorPendulumTask};
+
+    /// The model environment over the true plant replays the registered true environment exactly:
+    /// same observations, rewards and truncation, including across the ±π wrap.
+    #[test]
+    fn plant_model_env_matches_the_registered_pendulum() {
+        let p = DcMotorPendulumParams::real();
+        let task = DcMotorPendulumTask::new("DcMotorPendulum-real-v0", &p);
+        let mut m = ModelEnv::new(PlantModel::new(DcMotorPendulum::new(p)), task).unwrap();
+        let mut e = tandem_envs::make("DcMotorPendulum-real-v0").unwrap();
+        assert_eq!(m.reset(Some(1)), e.reset(Some(1)));
+        let mut wrapped = false;
+        let mut velocity = 0.0;
+        for t in 0..400 {
+            // Pumping energy (voltage along the velocity, over-range to test clipping) swings the
+            // pendulum to the top and over it, through both wraps.
+            let u = if velocity >= 0.0 { 4.5 } else { -4.5 };
+            let a = Action::Continuous(vec![u]);
+            let (sm, se) = (m.step(&a).unwrap(), e.step(&a).unwrap());
+            for k in 0..2 {
+                assert!(
+                    (sm.observation[k] - se.observation[k]).abs() < 1e-6,
+                    "t={t}: {:?} vs {:?}",
+                    sm.observation,
+                    se.observation
+                );
+            }
+            assert!((sm.reward - se.reward).abs() < 1e-6);
+            assert_eq!(sm.truncated, se.truncated, "t={t}");
+            wrapped |= sm.observation[0].abs() < 0.5;
+            velocity = se.observation[1];
+        }
+        assert!(wrapped, "the test trajectory should reach the top");
+        assert!(matches!(
+            m.step(&Action::Continuous(vec![0.0])),
+            Err(EnvError::NeedsReset { .. })
+        ));
+    }
+
+    /// Branched rollouts through the true plant are the real environment stepped row by row:
+    /// the same transitions, rewards and terminations, and a terminated rollout stops.
+    #[test]
+    fn branched_rollouts_through_the_plant_replay_the_environment() {
+        let model = PlantModel::new(CartPole::default());
+        let task = CartPoleTask::default();
+        // The second start is about to fall: it terminates at the first step.
+        let starts = array![
+            [0.0, 0.1, 0.02, -0.1],
+            [2.39, 5.0, 0.0, 0.0],
+            [0.0, 0.0, 0.1, 0.5]
+        ];
+        // Push right on even columns of the observation's sign, left otherwise.
+        let mut policy = |obs: ArrayView2<'_, f64>, _: &mut Rng| {
+            Ok(obs
+                .map_axis(ndarray::Axis(1), |r| f64::from(u8::from(r[2] > 0.0)))
+                .insert_axis(ndarray::Axis(1)))
+        };
+        let h = 4;
+        let out = branched_rollouts(
+            &model,
+            &task,
+            &Judges::default(),
+            starts.view(),
+            None,
+            h,
+            &mut policy,
+            &mut rng_from_seed(0),
+        )
+        .unwrap();
+        assert_eq!(out.len(), 3 + 2 * (h - 1));
+        assert_eq!(out.origin[..5], [0, 1, 2, 0, 2]);
+        let mut row = 0;
+        let mut envs: Vec<CartPoleEnv> = (0..3).map(|_| CartPoleEnv::new()).collect();
+        for (i, env) in envs.iter_mut().enumerate() {
+            env.set_state(starts.row(i).as_slice().unwrap()).unwrap();
+        }
+        for t in 0..h {
+            for (i, env) in envs.iter_mut().enumerate() {
+                if i == 1 && t > 0 {
+                    continue;
+                }
+                let s = env.state();
+                let a = Action::Discrete(usize::from(s[2] > 0.0));
+                let st = env.step(&a).unwrap();
+                assert_eq!(out.origin[row], i);
+                assert_eq!(out.states.row(row).to_vec(), s);
+                assert_eq!(out.next_states.row(row).to_vec(), env.state());
+                assert_eq!(out.next_observations.row(row).to_vec(), st.observation);
+                assert_eq!(out.rewards[row], st.reward);
+                assert_eq!(out.terminated[row], st.terminated);
+                assert_eq!(
+                    out.controls[(row, 0)],
+                    if s[2] > 0.0 { 10.0 } else { -10.0 }
+                );
+                row += 1;
+            }
+        }
+        assert!(out.terminated[1]);
+    }
+
+    /// `s' = s + u`, reward 7, terminal with probability 0.9 where `s[0] > 0`, else 0.1.
+    #[derive(Debug, Clone)]
+    struct Scripted;
+    impl DynamicsModel for Scripted {
+        fn state_dim(&self) -> usize {
+            4
+        }
+        fn action_dim(&self) -> usize {
+            1
+        }
+        fn predict(&self, input: &ModelInput<'_>, _: &mut Rng) -> Result<Prediction, ModelError> {
+            let mut next = input.states.to_owned();
+            next.column_mut(0).scaled_add(1.0, &input.actions.column(0));
+            let b = next.nrows();
+            Ok(Prediction {
+                terminal_prob: Some(
+                    input
+                        .states
+                        .column(0)
+                        .mapv(|x| if x > 0.0 { 0.9 } else { 0.1 }),
+                ),
+                next_states: next,
+                variance: None,
+                rewards: Some(Array1::from_elem(b, 7.0)),
+            })
+        }
+        fn fit(&mut self, _: &Transitions, _: &FitConfig) -> Result<FitReport, ModelError> {
+            Ok(FitReport::default())
+        }
+    }
+
+    #[test]
+    fn model_judges_take_reward_and_termination_from_the_prediction() {
+        let mut env =
+            ModelEnv::with_judges(Scripted, CartPoleTask::default(), Judges::model()).unwrap();
+        env.set_state(&[-1.0, 0.0, 0.0, 0.0]).unwrap();
+        // -1 + 10: the state the model saw was negative, so p = 0.1 < 0.5.
+        let st = env.step(&Action::Discrete(1)).unwrap();
+        assert_eq!((st.reward, st.terminated), (7.0, false));
+        assert_eq!(env.state()[0], 9.0);
+        let st = env.step(&Action::Discrete(0)).unwrap();
+        assert_eq!((st.reward, st.terminated), (7.0, true));
+        // The task would have ended the episode at |x| > 2.4 after the first step.
+        let mut by_task = ModelEnv::new(Scripted, CartPoleTask::default()).unwrap();
+        by_task.set_state(&[-1.0, 0.0, 0.0, 0.0]).unwrap();
+        let st = by_task.step(&Action::Discrete(1)).unwrap();
+        assert_eq!((st.reward, st.terminated), (1.0, true));
+    }
+
+    #[test]
+    fn bad_pairs_policies_and_missing_predictions_are_errors() {
+        let p = DcMotorPendulumParams::real();
+        let task = DcMotorPendulumTask::new("x", &p);
+        assert!(ModelEnv::new(PlantModel::new(CartPole::default()), task.clone()).is_err());
+        let bad = Judges {
+            terminal_threshold: f64::NAN,
+            ..Judges::default()
+        };
+        let model = PlantModel::new(DcMotorPendulum::new(p));
+        assert!(ModelEnv::with_judges(model.clone(), task.clone(), bad).is_err());
+        let mut env = ModelEnv::with_judges(model.clone(), task.clone(), Judges::model()).unwrap();
+        env.reset(Some(0));
+        let err = env.step(&Action::Continuous(vec![1.0])).unwrap_err();
+        assert!(err.to_string().contains("no reward"), "{err}");
+
+        let starts = array![[0.0, 0.0]];
+        let run = |policy: &mut RolloutPolicy<'_>, starts: ArrayView2<'_, f64>| {
+            branched_rollouts(
+                &model,
+                &task,
+                &Judges::default(),
+                starts,
+                None,
+                2,
+                policy,
+                &mut rng_from_seed(0),
+            )
+        };
+        let wide = run(&mut |_, _| Ok(array![[0.0, 0.0]]), starts.view());
+        assert!(matches!(wide, Err(ModelError::Dim { .. })));
+        let nan = run(&mut |_, _| Ok(array![[f64::NAN]]), starts.view());
+        assert!(nan.unwrap_err().to_string().contains("row 0"));
+        let bad_start = run(
+            &mut |_, _| Ok(array![[0.0]]),
+            array![[f64::INFINITY, 0.0]].view(),
+        );
+        assert!(matches!(bad_start, Err(ModelError::NonFinite { .. })));
+        let ok = run(&mut |_, _| Ok(array![[3.0]]), starts.view()).unwrap();
+        assert_eq!(ok.len(), 2);
+    }
+}
