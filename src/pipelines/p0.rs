@@ -33,8 +33,8 @@ use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 use tandem_dynamics::Plant;
 use tandem_envs::{DcMotorPendulumEnv, DcMotorPendulumTask, Env, EnvError, SampleCounter, Task};
 use tandem_models::{
-    DynamicsModel, FitConfig, FitReport, ModelEnv, ModelError, PlantModel, ResidualModel,
-    ResidualModelConfig, Transitions, TransitionsBuilder,
+    canonical_pair, DynamicsModel, FitConfig, FitReport, ModelEnv, ModelError, PlantModel,
+    ResidualModel, ResidualModelConfig, Transitions, TransitionsBuilder,
 };
 
 use super::adapter::{feature_dim, Adapted, Feature};
@@ -297,13 +297,7 @@ pub fn collect<A: OffPolicyAgent, T: Task>(
     for _ in 0..n {
         let rec = lp.step(env, &mut runner, StepOptions::collect())?;
         let (x, x1) = rec.states.as_ref().expect("collect records states");
-        let mut s = x.clone();
-        task.canonicalize(&mut s);
-        let s1: Vec<f64> = s
-            .iter()
-            .zip(x1.iter().zip(x))
-            .map(|(s, (a, b))| s + (a - b))
-            .collect();
+        let (s, s1) = canonical_pair(task, x, x1);
         b.push(
             &s,
             &task.control(&rec.action),

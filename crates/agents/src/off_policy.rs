@@ -37,6 +37,7 @@
 //! assert!(returns[0] < 0.0);
 //! ```
 
+use ndarray::{ArrayView1, ArrayView2};
 use serde::{Deserialize, Serialize};
 use tandem_core::{Action, Rng, SeedStream, Space};
 use tandem_envs::Env;
@@ -411,6 +412,51 @@ impl<A: OffPolicyAgent> OffPolicyLoop<A> {
         Ok(())
     }
 
+    /// Stores transitions produced elsewhere (a model's imagined rollouts), one per row: `obs`,
+    /// `actions` (the index for a discrete action), `rewards`, `next_obs` and `terminated`.
+    /// Their previous actions are stored as zeros.
+    pub fn push_rows(
+        &mut self,
+        store: Store,
+        obs: ArrayView2<'_, f64>,
+        actions: ArrayView2<'_, f64>,
+        rewards: ArrayView1<'_, f64>,
+        next_obs: ArrayView2<'_, f64>,
+        terminated: &[bool],
+    ) -> Result<()> {
+        let n = obs.nrows();
+        for (what, got) in [
+            ("actions (rows)", actions.nrows()),
+            ("rewards", rewards.len()),
+            ("next observations (rows)", next_obs.nrows()),
+            ("terminal flags", terminated.len()),
+        ] {
+            if got != n {
+                return Err(AgentError::Dim {
+                    what,
+                    expected: n,
+                    got,
+                });
+            }
+        }
+        let zeros = vec![0.0; self.primary.act_dim()];
+        for i in 0..n {
+            let (o, a, o1) = (obs.row(i), actions.row(i), next_obs.row(i));
+            self.push(
+                store,
+                TransitionRef {
+                    obs: &o.to_vec(),
+                    action: &a.to_vec(),
+                    prev_action: &zeros,
+                    reward: rewards[i],
+                    next_obs: &o1.to_vec(),
+                    terminated: terminated[i],
+                },
+            )?;
+        }
+        Ok(())
+    }
+
     /// One exploring step of `runner`'s episode on `env`: act (random during the warm-up),
     /// step, count, store as `opts` says, then the schedule's updates if `opts.learn`.
     pub fn step(
@@ -554,4 +600,145 @@ pub fn evaluate(
         returns.push(ret);
     }
     Ok(returns)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Sac, SacConfig};
+    use ndarray::{Array1, Array2};
+
+    fn small_loop(
+        learning_starts: usize,
+        train_freq: usize,
+        gradient_steps: usize,
+    ) -> OffPolicyLoop<Sac> {
+        let env = tandem_envs::make("Pendulum-v1").unwrap();
+        let cfg = SacConfig {
+            hidden: vec![8],
+            batch_size: 8,
+            buffer_size: 1000,
+            learning_starts,
+            train_freq,
+            gradient_steps,
+            ..SacConfig::default()
+        };
+        let (o, a) = (env.observation_space(), env.action_space());
+        let sac = Sac::new(cfg.clone(), o, a, 1).unwrap();
+        OffPolicyLoop::new(
+            sac,
+            cfg.schedule(),
+            o,
+            a,
+            tandem_core::seeding::rng_from_seed(2),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn the_schedule_updates_after_learning_starts_every_train_freq_steps() {
+        let mut env = tandem_envs::make("Pendulum-v1").unwrap();
+        let mut lp = small_loop(10, 2, 3);
+        let mut runner = EpisodeRunner::new(0, "ep");
+        lp.train(&mut env, &mut runner, 30, StepOptions::real(), &mut |_| {})
+            .unwrap();
+        // Learning steps 12, 14, ..., 30 (more than 10 stored, even clock): 10 times 3 updates.
+        let c = lp.counts();
+        assert_eq!((c.real_steps, c.model_steps, c.updates), (30, 0, 30));
+        // Model steps count apart; collecting stores and learns nothing.
+        lp.train(&mut env, &mut runner, 4, StepOptions::model(), &mut |_| {})
+            .unwrap();
+        lp.train(&mut env, &mut runner, 5, StepOptions::collect(), &mut |r| {
+            assert!(r.states.is_some())
+        })
+        .unwrap();
+        let c = lp.counts();
+        assert_eq!((c.real_steps, c.model_steps, c.updates), (35, 4, 36));
+        assert_eq!(lp.primary().len(), 34);
+        // Clearing the buffer restarts the warm-up count.
+        lp.clear(Store::Primary).unwrap();
+        assert_eq!((lp.primary().len(), lp.counts().primary_pushed), (0, 0));
+        assert!(lp.update(1).is_err(), "no data to sample from");
+    }
+
+    #[test]
+    fn a_secondary_buffer_feeds_minibatches_and_must_exist_to_be_used() {
+        let mut lp = small_loop(10, 1, 1);
+        let rows = |n: usize| {
+            (
+                Array2::<f64>::zeros((n, 3)),
+                Array2::<f64>::zeros((n, 1)),
+                Array1::<f64>::from_elem(n, -1.0),
+            )
+        };
+        let (o, a, r) = rows(5);
+        let flags = vec![false; 5];
+        let push = |lp: &mut OffPolicyLoop<Sac>, store| {
+            lp.push_rows(store, o.view(), a.view(), r.view(), o.view(), &flags)
+        };
+        assert!(push(&mut lp, Store::Secondary).is_err());
+        let mut lp = lp.with_secondary(50, 0.25).unwrap();
+        push(&mut lp, Store::Secondary).unwrap();
+        assert_eq!((lp.secondary().unwrap().len(), lp.primary().len()), (5, 0));
+        // All rows from the secondary buffer while the primary is empty.
+        lp.update(2).unwrap();
+        assert_eq!(lp.counts().updates, 2);
+        let short = lp.push_rows(
+            Store::Primary,
+            o.view(),
+            a.view(),
+            r.view(),
+            o.view(),
+            &flags[..4],
+        );
+        assert!(matches!(
+            short,
+            Err(AgentError::Dim {
+                expected: 5,
+                got: 4,
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn the_runner_limits_episodes_and_seeds_them_by_index() {
+        let mut env = tandem_envs::make("Pendulum-v1").unwrap();
+        let mut lp = small_loop(1000, 1, 1);
+        let mut runner = EpisodeRunner::new(7, "x").with_limit(Some(3));
+        let mut recs = Vec::new();
+        lp.train(&mut env, &mut runner, 7, StepOptions::collect(), &mut |r| {
+            recs.push(r.clone())
+        })
+        .unwrap();
+        let done: Vec<bool> = recs.iter().map(StepRecord::done).collect();
+        assert_eq!(done, [false, false, true, false, false, true, false]);
+        assert_eq!(runner.episode(), 2);
+        assert!(runner.in_episode());
+        // Episode 1 started from the reset seeded by "x1"; its first previous action is zero.
+        let mut fresh = tandem_envs::make("Pendulum-v1").unwrap();
+        fresh.reset(Some(SeedStream::new(7).derive("x1")));
+        assert_eq!(recs[3].states.as_ref().unwrap().0, fresh.state());
+        assert_eq!(recs[3].prev_action, vec![0.0]);
+        assert_eq!(recs[4].prev_action, recs[3].action_row);
+        assert_eq!(recs[5].episode_len, 3);
+        let sum: f64 = recs[3..6].iter().map(|r| r.reward).sum();
+        assert!((recs[5].episode_return - sum).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_saved_loop_loads_into_the_same_schedule_only() {
+        let mut env = tandem_envs::make("Pendulum-v1").unwrap();
+        let mut lp = small_loop(5, 1, 1);
+        let mut runner = EpisodeRunner::new(0, "ep");
+        lp.train(&mut env, &mut runner, 12, StepOptions::real(), &mut |_| {})
+            .unwrap();
+        let mut ckpt = Checkpoint::new();
+        lp.save("l", &mut ckpt).unwrap();
+        let mut back = small_loop(5, 1, 1);
+        back.load("l", &ckpt).unwrap();
+        assert_eq!(back.counts(), lp.counts());
+        assert_eq!(back.primary().get(3), lp.primary().get(3));
+        assert!(small_loop(6, 1, 1).load("l", &ckpt).is_err());
+    }
 }

@@ -116,7 +116,9 @@ pub use mlp_model::{MlpModel, MlpModelConfig};
 pub use model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
-pub use model_env::{branched_rollouts, Imagined, Judge, Judges, ModelEnv, RolloutPolicy};
+pub use model_env::{
+    branched_rollouts, canonical_pair, Imagined, Judge, Judges, ModelEnv, RolloutPolicy,
+};
 pub use plant_model::PlantModel;
 pub use residual::{ResidualModel, ResidualModelConfig};
 pub use train::{OptimizerConfig, Standardizer};

@@ -113,6 +113,32 @@ impl Judges {
     }
 }
 
+/// A real transition `x → x1` in `task`'s canonical coordinates: `s = canon(x)` and
+/// `s' = s + (x1 − x)`, so that a wrapped angle never makes the change jump by 2π. This is the
+/// data a model of state changes is fitted on (p0's difference model, Dyna's learned model);
+/// the model's predictions are canonicalized again by [`ModelEnv`] and [`branched_rollouts`].
+///
+/// ```
+/// use tandem_envs::PendulumTask;
+/// use tandem_dynamics::classic::GymPendulumParams;
+/// use tandem_models::canonical_pair;
+///
+/// let task = PendulumTask::new(&GymPendulumParams::default());
+/// // Passing the bottom: 3.1 → 3.2 rad is a change of 0.1, not of 0.1 − 2π.
+/// let (s, s1) = canonical_pair(&task, &[3.1 + 2.0 * std::f64::consts::PI, 0.0], &[3.2 + 2.0 * std::f64::consts::PI, 2.0]);
+/// assert!((s[0] - 3.1).abs() < 1e-12 && (s1[0] - s[0] - 0.1).abs() < 1e-12);
+/// ```
+pub fn canonical_pair<T: Task + ?Sized>(task: &T, x: &[f64], x1: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let mut s = x.to_vec();
+    task.canonicalize(&mut s);
+    let s1 = s
+        .iter()
+        .zip(x1.iter().zip(x))
+        .map(|(s, (b, a))| s + (b - a))
+        .collect();
+    (s, s1)
+}
+
 /// Checks that `model` and `task` agree on the state and control sizes.
 fn check_pair<M: DynamicsModel + ?Sized, T: Task + ?Sized>(
     model: &M,
