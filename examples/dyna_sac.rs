@@ -11,8 +11,8 @@ use tandem::core::SeedStream;
 use tandem::dynamics::classic::GymPendulumParams;
 use tandem::envs::{make, PendulumTask, Task};
 use tandem::models::{
-    branched_rollouts, canonical_pair, DynamicsModel, FitConfig, Judges, MlpModel, MlpModelConfig,
-    OptimizerConfig, TransitionsBuilder,
+    branched_rollouts, DynamicsModel, FitConfig, Judges, MlpModel, MlpModelConfig, OptimizerConfig,
+    TransitionsBuilder,
 };
 
 const FIT_EVERY: u64 = 250; // real steps between model fits (and rollout batches)
@@ -60,17 +60,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         };
         let rec = lp.step(&mut env, &mut episodes, opts)?;
         let (x, x1) = rec.states.as_ref().expect("recorded");
-        let (s, s1) = canonical_pair(&task, x, x1);
-        data.push(
-            &s,
-            &task.control(&rec.action),
-            &s1,
-            rec.reward,
-            rec.terminated,
-        )?;
-        if rec.done() {
-            data.end_episode();
-        }
+        let u = task.control(&rec.action);
+        data.push_canonical(&task, x, &u, x1, rec.reward, rec.terminated, rec.done())?;
         if t % FIT_EVERY == 0 {
             // Refit the model on all real data, then imagine from random real states.
             let all = data.clone().build();

@@ -33,8 +33,8 @@ use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 use tandem_dynamics::Plant;
 use tandem_envs::{DcMotorPendulumEnv, DcMotorPendulumTask, Env, EnvError, SampleCounter, Task};
 use tandem_models::{
-    canonical_pair, DynamicsModel, FitConfig, FitReport, ModelEnv, ModelError, PlantModel,
-    ResidualModel, ResidualModelConfig, Transitions, TransitionsBuilder,
+    DynamicsModel, FitConfig, FitReport, ModelEnv, ModelError, PlantModel, ResidualModel,
+    ResidualModelConfig, Transitions, TransitionsBuilder,
 };
 
 use super::adapter::{feature_dim, Adapted, Feature};
@@ -297,17 +297,8 @@ pub fn collect<A: OffPolicyAgent, T: Task>(
     for _ in 0..n {
         let rec = lp.step(env, &mut runner, StepOptions::collect())?;
         let (x, x1) = rec.states.as_ref().expect("collect records states");
-        let (s, s1) = canonical_pair(task, x, x1);
-        b.push(
-            &s,
-            &task.control(&rec.action),
-            &s1,
-            rec.reward,
-            rec.terminated,
-        )?;
-        if rec.done() {
-            b.end_episode();
-        }
+        let u = task.control(&rec.action);
+        b.push_canonical(task, x, &u, x1, rec.reward, rec.terminated, rec.done())?;
         tick();
     }
     Ok(b.build())

@@ -139,6 +139,29 @@ pub fn canonical_pair<T: Task + ?Sized>(task: &T, x: &[f64], x1: &[f64]) -> (Vec
     (s, s1)
 }
 
+impl crate::TransitionsBuilder {
+    /// Appends the real transition `x --u--> x1` in `task`'s canonical coordinates
+    /// ([`canonical_pair`]), and ends the episode when `done`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn push_canonical<T: Task + ?Sized>(
+        &mut self,
+        task: &T,
+        x: &[f64],
+        u: &[f64],
+        x1: &[f64],
+        reward: f64,
+        terminated: bool,
+        done: bool,
+    ) -> Result<(), ModelError> {
+        let (s, s1) = canonical_pair(task, x, x1);
+        self.push(&s, u, &s1, reward, terminated)?;
+        if done {
+            self.end_episode();
+        }
+        Ok(())
+    }
+}
+
 /// Checks that `model` and `task` agree on the state and control sizes.
 fn check_pair<M: DynamicsModel + ?Sized, T: Task + ?Sized>(
     model: &M,
