@@ -5,8 +5,10 @@
 //! * [`DynamicsModel`]: batched one-step prediction ([`ModelInput`] → [`Prediction`]: next state,
 //!   and where the model has them its variance, reward and termination probability) and `fit` on
 //!   [`Transitions`] (which keep each transition's previous action: p1's one-step-back data),
-//!   returning a [`FitReport`] of training and held-out loss per epoch. Object-safe: planners
-//!   take `&dyn DynamicsModel`.
+//!   returning a [`FitReport`] of training and held-out loss per epoch; and linearization
+//!   ([`DynamicsModel::linearize`]: Jacobians at a batch of points, finite differences of one
+//!   batched `predict` by default, [`linearize_fd`]). It is the one model trait planners use,
+//!   sampling MPC and iLQR alike. Object-safe: planners take `&dyn DynamicsModel`.
 //! * [`PlantModel`]: any known [`tandem_dynamics::Plant`] as a deterministic model, so "plan on
 //!   the true physics" and "plan on a learned model" are the same call.
 //! * The learned models, each with a serde `Config` whose `Default` is its paper's setting:
@@ -110,7 +112,8 @@ pub use gmm::Gmm;
 pub use incremental::{GainStructure, IncrementalModel, IncrementalModelConfig};
 pub use mlp_model::{MlpModel, MlpModelConfig};
 pub use model::{
-    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
+    linearize_fd, DynamicsModel, FitConfig, FitReport, Linearization, ModelError, ModelInput,
+    Prediction, Transitions,
 };
 pub use plant_model::PlantModel;
 pub use residual::{ResidualModel, ResidualModelConfig};
