@@ -325,12 +325,7 @@ impl DynamicsModel for IncrementalModel {
                     .sum::<f64>();
             }
         }
-        Ok(Prediction {
-            next_states: next,
-            variance: None,
-            rewards: None,
-            terminal_prob: None,
-        })
+        Ok(Prediction::deterministic(next))
     }
 
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {

@@ -107,6 +107,19 @@ pub struct Prediction {
     pub terminal_prob: Option<Array1<f64>>,
 }
 
+impl Prediction {
+    /// A prediction of next states only (no variance, reward or termination), as deterministic
+    /// models give.
+    pub fn deterministic(next_states: Array2<f64>) -> Self {
+        Self {
+            next_states,
+            variance: None,
+            rewards: None,
+            terminal_prob: None,
+        }
+    }
+}
+
 /// Settings of one fit.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]

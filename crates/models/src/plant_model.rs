@@ -114,12 +114,7 @@ impl<P: Plant> DynamicsModel for PlantModel<P> {
     }
 
     fn predict(&self, input: &ModelInput<'_>, _rng: &mut Rng) -> Result<Prediction, ModelError> {
-        Ok(Prediction {
-            next_states: step_rows(&self.plant, input)?,
-            variance: None,
-            rewards: None,
-            terminal_prob: None,
-        })
+        Ok(Prediction::deterministic(step_rows(&self.plant, input)?))
     }
 
     /// [`Plant::linearize`] at every row; previous actions, if given, get zero Jacobians (a plant

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{quadratic_objective, riccati, LinearModel, PendulumModel};
+use common::{lq_weights, quadratic_objective, riccati, LinearModel, PendulumModel};
 use nalgebra::{DMatrix, DVector};
 use ndarray::Array2;
 use tandem_core::seeding::rng_from_seed;
@@ -15,9 +15,7 @@ const T: usize = 20;
 
 fn problem() -> (LinearModel, Objective, DMatrix<f64>, Vec<DMatrix<f64>>) {
     let m = LinearModel::double_integrator();
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let qf = &q * 10.0;
+    let (q, r, qf) = lq_weights();
     let obj = quadratic_objective(&q, &r, &qf);
     let (p, k) = riccati(&m.a, &m.b, &q, &r, &qf, T);
     (m, obj, p[0].clone(), k)
@@ -226,9 +224,7 @@ fn seeds_and_errors() {
 #[test]
 fn time_varying_tracking_cost_matches_the_affine_riccati_recursion() {
     let m = LinearModel::double_integrator();
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let qf = &q * 10.0;
+    let (q, r, qf) = lq_weights();
     let target = |t: usize| DVector::from_vec(vec![(0.3 * t as f64).sin(), 0.0]);
     let (q2, r2, qf2) = (q.clone(), r.clone(), qf.clone());
     let obj = Objective::time_varying(2, 1, move |x, u, t| {

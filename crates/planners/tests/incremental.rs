@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{quadratic_objective, riccati};
+use common::{lq_weights, quadratic_objective, riccati};
 use nalgebra::{DMatrix, DVector};
 use ndarray::Array2;
 use tandem_core::Rng;
@@ -62,29 +62,17 @@ impl DynamicsModel for Augmented {
                 a[(r, 0)]
             }
         });
-        Ok(Prediction {
-            next_states: next,
-            variance: None,
-            rewards: None,
-            terminal_prob: None,
-        })
+        Ok(Prediction::deterministic(next))
     }
     fn fit(&mut self, _: &Transitions, _: &FitConfig) -> Result<FitReport, ModelError> {
         Ok(FitReport::default())
     }
 }
 
-fn weights() -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let qf = &q * 10.0;
-    (q, r, qf)
-}
-
 /// The quadratic cost on `x`, and the same cost on `y = [x; u_prev]` (blind to `u_prev`),
 /// evaluated alike (`common::quadratic_objective`'s arithmetic).
 fn objectives() -> (Objective, Objective) {
-    let (q, r, qf) = weights();
+    let (q, r, qf) = lq_weights();
     let plain = quadratic_objective(&q, &r, &qf);
     let full = quadratic_objective(&q, &r, &qf);
     let full_t = quadratic_objective(&q, &r, &qf);
@@ -200,7 +188,7 @@ fn every_planner_plans_through_the_incremental_model_as_through_the_augmented_pl
 fn ilqr_through_the_incremental_model_reaches_the_augmented_riccati_optimum() {
     let inc = incremental();
     let (obj, _) = objectives();
-    let (q, r, qf) = weights();
+    let (q, r, qf) = lq_weights();
     let l = gain();
     // y' = A y + B u with y = [x; u_prev].
     let a = DMatrix::from_row_slice(3, 3, &[1.0, 0.0, -l[0], 0.0, 1.0, -l[1], 0.0, 0.0, 0.0]);

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{quadratic_objective, riccati, LinearModel, PendulumModel};
+use common::{lq_weights, quadratic_objective, riccati, LinearModel, PendulumModel};
 use nalgebra::{DMatrix, DVector};
 use ndarray::{Array1, Array2};
 use tandem_models::DynamicsModel;
@@ -18,9 +18,7 @@ const H: usize = 15;
 
 fn lqr_problem() -> (LinearModel, Objective, f64, Vec<f64>) {
     let m = LinearModel::double_integrator();
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let qf = &q * 10.0;
+    let (q, r, qf) = lq_weights();
     let obj = quadratic_objective(&q, &r, &qf);
     let (p, k) = riccati(&m.a, &m.b, &q, &r, &qf, H);
     let x0 = DVector::from_vec(vec![1.0, 0.0]);
@@ -395,9 +393,7 @@ fn held_knots_reach_the_move_blocked_optimum() {
 #[test]
 fn terminal_value_extends_the_horizon() {
     let m = LinearModel::double_integrator();
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let qf = &q * 10.0;
+    let (q, r, qf) = lq_weights();
     let (p, k) = riccati(&m.a, &m.b, &q, &r, &qf, H);
     let p3 = p[3].clone();
     let (q2, r2) = (q.clone(), r.clone());

@@ -5,7 +5,7 @@
 mod common;
 
 use common::reacher::{evaluate, objective, push_objective, Reacher};
-use common::{quadratic_objective, riccati, LinearModel};
+use common::{lq_weights, quadratic_objective, riccati, LinearModel};
 use nalgebra::{DMatrix, DVector};
 use ndarray::Array2;
 use tandem_core::seeding::rng_from_seed;
@@ -22,9 +22,8 @@ const T: usize = 20;
 /// terminal `10 Q` (as in `lqr_flm_with_fitted_dynamics_reaches_the_lqr_cost`, which needs the
 /// matrices themselves for the Riccati optimum).
 fn double_integrator_objective() -> Objective {
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    quadratic_objective(&q, &r, &(&q * 10.0))
+    let (q, r, qf) = lq_weights();
+    quadratic_objective(&q, &r, &qf)
 }
 
 /// Cost of the controller's mean (no action noise) on a deterministic system from `x0`.
@@ -51,9 +50,7 @@ fn mean_cost(ctrl: &TvlgController, sys: &dyn DynamicsModel, obj: &Objective, x0
 #[test]
 fn lqr_flm_with_fitted_dynamics_reaches_the_lqr_cost() {
     let m = LinearModel::double_integrator();
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let qf = &q * 10.0;
+    let (q, r, qf) = lq_weights();
     let obj = quadratic_objective(&q, &r, &qf);
     let (p, _) = riccati(&m.a, &m.b, &q, &r, &qf, T);
     let x0 = [1.0, 0.0];
@@ -433,25 +430,47 @@ fn pusher_contact_happens_at_different_steps() {
     assert!(steps[steps.len() - 1] - steps[0] >= 5, "{first_contact:?}");
 }
 
+/// The first iteration on the double integrator from `(1, 0)`: the quadratic objective, the
+/// initial controller (`K = 0`, `k = 0`, `Σ = I`), 20 samples of it with process noise
+/// `process_std` (seeded) and the TVLG dynamics fitted to them.
+fn first_batch(
+    process_std: f64,
+    seed: u64,
+) -> (
+    Objective,
+    TvlgController,
+    tandem_planners::TrajectorySamples,
+    tandem_models::TvlgDynamics,
+) {
+    let m = LinearModel::double_integrator();
+    let obj = double_integrator_objective();
+    let ctrl = TvlgController::constant(T, 2, &[0.0], 1.0).unwrap();
+    let scfg = SampleConfig {
+        process_std,
+        ..Default::default()
+    };
+    let samples = sample_trajectories(
+        &ctrl,
+        &m,
+        &obj,
+        &[1.0, 0.0],
+        &scfg,
+        &mut rng_from_seed(seed),
+    )
+    .unwrap();
+    let dynamics = TvlgFit::new(TvlgConfig::default())
+        .fit(samples.states.view(), samples.actions.view())
+        .unwrap();
+    (obj, ctrl, samples, dynamics)
+}
+
 /// GPS's classic step rule for LQR-FLM: when the new model agrees with the old one (same fit and
 /// cost), the actual improvement equals the predicted one and the multiplier grows by the
 /// maximum factor 5 (capped at 10); when the "new" controller is the old one, nothing was
 /// predicted and it shrinks by the minimum factor 0.1.
 #[test]
 fn classic_step_rule_on_agreeing_and_null_predictions() {
-    let m = LinearModel::double_integrator();
-    let sys = m.clone();
-    let obj = double_integrator_objective();
-    let ctrl = TvlgController::constant(T, 2, &[0.0], 1.0).unwrap();
-    let scfg = SampleConfig {
-        process_std: 0.01,
-        ..Default::default()
-    };
-    let samples =
-        sample_trajectories(&ctrl, &sys, &obj, &[1.0, 0.0], &scfg, &mut rng_from_seed(4)).unwrap();
-    let dynamics = TvlgFit::new(TvlgConfig::default())
-        .fit(samples.states.view(), samples.actions.view())
-        .unwrap();
+    let (obj, ctrl, samples, dynamics) = first_batch(0.01, 4);
     let cost = quadratize_cost(&obj, &samples).unwrap();
     let next = LqrFlm::new(LqrFlmConfig::default())
         .unwrap()
@@ -474,18 +493,7 @@ fn classic_step_rule_on_agreeing_and_null_predictions() {
 /// length is an error.
 #[test]
 fn pilqr_with_an_externally_supplied_per_step_cost() {
-    let m = LinearModel::double_integrator();
-    let obj = double_integrator_objective();
-    let ctrl = TvlgController::constant(T, 2, &[0.0], 1.0).unwrap();
-    let scfg = SampleConfig {
-        process_std: 0.05,
-        ..Default::default()
-    };
-    let samples =
-        sample_trajectories(&ctrl, &m, &obj, &[1.0, 0.0], &scfg, &mut rng_from_seed(2)).unwrap();
-    let dynamics = TvlgFit::new(TvlgConfig::default())
-        .fit(samples.states.view(), samples.actions.view())
-        .unwrap();
+    let (obj, ctrl, samples, dynamics) = first_batch(0.05, 2);
     let cfg = PilqrConfig {
         lqr: LqrFlmConfig {
             kl_step: 0.5,

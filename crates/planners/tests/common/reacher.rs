@@ -185,12 +185,7 @@ impl DynamicsModel for Reacher {
             }
             out[(i, 2)] = v[0];
         }
-        Ok(Prediction {
-            next_states: out,
-            variance: None,
-            rewards: None,
-            terminal_prob: None,
-        })
+        Ok(Prediction::deterministic(out))
     }
     fn fit(&mut self, _: &Transitions, _: &FitConfig) -> Result<FitReport, ModelError> {
         Ok(FitReport::default())
