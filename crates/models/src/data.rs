@@ -94,7 +94,6 @@ impl Transitions {
         }
         check_array("states", self.states.view(), n, state_dim)?;
         check_array("actions", self.actions.view(), n, action_dim)?;
-        check_array("prev_states", self.prev_states.view(), n, state_dim)?;
         check_array("prev_actions", self.prev_actions.view(), n, action_dim)?;
         check_array("next_states", self.next_states.view(), n, state_dim)?;
         if self.rewards.len() != n {
@@ -122,8 +121,7 @@ impl Transitions {
 
     /// The transitions of one episode: `states` holds `T + 1` states `s_0..s_T`, `actions` the
     /// `T` actions, `rewards` the `T` rewards; `terminated` says whether `s_T` is terminal (only
-    /// the last transition is marked). The previous action of the first transition is zero, its
-    /// previous state is `s_0`.
+    /// the last transition is marked). The previous action of the first transition is zero.
     pub fn from_episode(
         states: ArrayView2<'_, f64>,
         actions: ArrayView2<'_, f64>,
@@ -163,7 +161,6 @@ impl Transitions {
         Self {
             states: self.states.select(Axis(0), idx),
             actions: self.actions.select(Axis(0), idx),
-            prev_states: self.prev_states.select(Axis(0), idx),
             prev_actions: self.prev_actions.select(Axis(0), idx),
             next_states: self.next_states.select(Axis(0), idx),
             rewards: self.rewards.select(Axis(0), idx),
@@ -183,7 +180,6 @@ impl Transitions {
         };
         self.states = cat(&self.states, &other.states);
         self.actions = cat(&self.actions, &other.actions);
-        self.prev_states = cat(&self.prev_states, &other.prev_states);
         self.prev_actions = cat(&self.prev_actions, &other.prev_actions);
         self.next_states = cat(&self.next_states, &other.next_states);
         self.rewards = ndarray::concatenate(Axis(0), &[self.rewards.view(), other.rewards.view()])
@@ -231,8 +227,6 @@ pub fn holdout_indices(n: usize, fraction: f64, rng: &mut Rng) -> (Vec<usize>, V
 /// assert_eq!(data.len(), 2);
 /// assert_eq!(data.prev_actions[[0, 0]], 0.0);
 /// assert_eq!(data.prev_actions[[1, 0]], 1.0);
-/// assert_eq!(data.prev_states.row(0).to_vec(), vec![0.0, 0.0]);
-/// assert_eq!(data.prev_states.row(1).to_vec(), vec![0.0, 0.0]);
 /// ```
 #[derive(Debug, Clone)]
 pub struct TransitionsBuilder {
@@ -240,12 +234,10 @@ pub struct TransitionsBuilder {
     action_dim: usize,
     states: Vec<f64>,
     actions: Vec<f64>,
-    prev_states: Vec<f64>,
     prev_actions: Vec<f64>,
     next_states: Vec<f64>,
     rewards: Vec<f64>,
     terminated: Vec<bool>,
-    last_state: Option<Vec<f64>>,
     last_action: Vec<f64>,
 }
 
@@ -257,12 +249,10 @@ impl TransitionsBuilder {
             action_dim,
             states: Vec::new(),
             actions: Vec::new(),
-            prev_states: Vec::new(),
             prev_actions: Vec::new(),
             next_states: Vec::new(),
             rewards: Vec::new(),
             terminated: Vec::new(),
-            last_state: None,
             last_action: vec![0.0; action_dim],
         }
     }
@@ -277,8 +267,8 @@ impl TransitionsBuilder {
         self.rewards.is_empty()
     }
 
-    /// Appends one transition `(s, a, s', r, terminated)`; its previous state and action are the
-    /// state and action of the previous push of this episode. A row with a wrong width or a non-finite value is
+    /// Appends one transition `(s, a, s', r, terminated)`; its previous action is the action of
+    /// the previous push of this episode. A row with a wrong width or a non-finite value is
     /// refused (error naming it, with the row it would have been) and nothing is appended. A
     /// terminated row ends the episode.
     pub fn push(
@@ -313,14 +303,11 @@ impl TransitionsBuilder {
         }
         self.states.extend_from_slice(state);
         self.actions.extend_from_slice(action);
-        self.prev_states
-            .extend_from_slice(self.last_state.as_deref().unwrap_or(state));
         self.prev_actions.extend_from_slice(&self.last_action);
         self.next_states.extend_from_slice(next_state);
         self.rewards.push(reward);
         self.terminated.push(terminated);
         self.last_action.copy_from_slice(action);
-        self.last_state = Some(state.to_vec());
         if terminated {
             self.end_episode();
         }
@@ -328,9 +315,8 @@ impl TransitionsBuilder {
     }
 
     /// Marks the end of an episode (terminated or truncated): the next row's previous action is
-    /// zero and its previous state is its own state.
+    /// zero.
     pub fn end_episode(&mut self) {
-        self.last_state = None;
         self.last_action.iter_mut().for_each(|a| *a = 0.0);
     }
 
@@ -341,7 +327,6 @@ impl TransitionsBuilder {
         Transitions {
             states: m(self.states, self.state_dim),
             actions: m(self.actions, self.action_dim),
-            prev_states: m(self.prev_states, self.state_dim),
             prev_actions: m(self.prev_actions, self.action_dim),
             next_states: m(self.next_states, self.state_dim),
             rewards: Array1::from(self.rewards),
@@ -379,7 +364,6 @@ mod tests {
         let d = Transitions::from_episode(s.view(), a.view(), &[1.0, 2.0, 3.0], true).unwrap();
         assert_eq!(d.len(), 3);
         assert_eq!(d.prev_actions.column(0).to_vec(), vec![0.0, 0.5, 0.6]);
-        assert_eq!(d.prev_states.column(0).to_vec(), vec![0.0, 0.0, 1.0]);
         assert_eq!(d.next_states.column(0).to_vec(), vec![1.0, 2.0, 3.0]);
         assert_eq!(d.terminated.to_vec(), vec![false, false, true]);
         d.validate(1, 1).unwrap();

@@ -306,6 +306,11 @@ impl DynamicsModel for IncrementalModel {
         self.action_dim
     }
 
+    /// `true`: the prediction conditions on the previous action.
+    fn uses_prev_actions(&self) -> bool {
+        true
+    }
+
     fn predict(&self, input: &ModelInput<'_>, _rng: &mut Rng) -> Result<Prediction, ModelError> {
         let b = check_input(input, self.state_dim, self.action_dim, true)?;
         let prev = input.prev_actions.expect("checked");
@@ -320,12 +325,7 @@ impl DynamicsModel for IncrementalModel {
                     .sum::<f64>();
             }
         }
-        Ok(Prediction {
-            next_states: next,
-            variance: None,
-            rewards: None,
-            terminal_prob: None,
-        })
+        Ok(Prediction::deterministic(next))
     }
 
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
@@ -436,7 +436,6 @@ mod tests {
         let mut t = Transitions {
             states: Array2::zeros((n, s)),
             actions: Array2::zeros((n, a)),
-            prev_states: Array2::zeros((n, s)),
             prev_actions: Array2::zeros((n, a)),
             next_states: Array2::zeros((n, s)),
             rewards: Array1::zeros(n),
@@ -451,7 +450,6 @@ mod tests {
         for _ in 0..episodes {
             let mut prev: Vec<f64> = (0..a).map(|_| rng.random_range(-1.0..1.0)).collect();
             let mut x = step(&prev);
-            let mut prev_x = x.clone();
             for _ in 0..len {
                 let u: Vec<f64> = if rng.random::<f64>() < 0.2 {
                     prev.clone()
@@ -461,7 +459,6 @@ mod tests {
                 let next = step(&u);
                 for i in 0..s {
                     t.states[[row, i]] = x[i];
-                    t.prev_states[[row, i]] = prev_x[i];
                     t.next_states[[row, i]] = next[i];
                 }
                 for j in 0..a {
@@ -469,7 +466,7 @@ mod tests {
                     t.prev_actions[[row, j]] = prev[j];
                 }
                 row += 1;
-                prev_x = std::mem::replace(&mut x, next);
+                x = next;
                 prev = u;
             }
         }
@@ -539,6 +536,35 @@ mod tests {
         assert_eq!((l[5][(0, 1)], l[5][(1, 0)]), (0.0, 0.0));
     }
 
+    /// With a known `L` (the prior of an unfitted model) the model is `x + L (u − u_prev)`: the
+    /// default finite-difference linearization gives `A = I`, `B = L`, `B_prev = −L`.
+    #[test]
+    fn linearization_of_a_known_gain() {
+        let l0 = [0.5, -2.0, 0.25, 1.5];
+        let m = IncrementalModel::new(2, 2, fast(GainStructure::Full, Some(l0.to_vec()))).unwrap();
+        assert!(m.uses_prev_actions());
+        let s = ndarray::array![[1.0, -3.0], [0.2, 40.0]];
+        let a = ndarray::array![[0.5, 0.1], [-1.0, 2.0]];
+        let p = ndarray::array![[0.0, 0.3], [7.0, -2.0]];
+        let lin = m
+            .linearize(
+                &ModelInput::new(s.view(), a.view()).with_prev_actions(p.view()),
+                &mut rng_from_seed(0),
+            )
+            .unwrap();
+        let l = DMatrix::from_row_slice(2, 2, &l0);
+        for li in lin {
+            assert!((li.a - DMatrix::<f64>::identity(2, 2)).abs().max() < 1e-8);
+            assert!((li.b - &l).abs().max() < 1e-8);
+            assert!((li.b_prev.unwrap() + &l).abs().max() < 1e-8);
+        }
+        // Without previous actions the model cannot predict, so it cannot be linearized.
+        assert!(matches!(
+            m.linearize(&ModelInput::new(s.view(), a.view()), &mut rng_from_seed(0)),
+            Err(ModelError::MissingInput(_))
+        ));
+    }
+
     #[test]
     fn zero_action_change_and_missing_previous_actions() {
         let m =
@@ -562,7 +588,6 @@ mod tests {
         let data = Transitions {
             states: ndarray::array![[0.0, 0.0], [0.1, 0.1]],
             actions: ndarray::array![[0.5], [0.5]],
-            prev_states: ndarray::array![[0.0, 0.0], [0.0, 0.0]],
             prev_actions: ndarray::array![[0.5], [0.5]],
             next_states: ndarray::array![[0.1, 0.1], [0.2, 0.2]],
             rewards: ndarray::array![0.0, 0.0],

@@ -5,8 +5,10 @@
 //! * [`DynamicsModel`]: batched one-step prediction ([`ModelInput`] → [`Prediction`]: next state,
 //!   and where the model has them its variance, reward and termination probability) and `fit` on
 //!   [`Transitions`] (which keep each transition's previous action: p1's one-step-back data),
-//!   returning a [`FitReport`] of training and held-out loss per epoch. Object-safe: planners
-//!   take `&dyn DynamicsModel`.
+//!   returning a [`FitReport`] of training and held-out loss per epoch; and linearization
+//!   ([`DynamicsModel::linearize`]: Jacobians at a batch of points, finite differences of one
+//!   batched `predict` by default, [`linearize_fd`]). It is the one model trait planners use,
+//!   sampling MPC and iLQR alike. Object-safe: planners take `&dyn DynamicsModel`.
 //! * [`ModelEnv`] and [`branched_rollouts`]: any model under a `tandem_envs::Task`, one
 //!   imagined episode behind the `Env` trait or N branched rollouts from real states at once,
 //!   with reward and termination from the task or from the model ([`Judges`]).
@@ -114,7 +116,8 @@ pub use gmm::Gmm;
 pub use incremental::{GainStructure, IncrementalModel, IncrementalModelConfig};
 pub use mlp_model::{MlpModel, MlpModelConfig};
 pub use model::{
-    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
+    linearize_fd, DynamicsModel, FitConfig, FitReport, Linearization, ModelError, ModelInput,
+    Prediction, Transitions,
 };
 pub use model_env::{
     branched_rollouts, canonical_pair, Imagined, Judge, Judges, ModelEnv, RolloutPolicy,

@@ -1,7 +1,10 @@
 //! The [`DynamicsModel`] trait and the data it is fitted on.
 
+use nalgebra::DMatrix;
 use ndarray::{Array1, Array2, ArrayView2};
 use tandem_core::Rng;
+
+use crate::data::check_input;
 
 /// Errors of models: bad data, bad dimensions, a fit that diverged.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -43,17 +46,15 @@ pub enum ModelError {
     Other(String),
 }
 
-/// Transitions `(s, a, s', r, terminated)` with the previous state and action of each (p1 learns
-/// from the one-step-back data `{s_{t-1}, a_{t-1}, s_t, a_t}`), one row per transition.
+/// Transitions `(s, a, s', r, terminated)` with the previous action of each (p1 learns from the
+/// one-step-back data `{a_{t-1}, s_t, a_t, s_{t+1}}`: its model conditions on `a_{t-1}`, and its
+/// unknown-part estimate `ĥ_t = s_t − L a_{t−1}` needs no previous state), one row per transition.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Transitions {
     /// States `s_t`, `N x S`.
     pub states: Array2<f64>,
     /// Actions `a_t`, `N x A`.
     pub actions: Array2<f64>,
-    /// Previous states `s_{t-1}` (at the start of an episode, where there is none, `s_t`
-    /// itself), `N x S`.
-    pub prev_states: Array2<f64>,
     /// Previous actions `a_{t-1}` (zeros at the start of an episode), `N x A`.
     pub prev_actions: Array2<f64>,
     /// Next states `s_{t+1}`, `N x S`.
@@ -106,6 +107,19 @@ pub struct Prediction {
     pub terminal_prob: Option<Array1<f64>>,
 }
 
+impl Prediction {
+    /// A prediction of next states only (no variance, reward or termination), as deterministic
+    /// models give.
+    pub fn deterministic(next_states: Array2<f64>) -> Self {
+        Self {
+            next_states,
+            variance: None,
+            rewards: None,
+            terminal_prob: None,
+        }
+    }
+}
+
 /// Settings of one fit.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -140,6 +154,19 @@ pub struct FitReport {
     pub holdout_loss: Vec<f64>,
 }
 
+/// The Jacobians of a model's next state (its mean) at one point `(x, u)` (and `u_prev`):
+/// `x' ≈ x̄' + A δx + B δu + B_prev δu_prev`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Linearization {
+    /// `A = ∂x'/∂x`, `S x S`.
+    pub a: DMatrix<f64>,
+    /// `B = ∂x'/∂u`, `S x A`.
+    pub b: DMatrix<f64>,
+    /// `B_prev = ∂x'/∂u_prev`, `S x A`, when the point had a previous action (a model that does
+    /// not read it has zeros here).
+    pub b_prev: Option<DMatrix<f64>>,
+}
+
 /// A dynamics model: batched prediction of the next state (and, where learned, its variance,
 /// the reward and termination), fitted on transitions.
 ///
@@ -149,6 +176,9 @@ pub struct FitReport {
 /// * Stochastic behaviour (the ensemble's member choice and sampling) draws from the `rng`
 ///   argument only; its mode is a setting of the model
 ///   (`ProbabilisticEnsemble::set_propagation`), so planners stay model-agnostic.
+/// * Linearization ([`DynamicsModel::linearize`]) is what trajectory optimizers (iLQR) need on
+///   top of stepping: central finite differences of `predict` by default, analytic where a model
+///   knows better (a [`crate::PlantModel`] uses [`tandem_dynamics::Plant::linearize`]).
 /// * Object-safe: planners and pipelines hold `&dyn DynamicsModel` or `Box<dyn DynamicsModel>`
 ///   (which implements the trait too).
 pub trait DynamicsModel {
@@ -164,6 +194,115 @@ pub trait DynamicsModel {
 
     /// Fits the model on `data`. On error the model is left as it was.
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError>;
+
+    /// Whether `predict` reads [`ModelInput::prev_actions`] (the incremental model); planners
+    /// then treat the previous action as part of the state (iLQR differentiates through it).
+    fn uses_prev_actions(&self) -> bool {
+        false
+    }
+
+    /// Jacobians of the predicted next state at each row of `input` (`B` points, one
+    /// [`Linearization`] each; `b_prev` is given where `input` has previous actions).
+    ///
+    /// The default takes central differences of [`DynamicsModel::predict`] with step
+    /// `1e-6·max(1, |z_i|)` per coordinate, all `2B(S + 2A)` perturbed points in one batched
+    /// `predict` call (one network pass for a learned model). `rng` is passed to that call: a
+    /// stochastic model should propagate its mean (or be given a generator that makes every row
+    /// draw alike), or the differences mix different samples.
+    fn linearize(
+        &self,
+        input: &ModelInput<'_>,
+        rng: &mut Rng,
+    ) -> Result<Vec<Linearization>, ModelError> {
+        linearize_fd(self, input, rng)
+    }
+}
+
+/// Central-difference Jacobians of `model`'s `predict` at each row of `input`: the default of
+/// [`DynamicsModel::linearize`], and the test oracle of analytic overrides.
+pub fn linearize_fd<M: DynamicsModel + ?Sized>(
+    model: &M,
+    input: &ModelInput<'_>,
+    rng: &mut Rng,
+) -> Result<Vec<Linearization>, ModelError> {
+    let (n, m) = (model.state_dim(), model.action_dim());
+    let t_len = check_input(input, n, m, false)?;
+    let prev = input.prev_actions;
+    // Coordinates perturbed per point: x, u, then u_prev when given.
+    let d = n + m + if prev.is_some() { m } else { 0 };
+    let rows = t_len * 2 * d;
+    let mut xs = Array2::zeros((rows, n));
+    let mut us = Array2::zeros((rows, m));
+    let mut ps = Array2::zeros((rows, m));
+    let mut hs = vec![0.0; t_len * d];
+    for t in 0..t_len {
+        for k in 0..d {
+            let z = if k < n {
+                input.states[(t, k)]
+            } else if k < n + m {
+                input.actions[(t, k - n)]
+            } else {
+                prev.expect("d counts u_prev only when given")[(t, k - n - m)]
+            };
+            let h = 1e-6 * z.abs().max(1.0);
+            hs[t * d + k] = h;
+            for (s, sign) in [(0, 1.0), (1, -1.0)] {
+                let r = (t * d + k) * 2 + s;
+                xs.row_mut(r).assign(&input.states.row(t));
+                us.row_mut(r).assign(&input.actions.row(t));
+                if let Some(p) = prev {
+                    ps.row_mut(r).assign(&p.row(t));
+                }
+                if k < n {
+                    xs[(r, k)] += sign * h;
+                } else if k < n + m {
+                    us[(r, k - n)] += sign * h;
+                } else {
+                    ps[(r, k - n - m)] += sign * h;
+                }
+            }
+        }
+    }
+    let mut fd_input = ModelInput::new(xs.view(), us.view());
+    if prev.is_some() {
+        fd_input = fd_input.with_prev_actions(ps.view());
+    }
+    let f = model.predict(&fd_input, rng)?.next_states;
+    if f.dim() != (rows, n) {
+        return Err(ModelError::Dim {
+            what: "predicted next states for finite differences (rows x columns)".into(),
+            expected: rows * n,
+            got: f.len(),
+        });
+    }
+    let mut out = Vec::with_capacity(t_len);
+    for t in 0..t_len {
+        let mut jac = DMatrix::zeros(n, d);
+        for k in 0..d {
+            let r = (t * d + k) * 2;
+            let h = hs[t * d + k];
+            for i in 0..n {
+                jac[(i, k)] = (f[(r, i)] - f[(r + 1, i)]) / (2.0 * h);
+            }
+        }
+        out.push(Linearization {
+            a: jac.columns(0, n).into_owned(),
+            b: jac.columns(n, m).into_owned(),
+            b_prev: prev.map(|_| jac.columns(n + m, m).into_owned()),
+        });
+    }
+    if let Some(row) = out.iter().position(|l| {
+        l.a.iter()
+            .chain(l.b.iter())
+            .chain(l.b_prev.iter().flatten())
+            .any(|v| !v.is_finite())
+    }) {
+        return Err(ModelError::NonFinite {
+            what: "model Jacobians".into(),
+            row,
+        });
+    }
+    Ok(out)
 }
 
 impl<M: DynamicsModel + ?Sized> DynamicsModel for Box<M> {
@@ -181,6 +320,18 @@ impl<M: DynamicsModel + ?Sized> DynamicsModel for Box<M> {
 
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
         (**self).fit(data, cfg)
+    }
+
+    fn uses_prev_actions(&self) -> bool {
+        (**self).uses_prev_actions()
+    }
+
+    fn linearize(
+        &self,
+        input: &ModelInput<'_>,
+        rng: &mut Rng,
+    ) -> Result<Vec<Linearization>, ModelError> {
+        (**self).linearize(input, rng)
     }
 }
 

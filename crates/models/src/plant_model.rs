@@ -7,13 +7,16 @@ use tandem_dynamics::Plant;
 
 use crate::data::check_input;
 use crate::model::{
-    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
+    DynamicsModel, FitConfig, FitReport, Linearization, ModelError, ModelInput, Prediction,
+    Transitions,
 };
 
 /// A known plant used as a (deterministic) dynamics model, so that planners plan through "the
 /// true physics" and through a learned model with the same call.
 ///
 /// `predict` steps the plant once per row; it gives no variance, reward or termination.
+/// `linearize` is the plant's own [`Plant::linearize`] (analytic where the plant provides it, as
+/// a rigid-body plant does), not finite differences of `predict`.
 ///
 /// `fit` does not change anything (a known plant has no parameters to learn): it validates the
 /// data like every model does and reports the plant's one-step mean squared error on it as the
@@ -111,12 +114,43 @@ impl<P: Plant> DynamicsModel for PlantModel<P> {
     }
 
     fn predict(&self, input: &ModelInput<'_>, _rng: &mut Rng) -> Result<Prediction, ModelError> {
-        Ok(Prediction {
-            next_states: step_rows(&self.plant, input)?,
-            variance: None,
-            rewards: None,
-            terminal_prob: None,
-        })
+        Ok(Prediction::deterministic(step_rows(&self.plant, input)?))
+    }
+
+    /// [`Plant::linearize`] at every row; previous actions, if given, get zero Jacobians (a plant
+    /// does not read them).
+    fn linearize(
+        &self,
+        input: &ModelInput<'_>,
+        _rng: &mut Rng,
+    ) -> Result<Vec<Linearization>, ModelError> {
+        let (sd, ad) = (self.plant.state_dim(), self.plant.action_dim());
+        let b = check_input(input, sd, ad, false)?;
+        (0..b)
+            .map(|i| {
+                let x = DVector::from_iterator(sd, input.states.row(i).iter().copied());
+                let u = DVector::from_iterator(ad, input.actions.row(i).iter().copied());
+                let (a, bm) = self.plant.linearize(&x, &u);
+                if a.shape() != (sd, sd) || bm.shape() != (sd, ad) {
+                    return Err(ModelError::Dim {
+                        what: "plant Jacobians (entries of A and B)".into(),
+                        expected: sd * (sd + ad),
+                        got: a.len() + bm.len(),
+                    });
+                }
+                if a.iter().chain(bm.iter()).any(|v| !v.is_finite()) {
+                    return Err(ModelError::NonFinite {
+                        what: "plant Jacobians".into(),
+                        row: i,
+                    });
+                }
+                Ok(Linearization {
+                    a,
+                    b: bm,
+                    b_prev: input.prev_actions.map(|_| nalgebra::DMatrix::zeros(sd, ad)),
+                })
+            })
+            .collect()
     }
 
     /// Validates `data` and reports the plant's one-step mean squared error on it; changes
@@ -139,7 +173,7 @@ impl<P: Plant> DynamicsModel for PlantModel<P> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::dvector;
+    use nalgebra::{dvector, DMatrix};
     use ndarray::array;
     use tandem_core::seeding::rng_from_seed;
 
@@ -189,6 +223,67 @@ mod tests {
         }
         let r = m.fit(&b.build(), &FitConfig::default()).unwrap();
         assert!((r.train_loss[0] - 0.09 / 6.0).abs() < 1e-12);
+    }
+
+    /// A two-link arm (rigid bodies from URDF, torque sources on both joints): `PlantModel`'s
+    /// analytic Jacobians (chained ABA derivatives through RK4) against the trait's default,
+    /// central differences of one batched `predict`.
+    #[test]
+    fn analytic_jacobians_of_a_rigid_body_plant_match_the_finite_difference_default() {
+        use tandem_dynamics::actuators::Actuator;
+        use tandem_dynamics::rigid::Model;
+        use tandem_dynamics::rigid_plant::{RigidBodyPlant, RigidPlantConfig};
+        let link = |name: &str| {
+            format!(
+                r#"<link name="{name}"><inertial><origin xyz="0 0 -0.25"/><mass value="0.8"/>
+                <inertia ixx="0.004" ixy="0" ixz="0" iyy="0.004" iyz="0" izz="0.001"/>
+                </inertial></link>"#
+            )
+        };
+        let urdf = format!(
+            r#"<robot name="arm"><link name="base"/>{}{}
+            <joint name="shoulder" type="continuous"><parent link="base"/><child link="upper"/>
+              <axis xyz="0 1 0"/></joint>
+            <joint name="elbow" type="continuous"><parent link="upper"/><child link="lower"/>
+              <origin xyz="0 0 -0.5"/><axis xyz="0 1 0"/></joint></robot>"#,
+            link("upper"),
+            link("lower")
+        );
+        let cfg = RigidPlantConfig {
+            control_period: 0.02,
+            internal_step: 5e-3,
+        };
+        let mut plant = RigidBodyPlant::new(Model::from_urdf_str(&urdf).unwrap(), cfg).unwrap();
+        for joint in ["shoulder", "elbow"] {
+            plant = plant
+                .with_actuator(joint, Actuator::Torque { limit: 50.0 })
+                .unwrap();
+        }
+        let model = PlantModel::new(plant);
+        assert_eq!((model.state_dim(), model.action_dim()), (4, 2));
+        let s = array![
+            [0.3, -0.8, 1.0, 0.5],
+            [2.0, 1.1, -3.0, 0.2],
+            [-1.2, 0.0, 0.0, -2.5]
+        ];
+        let a = array![[1.0, -2.0], [0.0, 0.5], [-4.0, 3.0]];
+        let prev = array![[0.0, 0.0], [1.0, 1.0], [2.0, -2.0]];
+        let input = ModelInput::new(s.view(), a.view()).with_prev_actions(prev.view());
+        let mut rng = rng_from_seed(0);
+        let analytic = model.linearize(&input, &mut rng).unwrap();
+        let fd = crate::linearize_fd(&model, &input, &mut rng).unwrap();
+        assert_eq!((analytic.len(), fd.len()), (3, 3));
+        for (an, fd) in analytic.iter().zip(&fd) {
+            assert_eq!(an.a.shape(), (4, 4));
+            assert_eq!(an.b.shape(), (4, 2));
+            // Gravity and the coupled inertia make A far from the identity: the check has teeth.
+            assert!((&an.a - DMatrix::<f64>::identity(4, 4)).abs().max() > 1e-2);
+            assert!((&an.a - &fd.a).abs().max() < 1e-6, "{}", &an.a - &fd.a);
+            assert!((&an.b - &fd.b).abs().max() < 1e-6, "{}", &an.b - &fd.b);
+            // The plant does not read the previous action: zero both ways.
+            assert_eq!(an.b_prev, Some(DMatrix::zeros(4, 2)));
+            assert_eq!(fd.b_prev, Some(DMatrix::zeros(4, 2)));
+        }
     }
 
     #[test]

@@ -91,8 +91,7 @@ mod reacher;
 
 use reacher::{evaluate, objective, push_objective_dim, Reacher};
 use tandem_core::seeding::rng_from_seed;
-use tandem_models::{TvlgConfig, TvlgDynamics, TvlgFit};
-use tandem_planners::Dynamics;
+use tandem_models::{DynamicsModel, TvlgConfig, TvlgDynamics, TvlgFit};
 use tandem_planners::{
     classic_step_mult, pi2_update, quadratize_cost, sample_trajectories, LqrFlm, LqrFlmConfig,
     Objective, Pi2Config, Pilqr, PilqrConfig, QuadraticCost, SampleConfig, TvlgController,

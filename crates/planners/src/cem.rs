@@ -16,7 +16,7 @@ use tandem_models::DynamicsModel;
 use crate::error::Result;
 use crate::mpc::{
     check_problem, clamp_opt, fraction, lowest_k, nonzero, plan_from_actions, positive,
-    rollout_population, shift_plan, Bounds, Knots, Plan, Planner,
+    rollout_population, warm_start, Bounds, Knots, Plan, Planner,
 };
 use crate::objective::Objective;
 
@@ -140,33 +140,21 @@ impl Cem {
 }
 
 impl Planner for Cem {
-    fn plan(
+    fn plan_with_prev_action(
         &mut self,
         x0: &[f64],
+        prev_action: Option<&[f64]>,
         model: &dyn DynamicsModel,
         objective: &Objective,
     ) -> Result<Plan> {
-        let (_, a) = check_problem(x0, model, objective)?;
+        let (_, a) = check_problem(x0, prev_action, model, objective)?;
         if let Some(b) = &self.cfg.bounds {
             b.validate(a)?;
         }
         let (h, n) = (self.cfg.horizon, self.cfg.population);
         let n_elite = ((self.cfg.elite_fraction * n as f64).round() as usize).clamp(1, n);
         let std0 = self.init_std(a)?;
-        let mut mean = match self.mean.take() {
-            Some(mut m) if m.dim() == (h, a) => {
-                shift_plan(&mut m);
-                m
-            }
-            _ => {
-                let c = self
-                    .cfg
-                    .bounds
-                    .as_ref()
-                    .map_or(vec![0.0; a], |b| b.center());
-                Array2::from_shape_fn((h, a), |(_, j)| c[j])
-            }
-        };
+        let mut mean = warm_start(self.mean.take(), h, a, self.cfg.bounds.as_ref());
         let mut std = Array2::from_shape_fn((h, a), |(_, j)| std0[j]);
         let mut acts = Array3::zeros((h, n, a));
         let mut best: Option<(f64, Array2<f64>)> = None;
@@ -188,6 +176,7 @@ impl Planner for Cem {
             }
             let (costs, _) = rollout_population(
                 x0,
+                prev_action,
                 model,
                 objective,
                 &mut self.rng,
@@ -219,7 +208,7 @@ impl Planner for Cem {
             Some((_, seq)) if !self.cfg.return_mean => seq,
             _ => mean.clone(),
         };
-        let plan = plan_from_actions(x0, model, objective, &mut self.rng, &chosen)?;
+        let plan = plan_from_actions(x0, prev_action, model, objective, &mut self.rng, &chosen)?;
         self.mean = Some(mean);
         Ok(plan)
     }

@@ -19,15 +19,14 @@
 //! [`Plan::transitions`] are what p3 adds to the MPC replay buffer (line 15). A terminal value
 //! `−V` enters through the [`Objective`].
 
-use nalgebra::DMatrix;
 use ndarray::{s, Array1, Array2, Array3, ArrayView2, ArrayViewMut2};
 use tandem_core::{seeding::rng_from_seed, Rng};
 use tandem_models::DynamicsModel;
 
 use crate::error::{check_len, PlanError, Result};
 use crate::mpc::{
-    check_problem, clamp_opt, fraction, lowest_k, nonzero, plan_from_actions, positive,
-    rollout_population, shift_plan, Bounds, Knots, Noise, Plan, Planner,
+    add_noise, check_problem, clamp_opt, fraction, lowest_k, nonzero, plan_from_actions, positive,
+    rollout_population, warm_start, Bounds, Knots, Noise, Plan, Planner,
 };
 use crate::objective::Objective;
 
@@ -177,44 +176,34 @@ impl DmdMpc {
         &self.cfg
     }
 
-    /// One call with an explicit proposal (borrowed for this call only), ignoring any stored one.
+    /// One call with an explicit proposal (borrowed for this call only), ignoring any stored one;
+    /// `prev_action` as in [`Planner::plan_with_prev_action`].
     pub fn plan_with_proposal(
         &mut self,
         x0: &[f64],
+        prev_action: Option<&[f64]>,
         model: &dyn DynamicsModel,
         objective: &Objective,
         proposal: ProposalFn<'_>,
     ) -> Result<Plan> {
-        self.plan_impl(x0, model, objective, Some(proposal))
+        self.plan_impl(x0, prev_action, model, objective, Some(proposal))
     }
 
     fn plan_impl(
         &mut self,
         x0: &[f64],
+        prev_action: Option<&[f64]>,
         model: &dyn DynamicsModel,
         objective: &Objective,
         proposal: Option<ProposalFn<'_>>,
     ) -> Result<Plan> {
-        let (_, a) = check_problem(x0, model, objective)?;
+        let (_, a) = check_problem(x0, prev_action, model, objective)?;
         if let Some(b) = &self.cfg.bounds {
             b.validate(a)?;
         }
         let l = self.cfg.noise.cholesky(a)?;
         let (h, n) = (self.cfg.horizon, self.cfg.samples);
-        let mut mean = match self.mean.take() {
-            Some(mut m) if m.dim() == (h, a) => {
-                shift_plan(&mut m);
-                m
-            }
-            _ => {
-                let c = self
-                    .cfg
-                    .bounds
-                    .as_ref()
-                    .map_or(vec![0.0; a], |b| b.center());
-                Array2::from_shape_fn((h, a), |(_, j)| c[j])
-            }
-        };
+        let mut mean = warm_start(self.mean.take(), h, a, self.cfg.bounds.as_ref());
         let std0: Vec<f64> = (0..a).map(|j| l.row(j).norm()).collect();
         let mut std = Array2::from_shape_fn((h, a), |(_, j)| std0[j]);
         let adapt = self.cfg.adapt_covariance;
@@ -258,13 +247,14 @@ impl DmdMpc {
                         }
                     }
                 } else {
-                    add_noise(&l, &centre, z.slice(s![t, .., ..]), u.view_mut());
+                    add_noise(&l, centre.view(), z.slice(s![t, .., ..]), u.view_mut());
                 }
                 clamp_opt(&bounds, u);
                 Ok(())
             };
             let (costs, _) = rollout_population(
                 x0,
+                prev_action,
                 model,
                 objective,
                 &mut self.rng,
@@ -290,7 +280,7 @@ impl DmdMpc {
             }
         }
         clamp_opt(&self.cfg.bounds, mean.view_mut());
-        let plan = plan_from_actions(x0, model, objective, &mut self.rng, &mean)?;
+        let plan = plan_from_actions(x0, prev_action, model, objective, &mut self.rng, &mean)?;
         self.mean = Some(mean);
         Ok(plan)
     }
@@ -346,35 +336,18 @@ impl DmdMpc {
     }
 }
 
-/// `u = centre + L z` row by row.
-fn add_noise(
-    l: &DMatrix<f64>,
-    centre: &Array2<f64>,
-    z: ArrayView2<'_, f64>,
-    mut u: ArrayViewMut2<'_, f64>,
-) {
-    let a = centre.ncols();
-    for i in 0..centre.nrows() {
-        for j in 0..a {
-            let mut e = 0.0;
-            for k in 0..=j {
-                e += l[(j, k)] * z[(i, k)];
-            }
-            u[(i, j)] = centre[(i, j)] + e;
-        }
-    }
-}
-
 impl Planner for DmdMpc {
-    fn plan(
+    fn plan_with_prev_action(
         &mut self,
         x0: &[f64],
+        prev_action: Option<&[f64]>,
         model: &dyn DynamicsModel,
         objective: &Objective,
     ) -> Result<Plan> {
         let proposal = self.proposal.take();
         let r = self.plan_impl(
             x0,
+            prev_action,
             model,
             objective,
             proposal

@@ -3,15 +3,20 @@
 //! LQR-FLM, PI², PILQR).
 //!
 //! This crate owns
-//! - [`Objective`]: running cost, terminal cost, terminal value (`−V`, p3), derivatives
+//! - [`Objective`]: running cost (optionally time-varying, `c(x, u, t)`), terminal cost, terminal value (`−V`, p3), derivatives
 //!   (analytic or finite differences);
 //! - [`Planner`] and its implementations [`Cem`], [`Mppi`], [`DmdMpc`], all batched over the
 //!   population (one `predict` call per time step), warm-started by shifting, bounded;
-//! - [`Ilqr`] (also a [`Planner`]) on any [`Dynamics`]: a [`PlantDynamics`] (the plant's own
-//!   Jacobians) or a [`ModelDynamics`] (finite differences of a model);
+//! - [`Ilqr`] (also a [`Planner`]) through any [`tandem_models::DynamicsModel`], linearized by
+//!   the model's own `linearize` (a `PlantModel`: the plant's Jacobians, analytic for rigid
+//!   bodies; otherwise finite differences of one batched `predict`); the one model trait every
+//!   planner here takes, so there is no planner-side dynamics trait or adapter;
+//! - planning through models that read the previous action (p1's incremental model): the action
+//!   applied before `x0` is an input of the plan ([`Planner::plan_with_prev_action`]);
 //! - TVLG controllers ([`TvlgController`], sampled with stored noise) and their optimizers
 //!   [`LqrFlm`], [`pi2_update`] and [`Pilqr`] (p4), on dynamics fitted by
-//!   `tandem_models::TvlgFit`.
+//!   `tandem_models::TvlgFit`, with a quadratic cost per time step that the caller may supply
+//!   ([`Pilqr::update_with_cost`]; by default [`quadratize_cost`] of the [`Objective`]).
 //!
 //! Dependencies: `tandem-models` (the models planned through), `tandem-dynamics` (plants),
 //! `ndarray` (populations, horizon x samples x dim), `nalgebra` (gains and small matrices),
@@ -22,7 +27,6 @@
 
 mod cem;
 mod dmd;
-mod dynamics;
 mod error;
 mod ilqr;
 mod lqr_flm;
@@ -35,7 +39,6 @@ mod tvlg;
 
 pub use cem::{Cem, CemConfig};
 pub use dmd::{DmdMpc, DmdMpcConfig, Proposal, ProposalFn, Utility};
-pub use dynamics::{Dynamics, ModelDynamics, PlantDynamics};
 pub use error::{PlanError, Result};
 pub use ilqr::{backward_pass, BackwardPass, Ilqr, IlqrConfig, IlqrSolution};
 pub use lqr_flm::{classic_step_mult, LqrFlm, LqrFlmConfig, LqrFlmStep};

@@ -89,6 +89,11 @@ impl LqrFlm {
     }
 
     /// One KL-constrained update of `prev` with step `kl_step` (the configured one if `None`).
+    ///
+    /// `cost` is a quadratic cost per time step, `T` running terms then the terminal one: the
+    /// objective's expansion around the samples ([`crate::quadratize_cost`]), or one the caller
+    /// builds per step (a time-varying target, MDGPS's surrogate with its KL term to the global
+    /// policy).
     pub fn update(
         &self,
         prev: &TvlgController,

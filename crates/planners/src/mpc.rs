@@ -1,9 +1,16 @@
 //! The [`Planner`] trait, the [`Plan`] it returns, action [`Bounds`], Gaussian [`Noise`], and
-//! the batched rollout every sampling planner shares.
+//! the batched rollout and warm start every sampling planner shares.
 //!
 //! Populations are stored horizon-major, `H x N x A`, so that the actions of all `N` samples at
 //! one time step are one contiguous `N x A` block: a rollout makes exactly one
 //! [`DynamicsModel::predict`] call per time step for the whole population.
+//!
+//! **The previous action.** A model that conditions on the action applied before the current
+//! one (p1's incremental model, [`DynamicsModel::uses_prev_actions`]) needs, at `h = 0`, the
+//! action applied before `x0`: it is an input of the plan,
+//! [`Planner::plan_with_prev_action`], and the rollout gives every sample that action at `h = 0`
+//! and its own previous action after. [`Planner::plan`] is the same call without one (models that
+//! do not read it); planning through a model that needs it without one is an error.
 
 use nalgebra::DMatrix;
 use ndarray::{s, Array1, Array2, Array3, ArrayView2, ArrayViewMut2};
@@ -28,6 +35,9 @@ pub struct Plan {
     pub terminal_cost: f64,
     /// The objective value `Σ γ^h c_h + γ^H c_H` of the plan.
     pub total_cost: f64,
+    /// The action applied before `x0`, when the plan was given one
+    /// ([`Planner::plan_with_prev_action`]).
+    pub prev_action: Option<Vec<f64>>,
 }
 
 impl Plan {
@@ -42,27 +52,25 @@ impl Plan {
     }
 
     /// The planned transitions `(x_h, u_h, r_h = −c_h, x_{h+1})` as a dataset a pipeline can add to
-    /// a replay buffer (p3 Algorithm 1, lines 14–15). Previous states and actions are the plan's
-    /// own (at `h = 0`: the start state and a zero action); nothing is terminal.
+    /// a replay buffer (p3 Algorithm 1, lines 14–15). Previous actions are the plan's own; at
+    /// `h = 0` the action applied before `x0` if the plan had one, else zero (an episode start).
+    /// Nothing is terminal.
     pub fn transitions(&self) -> Transitions {
         let h = self.horizon();
         let a = self.actions.ncols();
         let states = self.states.slice(s![..h, ..]).to_owned();
-        // Row t of the previous-step arrays is row t - 1 of the plan; row 0 keeps the start state
-        // and a zero action.
+        // Row t of the previous actions is row t - 1 of the plan.
         let mut prev = Array2::zeros((h, a));
-        let mut prev_states = states.clone();
+        if let Some(p) = &self.prev_action {
+            prev.row_mut(0).assign(&ndarray::ArrayView1::from(&p[..]));
+        }
         if h > 1 {
             prev.slice_mut(s![1.., ..])
                 .assign(&self.actions.slice(s![..h - 1, ..]));
-            prev_states
-                .slice_mut(s![1.., ..])
-                .assign(&states.slice(s![..h - 1, ..]));
         }
         Transitions {
             states,
             actions: self.actions.clone(),
-            prev_states,
             prev_actions: prev,
             next_states: self.states.slice(s![1.., ..]).to_owned(),
             rewards: self.costs.mapv(|c| -c),
@@ -72,16 +80,29 @@ impl Plan {
 }
 
 /// A receding-horizon planner: plans through any [`DynamicsModel`] (a plant, a learned network,
-/// an ensemble) and keeps its warm start between calls.
+/// an ensemble, an incremental model) and keeps its warm start between calls.
 pub trait Planner {
-    /// Plans from state `x0`; the caller applies [`Plan::first_action`] and calls again at the next
-    /// state. The warm start is the previous plan shifted by one step.
+    /// Plans from state `x0`, given the action applied just before `x0` (`None` at an episode
+    /// start or for models that do not read it; see the module docs). The caller applies
+    /// [`Plan::first_action`] and calls again at the next state with that action as
+    /// `prev_action`. The warm start is the previous plan shifted by one step.
+    fn plan_with_prev_action(
+        &mut self,
+        x0: &[f64],
+        prev_action: Option<&[f64]>,
+        model: &dyn DynamicsModel,
+        objective: &Objective,
+    ) -> Result<Plan>;
+
+    /// [`Planner::plan_with_prev_action`] without a previous action.
     fn plan(
         &mut self,
         x0: &[f64],
         model: &dyn DynamicsModel,
         objective: &Objective,
-    ) -> Result<Plan>;
+    ) -> Result<Plan> {
+        self.plan_with_prev_action(x0, None, model, objective)
+    }
 
     /// Forgets the warm start and restarts the random stream from the configured seed (call at the
     /// start of an episode).
@@ -238,10 +259,11 @@ pub(crate) fn fraction(what: &str, v: f64) -> Result<()> {
     }
 }
 
-/// Checks that the model, the objective and `x0` agree on dimensions and `x0` is finite; returns
-/// `(S, A)`.
+/// Checks that the model, the objective, `x0` and the previous action agree on dimensions and are
+/// finite, and that a model that reads the previous action gets one; returns `(S, A)`.
 pub(crate) fn check_problem(
     x0: &[f64],
+    prev_action: Option<&[f64]>,
     model: &dyn DynamicsModel,
     objective: &Objective,
 ) -> Result<(usize, usize)> {
@@ -258,7 +280,62 @@ pub(crate) fn check_problem(
     )?;
     check_len("initial state", s, x0.len())?;
     check_finite("initial state", x0)?;
+    match prev_action {
+        Some(p) => {
+            check_len("previous action", a, p.len())?;
+            check_finite("previous action", p)?;
+        }
+        None if model.uses_prev_actions() => {
+            return Err(PlanError::Model(tandem_models::ModelError::MissingInput(
+                "the model conditions on the previous action: give the action applied before x0 \
+                 (Planner::plan_with_prev_action)"
+                    .into(),
+            )))
+        }
+        None => {}
+    }
     Ok((s, a))
+}
+
+/// The warm start of a sampling planner: the previous mean (`H x A`) shifted one step earlier
+/// (last action repeated) when it fits the horizon and action width, else the bounds' centre
+/// (zero where unbounded) at every step.
+pub(crate) fn warm_start(
+    previous: Option<Array2<f64>>,
+    h: usize,
+    a: usize,
+    bounds: Option<&Bounds>,
+) -> Array2<f64> {
+    match previous {
+        Some(mut m) if m.dim() == (h, a) => {
+            shift_plan(&mut m);
+            m
+        }
+        _ => {
+            let c = bounds.map_or(vec![0.0; a], |b| b.center());
+            Array2::from_shape_fn((h, a), |(_, j)| c[j])
+        }
+    }
+}
+
+/// `u = centre + L z` row by row (`L` lower triangular): Gaussian perturbations of a batch of
+/// actions.
+pub(crate) fn add_noise(
+    l: &DMatrix<f64>,
+    centre: ArrayView2<'_, f64>,
+    z: ArrayView2<'_, f64>,
+    mut u: ArrayViewMut2<'_, f64>,
+) {
+    let a = centre.ncols();
+    for i in 0..centre.nrows() {
+        for j in 0..a {
+            let mut e = 0.0;
+            for k in 0..=j {
+                e += l[(j, k)] * z[(i, k)];
+            }
+            u[(i, j)] = centre[(i, j)] + e;
+        }
+    }
 }
 
 /// Fills `out` with standard normal draws.
@@ -398,7 +475,7 @@ pub(crate) fn correlation(v: f64) -> Result<()> {
 }
 
 /// Shifts a `H x A` plan one step earlier, repeating the last action.
-pub(crate) fn shift_plan(mean: &mut Array2<f64>) {
+fn shift_plan(mean: &mut Array2<f64>) {
     let h = mean.nrows();
     for t in 0..h.saturating_sub(1) {
         let next = mean.row(t + 1).to_owned();
@@ -406,15 +483,34 @@ pub(crate) fn shift_plan(mean: &mut Array2<f64>) {
     }
 }
 
+/// `model.predict(input)`, with the next states checked to be `B x S` like the input.
+pub(crate) fn predict(
+    model: &dyn DynamicsModel,
+    input: &ModelInput<'_>,
+    rng: &mut Rng,
+) -> Result<tandem_models::Prediction> {
+    let pred = model.predict(input, rng)?;
+    let (b, s) = input.states.dim();
+    check_len("predicted next states (rows)", b, pred.next_states.nrows())?;
+    check_len(
+        "predicted next states (columns)",
+        s,
+        pred.next_states.ncols(),
+    )?;
+    Ok(pred)
+}
+
 /// Rolls a population out through `model`, one `predict` per step, and returns each sample's
 /// objective value `Σ γ^h c(x_h, u_h) + γ^H c_H(x_H)`.
 ///
-/// `actions` is `H x N x A`. Before step `h` the callback `act(h, states, actions_h)` may write
+/// `actions` is `H x N x A`; `prev_action` is the action applied before `x0` (every sample's
+/// previous action at `h = 0`). Before step `h` the callback `act(h, states, actions_h)` may write
 /// the actions of that step from the current states (a policy proposal); pass a no-op for
 /// open-loop sequences. `states_out`, when given (`(H+1) x N x S`), records the states.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn rollout_population(
     x0: &[f64],
+    prev_action: Option<&[f64]>,
     model: &dyn DynamicsModel,
     objective: &Objective,
     rng: &mut Rng,
@@ -434,6 +530,7 @@ pub(crate) fn rollout_population(
     let gamma = objective.discount();
     let mut disc = 1.0;
     let mut running_out = running_out;
+    let prev0 = prev_action.map(|p| Array2::from_shape_fn((n, a_dim), |(_, j)| p[j]));
     if let Some(so) = states_out.as_deref_mut() {
         so.slice_mut(s![0, .., ..]).assign(&states);
     }
@@ -444,14 +541,10 @@ pub(crate) fn rollout_population(
         let mut input = ModelInput::new(states.view(), u);
         if h > 0 {
             input = input.with_prev_actions(actions.slice(s![h - 1, .., ..]));
+        } else if let Some(p) = &prev0 {
+            input = input.with_prev_actions(p.view());
         }
-        let pred = model.predict(&input, rng)?;
-        check_len("predicted next states (rows)", n, pred.next_states.nrows())?;
-        check_len(
-            "predicted next states (columns)",
-            s_dim,
-            pred.next_states.ncols(),
-        )?;
+        let pred = predict(model, &input, rng)?;
         if objective.uses_model_reward() {
             let r = pred.rewards.as_ref().ok_or_else(|| {
                 PlanError::Config(
@@ -491,13 +584,13 @@ pub(crate) fn rollout_population(
             *t += disc * c;
         }
     }
-    let _ = a_dim;
     Ok((total, term))
 }
 
 /// Rolls out one action sequence (`H x A`) and packages it as a [`Plan`].
 pub(crate) fn plan_from_actions(
     x0: &[f64],
+    prev_action: Option<&[f64]>,
     model: &dyn DynamicsModel,
     objective: &Objective,
     rng: &mut Rng,
@@ -512,6 +605,7 @@ pub(crate) fn plan_from_actions(
     let mut running = Array2::zeros((h, 1));
     let (total, term) = rollout_population(
         x0,
+        prev_action,
         model,
         objective,
         rng,
@@ -526,6 +620,7 @@ pub(crate) fn plan_from_actions(
         costs: running.column(0).to_owned(),
         terminal_cost: term[0],
         total_cost: total[0],
+        prev_action: prev_action.map(<[f64]>::to_vec),
     })
 }
 

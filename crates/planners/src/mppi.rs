@@ -17,8 +17,8 @@ use tandem_models::DynamicsModel;
 
 use crate::error::Result;
 use crate::mpc::{
-    check_problem, clamp_opt, nonzero, plan_from_actions, positive, rollout_population, shift_plan,
-    Bounds, Knots, Noise, Plan, Planner,
+    add_noise, check_problem, clamp_opt, nonzero, plan_from_actions, positive, rollout_population,
+    warm_start, Bounds, Knots, Noise, Plan, Planner,
 };
 use crate::objective::Objective;
 
@@ -172,13 +172,14 @@ impl Mppi {
 }
 
 impl Planner for Mppi {
-    fn plan(
+    fn plan_with_prev_action(
         &mut self,
         x0: &[f64],
+        prev_action: Option<&[f64]>,
         model: &dyn DynamicsModel,
         objective: &Objective,
     ) -> Result<Plan> {
-        let (_, a) = check_problem(x0, model, objective)?;
+        let (_, a) = check_problem(x0, prev_action, model, objective)?;
         if let Some(b) = &self.cfg.bounds {
             b.validate(a)?;
         }
@@ -187,20 +188,7 @@ impl Planner for Mppi {
             .try_inverse()
             .ok_or_else(|| crate::PlanError::Config("noise covariance is singular".into()))?;
         let (h, n, lam) = (self.cfg.horizon, self.cfg.samples, self.cfg.lambda);
-        let mut mean = match self.mean.take() {
-            Some(mut m) if m.dim() == (h, a) => {
-                shift_plan(&mut m);
-                m
-            }
-            _ => {
-                let c = self
-                    .cfg
-                    .bounds
-                    .as_ref()
-                    .map_or(vec![0.0; a], |b| b.center());
-                Array2::from_shape_fn((h, a), |(_, j)| c[j])
-            }
-        };
+        let mut mean = warm_start(self.mean.take(), h, a, self.cfg.bounds.as_ref());
         let mut z = Array3::zeros((h, n, a));
         let mut acts = Array3::zeros((h, n, a));
         for _ in 0..self.cfg.iterations {
@@ -210,22 +198,21 @@ impl Planner for Mppi {
                 self.cfg.correlation,
                 &self.cfg.knots,
             );
+            // Sample 0 carries no noise: it is the mean itself.
+            z.slice_mut(s![.., 0, ..]).fill(0.0);
             for t in 0..h {
-                for i in 0..n {
-                    for j in 0..a {
-                        let mut e = 0.0;
-                        if i > 0 {
-                            for k in 0..=j {
-                                e += l[(j, k)] * z[(t, i, k)];
-                            }
-                        }
-                        acts[(t, i, j)] = mean[(t, j)] + e;
-                    }
-                }
+                let centre = mean.slice(s![t..t + 1, ..]);
+                add_noise(
+                    &l,
+                    centre.broadcast((n, a)).expect("one row broadcasts"),
+                    z.slice(s![t, .., ..]),
+                    acts.slice_mut(s![t, .., ..]),
+                );
                 clamp_opt(&self.cfg.bounds, acts.slice_mut(s![t, .., ..]));
             }
             let (mut costs, _) = rollout_population(
                 x0,
+                prev_action,
                 model,
                 objective,
                 &mut self.rng,
@@ -266,7 +253,7 @@ impl Planner for Mppi {
             mean = new_mean;
         }
         clamp_opt(&self.cfg.bounds, mean.view_mut());
-        let plan = plan_from_actions(x0, model, objective, &mut self.rng, &mean)?;
+        let plan = plan_from_actions(x0, prev_action, model, objective, &mut self.rng, &mean)?;
         self.mean = Some(mean);
         Ok(plan)
     }

@@ -6,6 +6,11 @@
 //! evaluated in batches (one row per sample of a population); a NaN or infinite cost is an error
 //! naming the sample and the time step.
 //!
+//! The running cost may vary with time, `c(x_h, u_h, h)` ([`Objective::time_varying`]): a
+//! tracking target that moves, a surrogate that differs at every step. The index `h` counts
+//! steps from the start of the plan or trajectory (`h = 0` at `x_0`); a receding-horizon caller
+//! whose cost depends on absolute time builds the objective for the current time at each call.
+//!
 //! Derivatives for iLQR and LQR-FLM: analytic when given
 //! ([`Objective::with_running_derivatives`], [`Objective::with_terminal_derivatives`]), central
 //! finite differences otherwise (the numerical twin is also the test oracle of the analytic
@@ -16,14 +21,14 @@ use ndarray::{Array1, Array2, ArrayView2};
 
 use crate::error::{check_finite, check_len, PlanError, Result};
 
-/// Running cost `c(x, u)`.
-pub type CostFn = Box<dyn Fn(&[f64], &[f64]) -> f64 + Send + Sync>;
+/// Running cost `c(x, u, t)` at time step `t`.
+pub type CostFn = Box<dyn Fn(&[f64], &[f64], usize) -> f64 + Send + Sync>;
 /// Terminal cost `c_H(x)`.
 pub type TerminalFn = Box<dyn Fn(&[f64]) -> f64 + Send + Sync>;
 /// Terminal value over a batch of states (`B x S` in, `B` values out), e.g. a critic `V(x)`.
 pub type ValueFn = Box<dyn Fn(ArrayView2<'_, f64>) -> Array1<f64> + Send + Sync>;
-/// Analytic second-order expansion of the running cost at `(x, u)`.
-pub type RunningDerivFn = Box<dyn Fn(&[f64], &[f64]) -> QuadCost + Send + Sync>;
+/// Analytic second-order expansion of the running cost at `(x, u)` and time step `t`.
+pub type RunningDerivFn = Box<dyn Fn(&[f64], &[f64], usize) -> QuadCost + Send + Sync>;
 /// Analytic second-order expansion of the terminal cost at `x`.
 pub type TerminalDerivFn = Box<dyn Fn(&[f64]) -> QuadTerminal + Send + Sync>;
 
@@ -62,7 +67,10 @@ pub struct QuadTerminal {
 /// use tandem_planners::Objective;
 /// // Reward of the p0 pendulum, turned into a cost.
 /// let obj = Objective::from_reward(2, 1, |x, u| -5.0 * x[0] * x[0] - 0.1 * x[1] * x[1] - 0.01 * u[0] * u[0]);
-/// assert_eq!(obj.running_cost(&[1.0, 0.0], &[0.0]).unwrap(), 5.0);
+/// assert_eq!(obj.running_cost(&[1.0, 0.0], &[0.0], 0).unwrap(), 5.0);
+/// // A target that moves with the time step t.
+/// let track = Objective::time_varying(1, 1, |x, _u, t| (x[0] - 0.1 * t as f64).powi(2));
+/// assert_eq!(track.running_cost(&[1.0], &[0.0], 10).unwrap(), 0.0);
 /// ```
 pub struct Objective {
     state_dim: usize,
@@ -98,12 +106,22 @@ impl std::fmt::Debug for Objective {
 }
 
 impl Objective {
-    /// An objective with running cost `c(x, u)` for states of length `state_dim` and actions of
-    /// length `action_dim`.
+    /// An objective with running cost `c(x, u)` (the same at every step) for states of length
+    /// `state_dim` and actions of length `action_dim`.
     pub fn new(
         state_dim: usize,
         action_dim: usize,
         running: impl Fn(&[f64], &[f64]) -> f64 + Send + Sync + 'static,
+    ) -> Self {
+        Self::time_varying(state_dim, action_dim, move |x, u, _| running(x, u))
+    }
+
+    /// An objective whose running cost `c(x, u, t)` depends on the time step `t` (counted from
+    /// the start of the plan; see the module docs).
+    pub fn time_varying(
+        state_dim: usize,
+        action_dim: usize,
+        running: impl Fn(&[f64], &[f64], usize) -> f64 + Send + Sync + 'static,
     ) -> Self {
         Self {
             state_dim,
@@ -146,10 +164,11 @@ impl Objective {
         self
     }
 
-    /// Gives the analytic expansion of the running cost (otherwise finite differences).
+    /// Gives the analytic expansion of the running cost at `(x, u, t)` (otherwise finite
+    /// differences).
     pub fn with_running_derivatives(
         mut self,
-        d: impl Fn(&[f64], &[f64]) -> QuadCost + Send + Sync + 'static,
+        d: impl Fn(&[f64], &[f64], usize) -> QuadCost + Send + Sync + 'static,
     ) -> Self {
         self.running_derivs = Some(Box::new(d));
         self
@@ -209,16 +228,16 @@ impl Objective {
         self.terminal.is_some() || self.value.is_some()
     }
 
-    /// Running cost at one `(x, u)`; non-finite is an error.
-    pub fn running_cost(&self, x: &[f64], u: &[f64]) -> Result<f64> {
+    /// Running cost at one `(x, u)` at time step `t`; non-finite is an error.
+    pub fn running_cost(&self, x: &[f64], u: &[f64], t: usize) -> Result<f64> {
         check_len("objective state", self.state_dim, x.len())?;
         check_len("objective action", self.action_dim, u.len())?;
-        let c = (self.running)(x, u);
-        finite_cost("running cost", 0, 0, c)
+        let c = (self.running)(x, u, t);
+        finite_cost("running cost", 0, t, c)
     }
 
-    /// Running costs of a batch (`B x S` states, `B x A` actions) into `out` (length `B`); `step`
-    /// only labels errors.
+    /// Running costs of a batch (`B x S` states, `B x A` actions) at time step `step` into `out`
+    /// (length `B`).
     pub fn running_batch(
         &self,
         states: ArrayView2<'_, f64>,
@@ -239,7 +258,7 @@ impl Objective {
         for (i, o) in out.iter_mut().enumerate() {
             let x = row_slice(states, i, &mut xb);
             let u = row_slice(actions, i, &mut ub);
-            *o = finite_cost("running cost", i, step, (self.running)(x, u))?;
+            *o = finite_cost("running cost", i, step, (self.running)(x, u, step))?;
         }
         Ok(())
     }
@@ -279,21 +298,21 @@ impl Objective {
         Ok(out[0])
     }
 
-    /// Second-order expansion of the running cost at `(x, u)`: analytic when given, otherwise
-    /// central finite differences (step `1e-4·max(1, |z_i|)`, about 1e-7 accurate for smooth
-    /// costs).
-    pub fn running_quadratic(&self, x: &[f64], u: &[f64]) -> Result<QuadCost> {
+    /// Second-order expansion of the running cost at `(x, u)` and time step `t`: analytic when
+    /// given, otherwise central finite differences (step `1e-4·max(1, |z_i|)`, about 1e-7
+    /// accurate for smooth costs).
+    pub fn running_quadratic(&self, x: &[f64], u: &[f64], t: usize) -> Result<QuadCost> {
         check_len("objective state", self.state_dim, x.len())?;
         check_len("objective action", self.action_dim, u.len())?;
         let (n, m) = (self.state_dim, self.action_dim);
         if let Some(d) = &self.running_derivs {
-            let q = d(x, u);
+            let q = d(x, u, t);
             check_len("analytic cx", n, q.cx.len())?;
             check_len("analytic cu", m, q.cu.len())?;
             check_len("analytic cxx", n * n, q.cxx.len())?;
             check_len("analytic cuu", m * m, q.cuu.len())?;
             check_len("analytic cux", m * n, q.cux.len())?;
-            finite_cost("running cost", 0, 0, q.c)?;
+            finite_cost("running cost", 0, t, q.c)?;
             for (what, s) in [
                 ("cost gradient cx", q.cx.as_slice()),
                 ("cost gradient cu", q.cu.as_slice()),
@@ -310,7 +329,7 @@ impl Objective {
             let mut out = vec![0.0; pts.nrows()];
             let xs = pts.slice(ndarray::s![.., ..n]);
             let us = pts.slice(ndarray::s![.., n..]);
-            self.running_batch(xs, us, 0, &mut out)?;
+            self.running_batch(xs, us, t, &mut out)?;
             Ok(out)
         })?;
         Ok(QuadCost {
@@ -440,7 +459,7 @@ mod tests {
     fn finite_difference_expansion_matches_hand_derivatives() {
         let obj = nonquadratic();
         let (x, u) = ([0.3, -0.7], [0.4]);
-        let q = obj.running_quadratic(&x, &u).unwrap();
+        let q = obj.running_quadratic(&x, &u, 0).unwrap();
         let (x0, x1, u0) = (x[0], x[1], u[0]);
         // Hand-derived derivatives of the running cost.
         let cx = [x0.cos() * x1 - u0 * (x0 * u0).sin(), x0.sin() + x1 * u0];
@@ -468,6 +487,45 @@ mod tests {
         assert_relative_eq!(t.cxx[(0, 0)], 2.0 * e, epsilon = 1e-6);
         assert_relative_eq!(t.cxx[(0, 1)], 2.0 * x0 * e, epsilon = 1e-6);
         assert_relative_eq!(t.cxx[(1, 1)], x0 * x0 * e, epsilon = 1e-6);
+    }
+
+    #[test]
+    fn time_varying_cost_sees_the_step_in_batches_and_expansions() {
+        // c = (x − t)² u: cx = 2 (x − t) u, cu = (x − t)², cxx = 2u, cuu = 0, cux = 2 (x − t).
+        let obj = Objective::time_varying(1, 1, |x, u, t| (x[0] - t as f64).powi(2) * u[0]);
+        let s = array![[1.0], [4.0]];
+        let a = array![[2.0], [0.5]];
+        let mut out = [0.0; 2];
+        obj.running_batch(s.view(), a.view(), 3, &mut out).unwrap();
+        assert_eq!(out, [8.0, 0.5]);
+        assert_eq!(obj.running_cost(&[1.0], &[2.0], 0).unwrap(), 2.0);
+        let q = obj.running_quadratic(&[1.0], &[2.0], 3).unwrap();
+        assert_relative_eq!(q.c, 8.0, epsilon = 1e-12);
+        assert_relative_eq!(q.cx[0], -8.0, epsilon = 1e-7);
+        assert_relative_eq!(q.cu[0], 4.0, epsilon = 1e-7);
+        assert_relative_eq!(q.cxx[(0, 0)], 4.0, epsilon = 1e-5);
+        assert_relative_eq!(q.cuu[(0, 0)], 0.0, epsilon = 1e-5);
+        assert_relative_eq!(q.cux[(0, 0)], -4.0, epsilon = 1e-5);
+        // Analytic derivatives get the step too.
+        let analytic = Objective::time_varying(1, 1, |x, _, t| x[0] * t as f64)
+            .with_running_derivatives(|_, _, t| QuadCost {
+                c: 0.0,
+                cx: DVector::from_element(1, t as f64),
+                cu: DVector::zeros(1),
+                cxx: DMatrix::zeros(1, 1),
+                cuu: DMatrix::zeros(1, 1),
+                cux: DMatrix::zeros(1, 1),
+            });
+        assert_eq!(
+            analytic.running_quadratic(&[0.0], &[0.0], 5).unwrap().cx[0],
+            5.0
+        );
+        // A non-finite cost names its step.
+        let nan = Objective::time_varying(1, 1, |_, _, t| if t == 4 { f64::NAN } else { 0.0 });
+        assert!(matches!(
+            nan.running_cost(&[0.0], &[0.0], 4),
+            Err(PlanError::NonFiniteCost { step: 4, .. })
+        ));
     }
 
     #[test]
@@ -502,7 +560,7 @@ mod tests {
             }
         ));
         assert!(matches!(
-            obj.running_cost(&[0.0, 1.0], &[0.0]),
+            obj.running_cost(&[0.0, 1.0], &[0.0], 0),
             Err(PlanError::Dim { .. })
         ));
         assert!(Objective::new(1, 1, |_, _| 0.0).with_discount(1.5).is_err());

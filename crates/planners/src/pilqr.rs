@@ -146,7 +146,9 @@ impl Pilqr {
         self.step_mult.clear();
     }
 
-    /// One update of `prev` from its `samples` and the dynamics fitted to them.
+    /// One update of `prev` from its `samples` and the dynamics fitted to them, on the quadratic
+    /// expansion of `objective` around the samples' mean ([`quadratize_cost`]): the default cost
+    /// of [`Pilqr::update_with_cost`].
     pub fn update(
         &mut self,
         prev: &TvlgController,
@@ -155,8 +157,29 @@ impl Pilqr {
         objective: &Objective,
     ) -> Result<PilqrStep> {
         let cost = quadratize_cost(objective, samples)?;
+        self.update_with_cost(prev, samples, dynamics, &cost)
+    }
+
+    /// One update on a quadratic cost per time step supplied by the caller: `T` running costs
+    /// then the terminal one (`T + 1` entries), e.g. MDGPS's surrogate, the task cost plus a KL
+    /// term to the linearized global policy, different at every step. The samples' own costs
+    /// (`samples.costs`, whose costs-to-go PI² weighs and the residuals compare against) must be
+    /// of the same cost: a caller that adds a term to the quadratic cost adds it to the samples
+    /// too ([`TrajectorySamples::add_quadratic_costs`]).
+    pub fn update_with_cost(
+        &mut self,
+        prev: &TvlgController,
+        samples: &TrajectorySamples,
+        dynamics: &TvlgDynamics,
+        cost: &[QuadraticCost],
+    ) -> Result<PilqrStep> {
+        crate::error::check_len(
+            "cost terms (T running + terminal)",
+            prev.horizon() + 1,
+            cost.len(),
+        )?;
         let s = samples.cost_to_go();
-        let resid = &s - &model_cost_to_go(prev, samples, dynamics, &cost);
+        let resid = &s - &model_cost_to_go(prev, samples, dynamics, cost);
         let t_len = s.ncols();
         let ratio: Vec<f64> = (0..t_len)
             .map(|t| {
@@ -186,7 +209,7 @@ impl Pilqr {
             .iter()
             .map(|m| self.cfg.lqr.kl_step * m)
             .collect();
-        let lqr = self.lqr.update_per_step(prev, dynamics, &cost, &eps)?;
+        let lqr = self.lqr.update_per_step(prev, dynamics, cost, &eps)?;
         let u_hat = reparametrize(&lqr.controller, samples);
         let etas: Vec<f64> = (0..t_len)
             .map(|t| pi2_weights(&s.column(t).to_vec(), self.cfg.pi2.kl_step).1)

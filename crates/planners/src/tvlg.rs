@@ -6,9 +6,8 @@
 use nalgebra::{DMatrix, DVector};
 use ndarray::{s, Array2, Array3};
 use tandem_core::Rng;
-use tandem_models::TvlgDynamics;
+use tandem_models::{DynamicsModel, ModelInput, TvlgDynamics};
 
-use crate::dynamics::Dynamics;
 use crate::error::{check_len, PlanError, Result};
 use crate::mpc::fill_normal;
 use crate::objective::{Objective, QuadCost};
@@ -154,6 +153,45 @@ impl TrajectorySamples {
         }
         s
     }
+    /// Adds per-step quadratic terms to the stored costs: `costs[i, t] += extra[t](x_{i,t}, u_{i,t})`
+    /// for `t < T` and `extra[T](x_{i,T})` to the terminal column (`T + 1` terms), e.g. the KL
+    /// surrogate MDGPS adds to the task cost before a [`crate::Pilqr::update_with_cost`] on the
+    /// same sum.
+    pub fn add_quadratic_costs(&mut self, extra: &[QuadraticCost]) -> Result<()> {
+        let (ns, t1) = self.costs.dim();
+        check_len("cost terms (T running + terminal)", t1, extra.len())?;
+        let (n, m) = (self.states.shape()[2], self.actions.shape()[2]);
+        for (t, q) in extra.iter().enumerate() {
+            let width = if t + 1 < t1 { n + m } else { n };
+            check_len("quadratic cost size", width * width, q.hess.len())?;
+            check_len("quadratic cost gradient", width, q.grad.len())?;
+            for i in 0..ns {
+                let mut z = DVector::zeros(width);
+                z.rows_mut(0, n)
+                    .iter_mut()
+                    .zip(self.states.slice(s![i, t, ..]))
+                    .for_each(|(d, v)| *d = *v);
+                if width > n {
+                    z.rows_mut(n, m)
+                        .iter_mut()
+                        .zip(self.actions.slice(s![i, t, ..]))
+                        .for_each(|(d, v)| *d = *v);
+                }
+                let c = q.eval(&z);
+                if !c.is_finite() {
+                    return Err(PlanError::NonFiniteCost {
+                        what: "added quadratic cost",
+                        sample: i,
+                        step: t,
+                        value: c,
+                    });
+                }
+                self.costs[(i, t)] += c;
+            }
+        }
+        Ok(())
+    }
+
     /// Mean total cost over the trajectories.
     pub fn mean_cost(&self) -> f64 {
         self.costs.sum() / self.len() as f64
@@ -182,11 +220,13 @@ impl Default for SampleConfig {
     }
 }
 
-/// Runs `controller` on `system` from `x0` (`N` trajectories batched, one step call per time step),
-/// storing the noise of every action.
+/// Runs `controller` on `system` from `x0` (`N` trajectories batched, one `predict` call per time
+/// step), storing the noise of every action. `rng` draws the noise and drives a stochastic
+/// system. A model that reads the previous action ([`DynamicsModel::uses_prev_actions`]) is
+/// refused: no action precedes `x0` here.
 pub fn sample_trajectories(
     controller: &TvlgController,
-    system: &dyn Dynamics,
+    system: &dyn DynamicsModel,
     objective: &Objective,
     x0: &[f64],
     cfg: &SampleConfig,
@@ -209,6 +249,13 @@ pub fn sample_trajectories(
     )?;
     check_len("initial state", n, x0.len())?;
     crate::mpc::nonzero("samples", cfg.samples)?;
+    if system.uses_prev_actions() {
+        return Err(PlanError::Config(
+            "sampling TVLG controllers through a model that reads the previous action is not \
+             supported (no action precedes x0)"
+                .into(),
+        ));
+    }
     let ns = cfg.samples;
     let mut noise = Array3::zeros((ns, t_len, m));
     fill_normal(rng, noise.as_slice_mut().expect("standard layout"));
@@ -243,7 +290,13 @@ pub fn sample_trajectories(
             .iter_mut()
             .zip(&c)
             .for_each(|(o, v)| *o = *v);
-        cur = system.step_batch(cur.view(), act.view())?;
+        if cur.iter().chain(act.iter()).any(|v| !v.is_finite()) {
+            return Err(PlanError::NonFinite(format!(
+                "states or actions of the samples at step {t}"
+            )));
+        }
+        cur =
+            crate::mpc::predict(system, &ModelInput::new(cur.view(), act.view()), rng)?.next_states;
         if cfg.process_std > 0.0 {
             fill_normal(rng, &mut z);
             cur.iter_mut()
@@ -302,7 +355,7 @@ pub fn quadratize_cost(
         let x = DVector::from_iterator(xbar.ncols(), xbar.row(t).iter().copied());
         if t < t_len {
             let u = DVector::from_iterator(ubar.ncols(), ubar.row(t).iter().copied());
-            let q = objective.running_quadratic(x.as_slice(), u.as_slice())?;
+            let q = objective.running_quadratic(x.as_slice(), u.as_slice(), t)?;
             out.push(absolute(&q, &x, &u));
         } else {
             let q = objective.terminal_quadratic(x.as_slice())?;

@@ -4,20 +4,18 @@
 
 mod common;
 
-use common::{quadratic_objective, riccati, LinearModel, PendulumModel};
+use common::{lq_weights, quadratic_objective, riccati, LinearModel, PendulumModel};
 use nalgebra::{DMatrix, DVector};
 use ndarray::Array2;
-use tandem_planners::{
-    Bounds, Dynamics, Ilqr, IlqrConfig, ModelDynamics, Objective, PlanError, Planner,
-};
+use tandem_core::seeding::rng_from_seed;
+use tandem_models::{DynamicsModel, ModelInput};
+use tandem_planners::{Bounds, Ilqr, IlqrConfig, Objective, PlanError, Planner};
 
 const T: usize = 20;
 
 fn problem() -> (LinearModel, Objective, DMatrix<f64>, Vec<DMatrix<f64>>) {
     let m = LinearModel::double_integrator();
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let qf = &q * 10.0;
+    let (q, r, qf) = lq_weights();
     let obj = quadratic_objective(&q, &r, &qf);
     let (p, k) = riccati(&m.a, &m.b, &q, &r, &qf, T);
     (m, obj, p[0].clone(), k)
@@ -29,9 +27,8 @@ fn linear_quadratic_is_solved_exactly_with_riccati_gains() {
     let x0 = DVector::from_vec(vec![1.0, -0.5]);
     let jstar = (x0.transpose() * &p0 * &x0)[0];
     let ilqr = Ilqr::new(IlqrConfig::default()).unwrap();
-    let dynamics = ModelDynamics::new(&m, 0);
     let sol = ilqr
-        .solve(&dynamics, &obj, x0.as_slice(), &Array2::zeros((T, 1)))
+        .solve(&m, &obj, x0.as_slice(), None, &Array2::zeros((T, 1)))
         .unwrap();
     assert!(
         (sol.cost - jstar).abs() < 1e-6 * jstar,
@@ -61,12 +58,19 @@ fn finite_difference_jacobians_of_a_model() {
         a: DMatrix::from_row_slice(2, 2, &[0.9, 0.2, -0.1, 1.1]),
         b: DMatrix::from_row_slice(2, 2, &[0.5, 0.0, 0.3, -2.0]),
     };
-    let d = ModelDynamics::new(&m, 0);
     let xs = Array2::from_shape_vec((2, 2), vec![1.0, 2.0, -30.0, 0.1]).unwrap();
     let us = Array2::from_shape_vec((2, 2), vec![0.0, 5.0, 1.0, 1.0]).unwrap();
-    for (a, b) in d.jacobians(xs.view(), us.view()).unwrap() {
-        assert!((a - &m.a).abs().max() < 1e-7);
-        assert!((b - &m.b).abs().max() < 1e-7);
+    let lin = m
+        .linearize(
+            &ModelInput::new(xs.view(), us.view()),
+            &mut rng_from_seed(0),
+        )
+        .unwrap();
+    assert_eq!(lin.len(), 2);
+    for l in lin {
+        assert!((l.a - &m.a).abs().max() < 1e-7);
+        assert!((l.b - &m.b).abs().max() < 1e-7);
+        assert!(l.b_prev.is_none());
     }
 }
 
@@ -74,10 +78,9 @@ fn finite_difference_jacobians_of_a_model() {
 fn bounds_hold_and_beat_clamping_the_unbounded_solution() {
     let (m, obj, _, _) = problem();
     let x0 = [3.0, 0.0];
-    let d = ModelDynamics::new(&m, 0);
     let free = Ilqr::new(IlqrConfig::default())
         .unwrap()
-        .solve(&d, &obj, &x0, &Array2::zeros((T, 1)))
+        .solve(&m, &obj, &x0, None, &Array2::zeros((T, 1)))
         .unwrap();
     let b = Bounds::symmetric(1, 2.0);
     let bounded = Ilqr::new(IlqrConfig {
@@ -85,7 +88,7 @@ fn bounds_hold_and_beat_clamping_the_unbounded_solution() {
         ..Default::default()
     })
     .unwrap()
-    .solve(&d, &obj, &x0, &Array2::zeros((T, 1)))
+    .solve(&m, &obj, &x0, None, &Array2::zeros((T, 1)))
     .unwrap();
     assert!(
         free.actions.iter().any(|u| u.abs() > 2.5),
@@ -99,7 +102,7 @@ fn bounds_hold_and_beat_clamping_the_unbounded_solution() {
     let mut c = 0.0;
     for t in 0..T {
         let u = clamped[(t, 0)];
-        c += obj.running_cost(x.as_slice(), &[u]).unwrap();
+        c += obj.running_cost(x.as_slice(), &[u], t).unwrap();
         x = m.step(&x, &DVector::from_vec(vec![u]));
     }
     c += obj.terminal_cost(x.as_slice()).unwrap();
@@ -187,22 +190,92 @@ fn seeds_and_errors() {
         Err(PlanError::Config(_))
     ));
     let ilqr = Ilqr::new(IlqrConfig::default()).unwrap();
-    let d = ModelDynamics::new(&m, 0);
     assert!(matches!(
-        ilqr.solve(&d, &obj, &[1.0], &Array2::zeros((5, 1))),
+        ilqr.solve(&m, &obj, &[1.0], None, &Array2::zeros((5, 1))),
         Err(PlanError::Dim { .. })
     ));
     assert!(matches!(
-        ilqr.solve(&d, &obj, &[1.0, 0.0], &Array2::zeros((5, 2))),
+        ilqr.solve(&m, &obj, &[1.0, 0.0], None, &Array2::zeros((5, 2))),
         Err(PlanError::Dim { .. })
     ));
     assert!(matches!(
-        ilqr.solve(&d, &obj, &[1.0, 0.0], &Array2::zeros((0, 1))),
+        ilqr.solve(&m, &obj, &[1.0, 0.0], None, &Array2::zeros((0, 1))),
         Err(PlanError::Config(_))
     ));
     let nan = Objective::new(2, 1, |x, _| if x[0] < 0.99 { f64::NAN } else { 0.0 });
     assert!(matches!(
-        ilqr.solve(&d, &nan, &[1.0, 0.0], &Array2::from_elem((5, 1), -1.0)),
+        ilqr.solve(
+            &m,
+            &nan,
+            &[1.0, 0.0],
+            None,
+            &Array2::from_elem((5, 1), -1.0)
+        ),
         Err(PlanError::NonFiniteCost { .. })
     ));
+}
+
+/// A time-varying cost: track `r_t = (sin 0.3t, 0)` with `(x − r_t)ᵀ Q (x − r_t) + uᵀ R u` on the
+/// double integrator, terminal `(x − r_T)ᵀ Q_f (x − r_T)`. iLQR (exact on linear-quadratic
+/// problems) must give the actions of the hand-rolled affine Riccati recursion:
+/// `V_t(x) = xᵀ P_t x − 2 s_tᵀ x + const`, `u_t = −K_t x + k_t`,
+/// `K_t = (R + BᵀP B)⁻¹ BᵀP A`, `k_t = (R + BᵀP B)⁻¹ Bᵀ s`,
+/// `P_t = Q + AᵀP A − AᵀP B K_t`, `s_t = Q r_t + (A − B K_t)ᵀ s` (with `P, s` of step `t + 1`).
+#[test]
+fn time_varying_tracking_cost_matches_the_affine_riccati_recursion() {
+    let m = LinearModel::double_integrator();
+    let (q, r, qf) = lq_weights();
+    let target = |t: usize| DVector::from_vec(vec![(0.3 * t as f64).sin(), 0.0]);
+    let (q2, r2, qf2) = (q.clone(), r.clone(), qf.clone());
+    let obj = Objective::time_varying(2, 1, move |x, u, t| {
+        let e = DVector::from_column_slice(x) - target(t);
+        (e.transpose() * &q2 * &e)[0] + r2[(0, 0)] * u[0] * u[0]
+    })
+    .with_terminal(move |x| {
+        let e = DVector::from_column_slice(x) - target(T);
+        (e.transpose() * &qf2 * &e)[0]
+    });
+    // Hand-rolled backward recursion.
+    let (a, b) = (&m.a, &m.b);
+    let mut p = qf.clone();
+    let mut s = &qf * target(T);
+    let mut gains = vec![(DMatrix::zeros(1, 2), DVector::zeros(1)); T];
+    for t in (0..T).rev() {
+        let h = (&r + b.transpose() * &p * b).try_inverse().unwrap();
+        let k = &h * b.transpose() * &p * a;
+        let kff = &h * b.transpose() * &s;
+        let p_next = &q + a.transpose() * &p * a - a.transpose() * &p * b * &k;
+        s = &q * target(t) + (a - b * &k).transpose() * &s;
+        p = p_next;
+        gains[t] = (k, kff);
+    }
+    let x0 = [0.5, 0.0];
+    let sol = Ilqr::new(IlqrConfig::default())
+        .unwrap()
+        .solve(&m, &obj, &x0, None, &Array2::zeros((T, 1)))
+        .unwrap();
+    let mut x = DVector::from_row_slice(&x0);
+    let mut moved = 0.0f64;
+    for t in 0..T {
+        let u = -(&gains[t].0 * &x)[0] + gains[t].1[0];
+        assert!(
+            (sol.actions[(t, 0)] - u).abs() < 1e-5 * (1.0 + u.abs()),
+            "step {t}: {} vs {u}",
+            sol.actions[(t, 0)]
+        );
+        moved = moved.max(gains[t].1[0].abs());
+        x = m.step(&x, &DVector::from_vec(vec![u]));
+    }
+    // The feedforward terms matter: the target moves.
+    assert!(moved > 1.0, "{moved}");
+    // The same cost with the target frozen at r_0 gives another plan.
+    let frozen = Objective::time_varying(2, 1, move |x, u, _| {
+        let e = DVector::from_column_slice(x) - target(0);
+        (e.transpose() * &q * &e)[0] + r[(0, 0)] * u[0] * u[0]
+    });
+    let other = Ilqr::new(IlqrConfig::default())
+        .unwrap()
+        .solve(&m, &frozen, &x0, None, &Array2::zeros((T, 1)))
+        .unwrap();
+    assert!((other.actions[(3, 0)] - sol.actions[(3, 0)]).abs() > 1e-2);
 }

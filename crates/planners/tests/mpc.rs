@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{quadratic_objective, riccati, LinearModel, PendulumModel};
+use common::{lq_weights, quadratic_objective, riccati, LinearModel, PendulumModel};
 use nalgebra::{DMatrix, DVector};
 use ndarray::{Array1, Array2};
 use tandem_models::DynamicsModel;
@@ -18,9 +18,7 @@ const H: usize = 15;
 
 fn lqr_problem() -> (LinearModel, Objective, f64, Vec<f64>) {
     let m = LinearModel::double_integrator();
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let qf = &q * 10.0;
+    let (q, r, qf) = lq_weights();
     let obj = quadratic_objective(&q, &r, &qf);
     let (p, k) = riccati(&m.a, &m.b, &q, &r, &qf, H);
     let x0 = DVector::from_vec(vec![1.0, 0.0]);
@@ -395,9 +393,7 @@ fn held_knots_reach_the_move_blocked_optimum() {
 #[test]
 fn terminal_value_extends_the_horizon() {
     let m = LinearModel::double_integrator();
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let qf = &q * 10.0;
+    let (q, r, qf) = lq_weights();
     let (p, k) = riccati(&m.a, &m.b, &q, &r, &qf, H);
     let p3 = p[3].clone();
     let (q2, r2) = (q.clone(), r.clone());
@@ -473,17 +469,11 @@ fn dmd_policy_proposal_and_transitions() {
             assert!((next[j] - tr.next_states[(h, j)]).abs() < 1e-12);
         }
         let c = obj
-            .running_cost(xs.as_slice(), &[tr.actions[(h, 0)]])
+            .running_cost(xs.as_slice(), &[tr.actions[(h, 0)]], h)
             .unwrap();
         assert!((tr.rewards[h] + c).abs() < 1e-12);
-        // One-step-back data: the previous row's state and action (the start state and a zero
-        // action at h = 0).
-        let (ps, pa) = if h == 0 {
-            (tr.states.row(0).to_owned(), 0.0)
-        } else {
-            (tr.states.row(h - 1).to_owned(), tr.actions[(h - 1, 0)])
-        };
-        assert_eq!(tr.prev_states.row(h), ps);
+        // One-step-back data: the previous row's action (zero at h = 0: the plan was given none).
+        let pa = if h == 0 { 0.0 } else { tr.actions[(h - 1, 0)] };
         assert_eq!(tr.prev_actions[(h, 0)], pa);
     }
 
@@ -501,14 +491,17 @@ fn dmd_policy_proposal_and_transitions() {
     let pol_cost = plan.total_cost;
     let k3 = kinf.clone();
     let better = p
-        .plan_with_proposal(&[1.0, 0.0], &m, &obj, &move |s: ndarray::ArrayView2<
-            '_,
-            f64,
-        >| {
-            Array2::from_shape_fn((s.nrows(), 1), |(i, _)| {
-                -(k3[(0, 0)] * s[(i, 0)] + k3[(0, 1)] * s[(i, 1)])
-            })
-        })
+        .plan_with_proposal(
+            &[1.0, 0.0],
+            None,
+            &m,
+            &obj,
+            &move |s: ndarray::ArrayView2<'_, f64>| {
+                Array2::from_shape_fn((s.nrows(), 1), |(i, _)| {
+                    -(k3[(0, 0)] * s[(i, 0)] + k3[(0, 1)] * s[(i, 1)])
+                })
+            },
+        )
         .unwrap();
     assert!(better.total_cost <= pol_cost + 1e-12 && better.total_cost >= jstar - 1e-9);
 }

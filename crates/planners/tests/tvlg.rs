@@ -5,15 +5,15 @@
 mod common;
 
 use common::reacher::{evaluate, objective, push_objective, Reacher};
-use common::{quadratic_objective, riccati, LinearModel};
+use common::{lq_weights, quadratic_objective, riccati, LinearModel};
 use nalgebra::{DMatrix, DVector};
 use ndarray::Array2;
 use tandem_core::seeding::rng_from_seed;
-use tandem_models::{TvlgConfig, TvlgFit};
+use tandem_models::{DynamicsModel, ModelInput, TvlgConfig, TvlgFit};
 use tandem_planners::{
     classic_step_mult, pi2_update, pi2_update_with_temperatures, pi2_weights, quadratize_cost,
-    sample_trajectories, Dynamics, LqrFlm, LqrFlmConfig, ModelDynamics, Objective, Pi2Config,
-    Pilqr, PilqrConfig, SampleConfig, TvlgController,
+    sample_trajectories, LqrFlm, LqrFlmConfig, Objective, Pi2Config, Pilqr, PilqrConfig,
+    QuadraticCost, SampleConfig, TvlgController,
 };
 
 const T: usize = 20;
@@ -22,21 +22,26 @@ const T: usize = 20;
 /// terminal `10 Q` (as in `lqr_flm_with_fitted_dynamics_reaches_the_lqr_cost`, which needs the
 /// matrices themselves for the Riccati optimum).
 fn double_integrator_objective() -> Objective {
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    quadratic_objective(&q, &r, &(&q * 10.0))
+    let (q, r, qf) = lq_weights();
+    quadratic_objective(&q, &r, &qf)
 }
 
 /// Cost of the controller's mean (no action noise) on a deterministic system from `x0`.
-fn mean_cost(ctrl: &TvlgController, sys: &dyn Dynamics, obj: &Objective, x0: &[f64]) -> f64 {
+fn mean_cost(ctrl: &TvlgController, sys: &dyn DynamicsModel, obj: &Objective, x0: &[f64]) -> f64 {
     let mut x = DVector::from_column_slice(x0);
     let mut c = 0.0;
     for t in 0..ctrl.horizon() {
         let u = ctrl.mean(t, &x);
-        c += obj.running_cost(x.as_slice(), u.as_slice()).unwrap();
+        c += obj.running_cost(x.as_slice(), u.as_slice(), t).unwrap();
         let xs = Array2::from_shape_vec((1, x.len()), x.as_slice().to_vec()).unwrap();
         let us = Array2::from_shape_vec((1, u.len()), u.as_slice().to_vec()).unwrap();
-        let y = sys.step_batch(xs.view(), us.view()).unwrap();
+        let y = sys
+            .predict(
+                &ModelInput::new(xs.view(), us.view()),
+                &mut rng_from_seed(0),
+            )
+            .unwrap()
+            .next_states;
         x = DVector::from_iterator(x.len(), y.row(0).iter().copied());
     }
     c + obj.terminal_cost(x.as_slice()).unwrap()
@@ -45,15 +50,13 @@ fn mean_cost(ctrl: &TvlgController, sys: &dyn Dynamics, obj: &Objective, x0: &[f
 #[test]
 fn lqr_flm_with_fitted_dynamics_reaches_the_lqr_cost() {
     let m = LinearModel::double_integrator();
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let qf = &q * 10.0;
+    let (q, r, qf) = lq_weights();
     let obj = quadratic_objective(&q, &r, &qf);
     let (p, _) = riccati(&m.a, &m.b, &q, &r, &qf, T);
     let x0 = [1.0, 0.0];
     let jstar =
         (DVector::from_row_slice(&x0).transpose() * &p[0] * DVector::from_row_slice(&x0))[0];
-    let sys = ModelDynamics::new(&m, 0);
+    let sys = m.clone();
     let lqr = LqrFlm::new(LqrFlmConfig {
         kl_step: 2.0,
         ..Default::default()
@@ -152,7 +155,7 @@ fn pi2_temperature_meets_the_kl_bound() {
 #[test]
 fn pilqr_step_multipliers_follow_the_residual_ratio() {
     let m = LinearModel::double_integrator();
-    let sys = ModelDynamics::new(&m, 0);
+    let sys = m.clone();
     let x0 = [1.0, 0.0];
     let quadratic = double_integrator_objective();
     let obj = &quadratic;
@@ -214,7 +217,7 @@ fn pilqr_step_multipliers_follow_the_residual_ratio() {
 #[test]
 fn pi2_at_given_temperatures() {
     let m = LinearModel::double_integrator();
-    let sys = ModelDynamics::new(&m, 0);
+    let sys = m.clone();
     let obj = double_integrator_objective();
     let ctrl = TvlgController::constant(T, 2, &[0.0], 1.0).unwrap();
     let samples = sample_trajectories(
@@ -287,7 +290,7 @@ fn pi2_at_given_temperatures() {
 #[test]
 fn pi2_covariance_damping_scales_the_old_covariance() {
     let m = LinearModel::double_integrator();
-    let sys = ModelDynamics::new(&m, 0);
+    let sys = m.clone();
     let obj = double_integrator_objective();
     let ctrl = TvlgController::constant(T, 2, &[0.3], 1.7).unwrap();
     let samples = sample_trajectories(
@@ -376,7 +379,11 @@ fn pusher_block_moves_only_in_contact() {
     let step = |sys: &Reacher, x: &[f64]| {
         let s = Array2::from_shape_vec((1, x.len()), x.to_vec()).unwrap();
         let a = Array2::zeros((1, 2));
-        sys.step_batch(s.view(), a.view()).unwrap().row(0).to_vec()
+        sys.predict(&ModelInput::new(s.view(), a.view()), &mut rng_from_seed(0))
+            .unwrap()
+            .next_states
+            .row(0)
+            .to_vec()
     };
     let push = Reacher::pusher(0.5);
     // Free: v₁' = 2 − 0.05·0.5·2 = 1.95, q₁' = 0.1 + 0.05·1.95 = 0.1975 < 0.3.
@@ -423,25 +430,47 @@ fn pusher_contact_happens_at_different_steps() {
     assert!(steps[steps.len() - 1] - steps[0] >= 5, "{first_contact:?}");
 }
 
+/// The first iteration on the double integrator from `(1, 0)`: the quadratic objective, the
+/// initial controller (`K = 0`, `k = 0`, `Σ = I`), 20 samples of it with process noise
+/// `process_std` (seeded) and the TVLG dynamics fitted to them.
+fn first_batch(
+    process_std: f64,
+    seed: u64,
+) -> (
+    Objective,
+    TvlgController,
+    tandem_planners::TrajectorySamples,
+    tandem_models::TvlgDynamics,
+) {
+    let m = LinearModel::double_integrator();
+    let obj = double_integrator_objective();
+    let ctrl = TvlgController::constant(T, 2, &[0.0], 1.0).unwrap();
+    let scfg = SampleConfig {
+        process_std,
+        ..Default::default()
+    };
+    let samples = sample_trajectories(
+        &ctrl,
+        &m,
+        &obj,
+        &[1.0, 0.0],
+        &scfg,
+        &mut rng_from_seed(seed),
+    )
+    .unwrap();
+    let dynamics = TvlgFit::new(TvlgConfig::default())
+        .fit(samples.states.view(), samples.actions.view())
+        .unwrap();
+    (obj, ctrl, samples, dynamics)
+}
+
 /// GPS's classic step rule for LQR-FLM: when the new model agrees with the old one (same fit and
 /// cost), the actual improvement equals the predicted one and the multiplier grows by the
 /// maximum factor 5 (capped at 10); when the "new" controller is the old one, nothing was
 /// predicted and it shrinks by the minimum factor 0.1.
 #[test]
 fn classic_step_rule_on_agreeing_and_null_predictions() {
-    let m = LinearModel::double_integrator();
-    let sys = ModelDynamics::new(&m, 0);
-    let obj = double_integrator_objective();
-    let ctrl = TvlgController::constant(T, 2, &[0.0], 1.0).unwrap();
-    let scfg = SampleConfig {
-        process_std: 0.01,
-        ..Default::default()
-    };
-    let samples =
-        sample_trajectories(&ctrl, &sys, &obj, &[1.0, 0.0], &scfg, &mut rng_from_seed(4)).unwrap();
-    let dynamics = TvlgFit::new(TvlgConfig::default())
-        .fit(samples.states.view(), samples.actions.view())
-        .unwrap();
+    let (obj, ctrl, samples, dynamics) = first_batch(0.01, 4);
     let cost = quadratize_cost(&obj, &samples).unwrap();
     let next = LqrFlm::new(LqrFlmConfig::default())
         .unwrap()
@@ -455,4 +484,124 @@ fn classic_step_rule_on_agreeing_and_null_predictions() {
     let shrink = classic_step_mult(1.0, &ctrl, &dynamics, &cost, &ctrl, &dynamics, &cost).unwrap();
     assert!((shrink - 0.1).abs() < 1e-12);
     assert!(classic_step_mult(0.0, &ctrl, &dynamics, &cost, &next, &dynamics, &cost).is_err());
+}
+
+/// PILQR on a cost supplied per time step: the quadratized objective given from outside is the
+/// default path, step for step; a per-step constant added to both the quadratic cost and the
+/// samples' costs (`add_quadratic_costs`) changes neither the LQR step (constants do not enter
+/// it) nor the PI² step (residuals and weights are shift-invariant per step); a cost of the wrong
+/// length is an error.
+#[test]
+fn pilqr_with_an_externally_supplied_per_step_cost() {
+    let (obj, ctrl, samples, dynamics) = first_batch(0.05, 2);
+    let cfg = PilqrConfig {
+        lqr: LqrFlmConfig {
+            kl_step: 0.5,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let default = Pilqr::new(cfg.clone())
+        .unwrap()
+        .update(&ctrl, &samples, &dynamics, &obj)
+        .unwrap();
+    let cost = quadratize_cost(&obj, &samples).unwrap();
+    let supplied = Pilqr::new(cfg.clone())
+        .unwrap()
+        .update_with_cost(&ctrl, &samples, &dynamics, &cost)
+        .unwrap();
+    assert_eq!(default.controller, supplied.controller);
+    assert_eq!(default.residual_ratio, supplied.residual_ratio);
+    assert_eq!(default.lqr.controller, supplied.lqr.controller);
+
+    // Shift step t by c_t = t + 1 (terminal included) in both the model cost and the samples.
+    let shift: Vec<QuadraticCost> = (0..=T)
+        .map(|t| {
+            let d = if t < T { 3 } else { 2 };
+            QuadraticCost {
+                hess: DMatrix::zeros(d, d),
+                grad: DVector::zeros(d),
+                constant: (t + 1) as f64,
+            }
+        })
+        .collect();
+    let mut shifted_samples = samples.clone();
+    shifted_samples.add_quadratic_costs(&shift).unwrap();
+    assert_eq!(
+        shifted_samples.costs[(3, 7)],
+        samples.costs[(3, 7)] + 8.0,
+        "the sample's cost at step 7 gains c_7"
+    );
+    let shifted_cost: Vec<QuadraticCost> = cost
+        .iter()
+        .zip(&shift)
+        .map(|(c, s)| QuadraticCost {
+            constant: c.constant + s.constant,
+            ..c.clone()
+        })
+        .collect();
+    let shifted = Pilqr::new(cfg.clone())
+        .unwrap()
+        .update_with_cost(&ctrl, &shifted_samples, &dynamics, &shifted_cost)
+        .unwrap();
+    assert_eq!(shifted.lqr.controller, default.lqr.controller);
+    for t in 0..T {
+        let d = (&shifted.controller.offsets[t] - &default.controller.offsets[t]).amax();
+        assert!(d < 1e-9, "step {t}: {d}");
+        let d = (&shifted.controller.cov[t] - &default.controller.cov[t]).amax();
+        assert!(d < 1e-9, "step {t}: {d}");
+    }
+    // A non-constant term does change the step: a pull of the actions towards u = 2.
+    let pull: Vec<QuadraticCost> = (0..=T)
+        .map(|t| {
+            if t < T {
+                // 5 (u − 2)² in z = [x; u].
+                let mut hess = DMatrix::zeros(3, 3);
+                hess[(2, 2)] = 10.0;
+                QuadraticCost {
+                    hess,
+                    grad: DVector::from_vec(vec![0.0, 0.0, -20.0]),
+                    constant: 20.0,
+                }
+            } else {
+                QuadraticCost {
+                    hess: DMatrix::zeros(2, 2),
+                    grad: DVector::zeros(2),
+                    constant: 0.0,
+                }
+            }
+        })
+        .collect();
+    let mut pulled_samples = samples.clone();
+    pulled_samples.add_quadratic_costs(&pull).unwrap();
+    let u = samples.actions[(0, 0, 0)];
+    assert!(
+        (pulled_samples.costs[(0, 0)] - samples.costs[(0, 0)] - 5.0 * (u - 2.0).powi(2)).abs()
+            < 1e-12
+    );
+    let pulled_cost: Vec<QuadraticCost> = cost
+        .iter()
+        .zip(&pull)
+        .map(|(c, p)| QuadraticCost {
+            hess: &c.hess + &p.hess,
+            grad: &c.grad + &p.grad,
+            constant: c.constant + p.constant,
+        })
+        .collect();
+    let pulled = Pilqr::new(cfg.clone())
+        .unwrap()
+        .update_with_cost(&ctrl, &pulled_samples, &dynamics, &pulled_cost)
+        .unwrap();
+    let mean_offset = |c: &TvlgController| c.offsets.iter().map(|k| k[0]).sum::<f64>() / T as f64;
+    assert!(
+        mean_offset(&pulled.lqr.controller) > mean_offset(&default.lqr.controller) + 0.1,
+        "{} vs {}",
+        mean_offset(&pulled.lqr.controller),
+        mean_offset(&default.lqr.controller)
+    );
+    assert!(Pilqr::new(cfg)
+        .unwrap()
+        .update_with_cost(&ctrl, &samples, &dynamics, &cost[..T])
+        .is_err());
+    assert!(shifted_samples.add_quadratic_costs(&shift[..T]).is_err());
 }

@@ -50,12 +50,7 @@ impl DynamicsModel for LinearModel {
                 out[(i, j)] = y[j];
             }
         }
-        Ok(Prediction {
-            next_states: out,
-            variance: None,
-            rewards: None,
-            terminal_prob: None,
-        })
+        Ok(Prediction::deterministic(out))
     }
     fn fit(&mut self, _: &Transitions, _: &FitConfig) -> Result<FitReport, ModelError> {
         Ok(FitReport::default())
@@ -94,16 +89,19 @@ impl DynamicsModel for PendulumModel {
             out[(i, 0)] = y[0];
             out[(i, 1)] = y[1];
         }
-        Ok(Prediction {
-            next_states: out,
-            variance: None,
-            rewards: None,
-            terminal_prob: None,
-        })
+        Ok(Prediction::deterministic(out))
     }
     fn fit(&mut self, _: &Transitions, _: &FitConfig) -> Result<FitReport, ModelError> {
         Ok(FitReport::default())
     }
+}
+
+/// The weights the double-integrator tests share: `Q = diag(1, 0.1)`, `R = 0.01`, `Q_f = 10 Q`.
+pub fn lq_weights() -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
+    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1]));
+    let r = DMatrix::from_element(1, 1, 0.01);
+    let qf = &q * 10.0;
+    (q, r, qf)
 }
 
 /// Quadratic objective `xᵀQx + uᵀRu` with terminal `xᵀQf x`.

@@ -16,11 +16,13 @@
 //! velocity), decelerated by friction.
 #![allow(dead_code)]
 
-use ndarray::{Array2, ArrayView2};
+use ndarray::Array2;
 use tandem_core::seeding::rng_from_seed;
-use tandem_planners::{
-    sample_trajectories, Dynamics, Objective, Result, SampleConfig, TvlgController,
+use tandem_core::Rng;
+use tandem_models::{
+    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
+use tandem_planners::{sample_trajectories, Objective, SampleConfig, TvlgController};
 
 /// The reacher; see the module docs.
 #[derive(Clone)]
@@ -132,7 +134,7 @@ pub fn objective(target: [f64; 2]) -> Objective {
     })
 }
 
-impl Dynamics for Reacher {
+impl DynamicsModel for Reacher {
     fn state_dim(&self) -> usize {
         match (self.push_loss, self.kick > 0.0) {
             (None, _) => 4,
@@ -143,7 +145,8 @@ impl Dynamics for Reacher {
     fn action_dim(&self) -> usize {
         2
     }
-    fn step_batch(&self, s: ArrayView2<'_, f64>, a: ArrayView2<'_, f64>) -> Result<Array2<f64>> {
+    fn predict(&self, input: &ModelInput<'_>, _rng: &mut Rng) -> Result<Prediction, ModelError> {
+        let (s, a) = (input.states, input.actions);
         let dt = 0.05;
         let mut out = Array2::zeros(s.dim());
         for i in 0..s.nrows() {
@@ -182,13 +185,21 @@ impl Dynamics for Reacher {
             }
             out[(i, 2)] = v[0];
         }
-        Ok(out)
+        Ok(Prediction::deterministic(out))
+    }
+    fn fit(&mut self, _: &Transitions, _: &FitConfig) -> Result<FitReport, ModelError> {
+        Ok(FitReport::default())
     }
 }
 
 /// Expected cost of a controller, estimated with a fixed set of 200 rollouts (common random
 /// numbers, so successive controllers are compared on the same noise).
-pub fn evaluate(ctrl: &TvlgController, sys: &dyn Dynamics, obj: &Objective, x0: &[f64]) -> f64 {
+pub fn evaluate(
+    ctrl: &TvlgController,
+    sys: &dyn DynamicsModel,
+    obj: &Objective,
+    x0: &[f64],
+) -> f64 {
     let cfg = SampleConfig {
         samples: 200,
         ..Default::default()
