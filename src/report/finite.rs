@@ -13,6 +13,14 @@ pub struct NonFinite {
     pub value: f64,
 }
 
+impl NonFinite {
+    /// The same error with `prefix.` before the path (for a value inside a larger one).
+    pub fn within(mut self, prefix: &str) -> Self {
+        self.path = format!("{prefix}.{}", self.path);
+        self
+    }
+}
+
 impl ser::Error for NonFinite {
     fn custom<T: std::fmt::Display>(msg: T) -> Self {
         NonFinite {
@@ -83,9 +91,8 @@ impl Checker {
         self.nested(format!("[{i}]"), v)
     }
 
-    fn open(&mut self) -> Result<&mut Self, NonFinite> {
+    fn open(&mut self) {
         self.index.push(0);
-        Ok(self)
     }
 
     fn close(&mut self) -> Result<(), NonFinite> {
@@ -165,13 +172,16 @@ impl<'a> ser::Serializer for &'a mut Checker {
         self.nested(variant.to_string(), v)
     }
     fn serialize_seq(self, _: Option<usize>) -> Result<Self, NonFinite> {
-        self.open()
+        self.open();
+        Ok(self)
     }
     fn serialize_tuple(self, _: usize) -> Result<Self, NonFinite> {
-        self.open()
+        self.open();
+        Ok(self)
     }
     fn serialize_tuple_struct(self, _: &'static str, _: usize) -> Result<Self, NonFinite> {
-        self.open()
+        self.open();
+        Ok(self)
     }
     fn serialize_tuple_variant(
         self,
@@ -181,7 +191,8 @@ impl<'a> ser::Serializer for &'a mut Checker {
         _: usize,
     ) -> Result<Self, NonFinite> {
         self.path.push(variant.to_string());
-        self.open()
+        self.open();
+        Ok(self)
     }
     fn serialize_map(self, _: Option<usize>) -> Result<Self, NonFinite> {
         self.path.push(String::new());
@@ -310,12 +321,12 @@ mod tests {
     use super::*;
     use std::collections::BTreeMap;
 
-    #[derive(Serialize)]
+    #[derive(serde::Serialize)]
     struct Inner {
         per_seed: Vec<Option<f64>>,
     }
 
-    #[derive(Serialize)]
+    #[derive(serde::Serialize)]
     struct Outer {
         name: &'static str,
         steps: u64,

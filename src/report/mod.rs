@@ -23,13 +23,8 @@ pub use finite::{ensure_finite, to_json_pretty, NonFinite};
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
     /// A number about to be written is NaN or infinite.
-    #[error("{what}: {source}")]
-    NonFinite {
-        /// The file or quantity, e.g. `table.json`.
-        what: String,
-        /// Where the number is.
-        source: NonFinite,
-    },
+    #[error(transparent)]
+    NonFinite(#[from] NonFinite),
     /// A table file that does not have a table's shape.
     #[error("{what}: {message}")]
     Malformed {
@@ -60,12 +55,13 @@ pub fn mean_stderr(v: &[f64]) -> (f64, f64) {
 pub struct ReturnAtBudget {
     /// The budget (samples of the system the paper counts).
     pub budget: u64,
+    /// One return per seed, in seed order (before the mean, so that a missing seed is the
+    /// number a finiteness check names).
+    pub per_seed: Vec<f64>,
     /// Mean over seeds.
     pub mean: f64,
     /// Standard error of that mean.
     pub stderr: f64,
-    /// One return per seed, in seed order.
-    pub per_seed: Vec<f64>,
 }
 
 impl ReturnAtBudget {
@@ -247,6 +243,7 @@ struct ComparisonFields {
 impl Table {
     /// The table as a JSON object (keys sorted), or an error naming a non-finite number.
     pub fn to_json_value(&self) -> Result<Value, ReportError> {
+        ensure_finite(&self.methods)?;
         let mut out = serde_json::Map::new();
         for (name, m) in &self.methods {
             out.insert(name.clone(), value(m));
@@ -266,10 +263,7 @@ impl Table {
                 per_seed: r.per_seed.clone(),
                 rest,
             };
-            ensure_finite(&fields).map_err(|source| ReportError::NonFinite {
-                what: REFERENCE.into(),
-                source,
-            })?;
+            ensure_finite(&fields).map_err(|e| e.within(REFERENCE))?;
             out.insert(REFERENCE.into(), value(fields));
         }
         for c in &self.comparisons {
@@ -281,16 +275,9 @@ impl Table {
                 note: c.note.clone(),
                 rest: [(format!("{}{MEAN_SAMPLES}", c.method), c.method_mean_samples)].into(),
             };
-            ensure_finite(&fields).map_err(|source| ReportError::NonFinite {
-                what: key.clone(),
-                source,
-            })?;
+            ensure_finite(&fields).map_err(|e| e.within(&key))?;
             out.insert(key, value(fields));
         }
-        ensure_finite(&self.methods).map_err(|source| ReportError::NonFinite {
-            what: "methods".into(),
-            source,
-        })?;
         Ok(Value::Object(out))
     }
 
