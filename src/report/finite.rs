@@ -116,7 +116,7 @@ macro_rules! ok_scalars {
     };
 }
 
-impl<'a> ser::Serializer for &'a mut Checker {
+impl ser::Serializer for &mut Checker {
     type Ok = ();
     type Error = NonFinite;
     type SerializeSeq = Self;
