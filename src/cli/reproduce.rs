@@ -6,12 +6,15 @@
 //! - `runs/<method>__seed<k>/record.json` and `curve.csv`: each run's learning curve (return of
 //!   the deterministic policy on the true system against true training samples);
 //! - `table.md`, `table.json`: p0's Table II (return at the fixed budget; true samples to the
-//!   fixed target return);
+//!   fixed target return), a typed [`tandem::report::Table`] rendered by the shared report code
+//!   with p0's words ([`markdown`]);
 //! - `fig5.svg`: p0's Fig. 5 (mean return on the true system against true samples, ± standard
 //!   error across seeds).
 //!
 //! Evaluation episodes run on a separate copy of the true system and are not counted as training
-//! samples.
+//! samples. An `--out` that already holds a reproduction is an error unless `--overwrite` (no seed
+//! folders of an earlier run are left beside a new table); a NaN or infinite number in the
+//! configuration or about to be written is an error naming it.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
