@@ -13,6 +13,8 @@
 //! | [`models`] | `tandem-models` | `DynamicsModel` and the learned models |
 //! | [`planners`] | `tandem-planners` | MPC planners and TVLG trajectory optimizers |
 //! | [`agents`] | `tandem-agents` | DDPG, SAC, REINFORCE, DQN, replay |
+//!
+//! [`run`] writes run directories; [`report`] renders reproduction tables and figures.
 
 pub use tandem_agents as agents;
 pub use tandem_core as core;
@@ -23,4 +25,5 @@ pub use tandem_nn as nn;
 pub use tandem_planners as planners;
 
 pub mod pipelines;
+pub mod report;
 pub mod run;

@@ -1,15 +1,14 @@
 //! Run directories: `runs/<env>__<algo>__<seed>__<time>/` (CleanRL's naming) holding the config a
 //! run used, metrics as CSV, a summary as JSON and learning curves as SVG, written by hand (a few
 //! lines of SVG need no plotting library).
+//!
+//! No run is overwritten or shared by accident ([`RunDir::create`]): a directory that already
+//! holds files is an error unless the caller passes [`Existing::Overwrite`] or
+//! [`Existing::Resume`], a lock file holding the writer's process id stops a second writer, and
+//! default names are made unique.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-
-/// A directory that a run writes its files into.
-#[derive(Debug, Clone)]
-pub struct RunDir {
-    path: PathBuf,
-}
 
 /// `YYYYMMDD-HHMMSS` in UTC for seconds since the Unix epoch (Howard Hinnant's civil-from-days).
 pub fn utc_stamp(unix_seconds: u64) -> String {
@@ -32,21 +31,246 @@ pub fn utc_stamp(unix_seconds: u64) -> String {
     )
 }
 
+/// What to do when the output directory already holds a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Existing {
+    /// Refuse: a directory that holds files is an error (the default, so no run is overwritten
+    /// by accident).
+    Refuse,
+    /// `--overwrite`: delete the files and folders this kind of run writes, then write anew.
+    Overwrite,
+    /// `--resume`: continue the run in place; its files are rewritten.
+    Resume,
+}
+
+/// Why a run directory could not be made ready.
+#[derive(Debug, thiserror::Error)]
+pub enum RunDirError {
+    /// The directory already holds a run (or other files) and neither `--overwrite` nor
+    /// `--resume` was given.
+    #[error(
+        "{} already holds a run ({}); pass --overwrite to replace it{}, or choose another --out",
+        path.display(), entries.join(", "), if *resumable { " or --resume to continue it" } else { "" }
+    )]
+    Exists {
+        /// The directory.
+        path: PathBuf,
+        /// Up to a few of the entries found there.
+        entries: Vec<String>,
+        /// Whether the command has a `--resume`.
+        resumable: bool,
+    },
+    /// `--overwrite` on a directory holding files that this kind of run does not write.
+    #[error(
+        "{} holds files a run does not write ({}); --overwrite only replaces a run's own files: \
+         choose another --out",
+        path.display(), entries.join(", ")
+    )]
+    Foreign {
+        /// The directory.
+        path: PathBuf,
+        /// The entries that are not the run's.
+        entries: Vec<String>,
+    },
+    /// Another process holds the directory's lock.
+    #[error(
+        "{} is in use by process {pid} (lock file {}); wait for it to finish or choose another --out",
+        path.display(), lock.display()
+    )]
+    Locked {
+        /// The directory.
+        path: PathBuf,
+        /// The lock file.
+        lock: PathBuf,
+        /// The process that holds it.
+        pid: u32,
+    },
+    /// The lock was left by a process that is no longer running (a killed run).
+    #[error(
+        "{} has a stale lock: process {pid}, which wrote {}, is no longer running (the run was \
+         interrupted); pass --overwrite{} to take the directory over, or delete the lock file",
+        path.display(), lock.display(), if *resumable { " or --resume" } else { "" }
+    )]
+    StaleLock {
+        /// The directory.
+        path: PathBuf,
+        /// The lock file.
+        lock: PathBuf,
+        /// The process that wrote it.
+        pid: u32,
+        /// Whether the command has a `--resume`.
+        resumable: bool,
+    },
+    /// A file-system operation failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// The operating system's error.
+        source: std::io::Error,
+    },
+}
+
+/// The lock file's name inside a run directory: it holds the writer's process id.
+pub const LOCK_FILE: &str = ".tandem.lock";
+
+/// What a kind of run writes into its directory, so that `--overwrite` removes exactly that.
+#[derive(Debug, Clone, Copy)]
+pub struct Layout {
+    /// The files and folders the run writes (a folder is removed with its contents).
+    pub owned: &'static [&'static str],
+    /// Whether the command has a `--resume` (named in error messages).
+    pub resumable: bool,
+}
+
+/// A directory that a run writes its files into. While this value lives, the directory's lock
+/// file stops a second `tandem` from writing there; dropping it removes the lock.
+#[derive(Debug)]
+pub struct RunDir {
+    path: PathBuf,
+    lock: PathBuf,
+    stale_lock: Option<u32>,
+}
+
+/// Whether process `pid` is running. On Linux `/proc/<pid>` tells; elsewhere it cannot be told
+/// without a system call, so the process is assumed alive (the lock is then reported, never
+/// taken over).
+fn process_alive(pid: u32) -> bool {
+    let proc = Path::new("/proc");
+    !proc.is_dir() || proc.join(pid.to_string()).exists()
+}
+
 impl RunDir {
-    /// Creates `out`, or `runs/<env>__<algo>__<seed>__<time>/` when `out` is `None`.
-    pub fn create(out: Option<&Path>, env: &str, algo: &str, seed: u64) -> std::io::Result<Self> {
-        let path = match out {
-            Some(p) => p.to_path_buf(),
-            None => {
-                let now = std::time::SystemTime::now()
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map(|d| d.as_secs())
-                    .unwrap_or(0);
-                PathBuf::from("runs").join(format!("{env}__{algo}__{seed}__{}", utc_stamp(now)))
-            }
+    /// Prepares the directory a run writes into and locks it.
+    ///
+    /// With `out`, that directory: created if missing; if it already holds files, `existing`
+    /// decides (an error, removing the run's own files per `layout`, or continuing in place).
+    /// Without `out`, a new `runs/<name>__<YYYYMMDD-HHMMSS>/` (CleanRL's naming), with `-2`,
+    /// `-3`, ... appended when a run started in the same second took that name: the directory
+    /// is created exclusively, so two runs never share one.
+    pub fn create(
+        out: Option<&Path>,
+        name: &str,
+        layout: Layout,
+        existing: Existing,
+    ) -> Result<Self, RunDirError> {
+        let io = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| RunDirError::Io { path, source }
         };
-        std::fs::create_dir_all(&path)?;
-        Ok(Self { path })
+        let Some(out) = out else {
+            let root = Path::new("runs");
+            std::fs::create_dir_all(root).map_err(io(root))?;
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_secs())
+                .unwrap_or(0);
+            let base = format!("{name}__{}", utc_stamp(now));
+            for k in 1u32.. {
+                let path = if k == 1 {
+                    root.join(&base)
+                } else {
+                    root.join(format!("{base}-{k}"))
+                };
+                match std::fs::create_dir(&path) {
+                    Ok(()) => return Self::lock(path, layout, Existing::Refuse),
+                    Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+                    Err(e) => return Err(io(&path)(e)),
+                }
+            }
+            unreachable!("some suffix is free");
+        };
+        std::fs::create_dir_all(out).map_err(io(out))?;
+        let dir = Self::lock(out.to_path_buf(), layout, existing)?;
+        let mut entries: Vec<String> = std::fs::read_dir(out)
+            .map_err(io(out))?
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n != LOCK_FILE)
+            .collect();
+        entries.sort();
+        if entries.is_empty() || existing == Existing::Resume {
+            return Ok(dir);
+        }
+        if existing == Existing::Refuse {
+            entries.truncate(5);
+            return Err(RunDirError::Exists {
+                path: out.to_path_buf(),
+                entries,
+                resumable: layout.resumable,
+            });
+        }
+        let foreign: Vec<String> = entries
+            .iter()
+            .filter(|n| !layout.owned.contains(&n.as_str()))
+            .cloned()
+            .collect();
+        if !foreign.is_empty() {
+            return Err(RunDirError::Foreign {
+                path: out.to_path_buf(),
+                entries: foreign,
+            });
+        }
+        for n in &entries {
+            let p = out.join(n);
+            let r = if p.is_dir() {
+                std::fs::remove_dir_all(&p)
+            } else {
+                std::fs::remove_file(&p)
+            };
+            r.map_err(io(&p))?;
+        }
+        Ok(dir)
+    }
+
+    /// Takes `path`'s lock: creates the lock file exclusively and writes this process's id.
+    fn lock(path: PathBuf, layout: Layout, existing: Existing) -> Result<Self, RunDirError> {
+        use std::io::Write as _;
+        let lock = path.join(LOCK_FILE);
+        let mut stale_lock = None;
+        loop {
+            match std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&lock)
+            {
+                Ok(mut f) => {
+                    // From here on, dropping `dir` removes the lock.
+                    let dir = Self {
+                        path,
+                        lock,
+                        stale_lock,
+                    };
+                    writeln!(f, "{}", std::process::id()).map_err(|source| RunDirError::Io {
+                        path: dir.lock.clone(),
+                        source,
+                    })?;
+                    return Ok(dir);
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                    let text = std::fs::read_to_string(&lock).unwrap_or_default();
+                    // An empty lock is one being written right now: in use.
+                    let pid: u32 = text.trim().parse().unwrap_or(0);
+                    if pid == 0 || process_alive(pid) {
+                        return Err(RunDirError::Locked { path, lock, pid });
+                    }
+                    if existing == Existing::Refuse || stale_lock.is_some() {
+                        return Err(RunDirError::StaleLock {
+                            path,
+                            lock,
+                            pid,
+                            resumable: layout.resumable,
+                        });
+                    }
+                    std::fs::remove_file(&lock).map_err(|source| RunDirError::Io {
+                        path: lock.clone(),
+                        source,
+                    })?;
+                    stale_lock = Some(pid);
+                }
+                Err(source) => return Err(RunDirError::Io { path: lock, source }),
+            }
+        }
     }
 
     /// The directory.
@@ -54,11 +278,28 @@ impl RunDir {
         &self.path
     }
 
+    /// The process id of a stale lock (left by a run that was killed) that `--overwrite` or
+    /// `--resume` removed, for the program to report.
+    pub fn stale_lock_taken_over(&self) -> Option<u32> {
+        self.stale_lock
+    }
+
     /// Writes `contents` to `name` inside the directory and returns the file's path.
     pub fn write(&self, name: &str, contents: &str) -> std::io::Result<PathBuf> {
         let p = self.path.join(name);
         std::fs::write(&p, contents)?;
         Ok(p)
+    }
+}
+
+impl Drop for RunDir {
+    /// Removes the lock, if it is still this process's.
+    fn drop(&mut self) {
+        let ours = std::fs::read_to_string(&self.lock)
+            .is_ok_and(|t| t.trim() == std::process::id().to_string());
+        if ours {
+            let _ = std::fs::remove_file(&self.lock);
+        }
     }
 }
 
@@ -285,6 +526,53 @@ mod tests {
         assert_eq!(utc_stamp(0), "19700101-000000");
         // 2000-02-29 12:34:56 UTC = 951827696.
         assert_eq!(utc_stamp(951_827_696), "20000229-123456");
+    }
+
+    const LAYOUT: Layout = Layout {
+        owned: &["table.json", "runs"],
+        resumable: false,
+    };
+
+    /// A fresh directory holding an earlier 5-seed reproduction: a table and seed folders.
+    fn earlier_run(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("tandem-run-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(d.join("runs/cold__seed4")).unwrap();
+        std::fs::write(d.join("runs/cold__seed4/curve.csv"), "x").unwrap();
+        std::fs::write(d.join("table.json"), "{}").unwrap();
+        d
+    }
+
+    #[test]
+    fn an_earlier_run_is_refused_kept_or_cleared_and_the_lock_lives_with_the_value() {
+        let d = earlier_run("modes");
+        let e = RunDir::create(Some(&d), "x", LAYOUT, Existing::Refuse).unwrap_err();
+        assert!(
+            matches!(&e, RunDirError::Exists { entries, .. } if entries == &["runs", "table.json"])
+        );
+        assert!(!e.to_string().contains("--resume"), "{e}");
+        assert!(d.join("runs/cold__seed4").exists() && !d.join(LOCK_FILE).exists());
+
+        let dir = RunDir::create(Some(&d), "x", LAYOUT, Existing::Resume).unwrap();
+        assert!(d.join("runs/cold__seed4").exists());
+        let pid = std::fs::read_to_string(d.join(LOCK_FILE)).unwrap();
+        assert_eq!(pid.trim(), std::process::id().to_string());
+        // A second writer while the first holds the lock.
+        let e = RunDir::create(Some(&d), "x", LAYOUT, Existing::Overwrite).unwrap_err();
+        assert!(matches!(e, RunDirError::Locked { pid, .. } if pid == std::process::id()));
+        drop(dir);
+        assert!(!d.join(LOCK_FILE).exists());
+
+        // Overwrite: the stale seed folders go with the table.
+        let dir = RunDir::create(Some(&d), "x", LAYOUT, Existing::Overwrite).unwrap();
+        let left: Vec<_> = std::fs::read_dir(&d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(left, [LOCK_FILE]);
+        assert_eq!(dir.stale_lock_taken_over(), None);
+        drop(dir);
+        let _ = std::fs::remove_dir_all(&d);
     }
 
     #[test]

@@ -359,3 +359,65 @@ fn usage_errors_exit_non_zero_without_panicking() {
     );
     assert_fails_with(&tandem(&["frobnicate"]), &["frobnicate"]);
 }
+
+/// `tandem reproduce p0-pendulum --quick --quiet` with `extra` arguments.
+fn reproduce(extra: &[&str]) -> Output {
+    tandem(
+        &[
+            &["reproduce", "p0-pendulum", "--quick", "--quiet"][..],
+            extra,
+        ]
+        .concat(),
+    )
+}
+
+#[test]
+fn reproduce_rejects_non_finite_config_values_before_any_work() {
+    for (line, key) in [
+        ("target_return = nan", "target_return is NaN"),
+        (
+            "[fit]\nholdout_fraction = nan",
+            "fit.holdout_fraction is NaN",
+        ),
+        (
+            "[fit]\nholdout_fraction = 1.5",
+            "fit.holdout_fraction is 1.5",
+        ),
+    ] {
+        let cfg = temp_file(&format!("p0-{}", key.len()), line);
+        let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("p0-nan-out");
+        let o = reproduce(&[
+            "--config",
+            cfg.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_fails_with(&o, &[key]);
+        assert!(!out.join("config.json").exists());
+    }
+}
+
+#[test]
+fn reproduce_over_an_earlier_run_is_refused_and_overwrite_names_foreign_files() {
+    // An earlier 5-seed reproduction: a seed folder that a 2-seed run would leave stale.
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("p0-earlier");
+    let _ = std::fs::remove_dir_all(&out);
+    std::fs::create_dir_all(out.join("runs/cold__seed4")).unwrap();
+    std::fs::write(out.join("table.json"), "{}").unwrap();
+    let o = reproduce(&["--seeds", "2", "--out", out.to_str().unwrap()]);
+    assert_fails_with(&o, &["already holds a run", "--overwrite"]);
+    assert!(!stderr(&o).contains("--resume"), "{}", stderr(&o));
+    assert!(out.join("runs/cold__seed4").exists());
+    // --overwrite replaces only a reproduction's own files.
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let o = reproduce(&[
+        "--seeds",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+        "--overwrite",
+    ]);
+    assert_fails_with(&o, &["notes.txt", "choose another --out"]);
+    assert!(out.join("runs/cold__seed4").exists() && out.join("notes.txt").exists());
+    let _ = std::fs::remove_dir_all(&out);
+}

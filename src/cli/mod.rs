@@ -3,6 +3,7 @@
 pub mod env;
 pub mod envs;
 pub mod json;
+pub mod presets;
 pub mod reproduce;
 pub mod rollout;
 pub mod train;

@@ -6,12 +6,15 @@
 //! - `runs/<method>__seed<k>/record.json` and `curve.csv`: each run's learning curve (return of
 //!   the deterministic policy on the true system against true training samples);
 //! - `table.md`, `table.json`: p0's Table II (return at the fixed budget; true samples to the
-//!   fixed target return);
+//!   fixed target return), a typed [`tandem::report::Table`] rendered by the shared report code
+//!   with p0's words ([`markdown`]);
 //! - `fig5.svg`: p0's Fig. 5 (mean return on the true system against true samples, ± standard
 //!   error across seeds).
 //!
 //! Evaluation episodes run on a separate copy of the true system and are not counted as training
-//! samples.
+//! samples. An `--out` that already holds a reproduction is an error unless `--overwrite` (no seed
+//! folders of an earlier run are left beside a new table); a NaN or infinite number in the
+//! configuration or about to be written is an error naming it.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -20,11 +23,15 @@ use std::time::Instant;
 
 use clap::{Args, Subcommand};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
-use serde_json::{json, Value};
+use serde::Serialize;
 use tandem::pipelines::p0::{
     ddpg_agent, pendulum_problem, run_seed, Method, P0Config, RunRecord, Tick,
 };
-use tandem::run::{csv, svg_chart, RunDir, Series};
+use tandem::report::{
+    ensure_finite, mean_stderr, to_json_pretty, Comparison, Curve, Figure, MarkdownText,
+    MethodFigures, Reference, ReturnAtBudget, SamplesToTarget, Table,
+};
+use tandem::run::{csv, Existing, Layout, RunDir};
 
 use super::{CliError, Result};
 
@@ -58,6 +65,10 @@ pub struct P0Args {
     /// No progress bars.
     #[arg(long)]
     pub quiet: bool,
+    /// Replace the reproduction in an existing `--out` directory (its seed runs, tables and
+    /// figure); without it, an existing reproduction there is an error.
+    #[arg(long)]
+    pub overwrite: bool,
 }
 
 /// Runs a reproduction.
@@ -95,6 +106,7 @@ fn read_config(quick: bool, path: Option<&Path>) -> Result<P0Config> {
         P0Config::default()
     };
     let Some(p) = path else { return Ok(base) };
+    let what = format!("--config {}", p.display());
     let text = std::fs::read_to_string(p).map_err(|source| CliError::Io {
         path: p.to_path_buf(),
         source,
@@ -108,7 +120,15 @@ fn read_config(quick: bool, path: Option<&Path>) -> Result<P0Config> {
         CliError::input(format!("--config {}", p.display()), e.to_string())
     })?;
     cfg.validate()
-        .map_err(|e| CliError::input(format!("--config {}", p.display()), e.to_string()))?;
+        .map_err(|e| CliError::input(&what, e.to_string()))?;
+    ensure_finite(&cfg).map_err(|e| CliError::input(&what, e.to_string()))?;
+    let h = cfg.fit.holdout_fraction;
+    if !(0.0..1.0).contains(&h) {
+        return Err(CliError::input(
+            &what,
+            format!("fit.holdout_fraction is {h}, must be in [0, 1)"),
+        ));
+    }
     Ok(cfg)
 }
 
@@ -128,28 +148,31 @@ fn merge(base: &mut toml::Value, over: toml::Value) {
     }
 }
 
-/// Mean and standard error (sample standard deviation over √n; 0 for one value).
-pub fn mean_stderr(v: &[f64]) -> (f64, f64) {
-    let n = v.len() as f64;
-    if v.is_empty() {
-        return (f64::NAN, f64::NAN);
-    }
-    let m = v.iter().sum::<f64>() / n;
-    if v.len() < 2 {
-        return (m, 0.0);
-    }
-    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
-    (m, (var / n).sqrt())
-}
+/// The files and folders `tandem reproduce` writes (what `--overwrite` removes).
+pub const LAYOUT: Layout = Layout {
+    owned: &["config.json", "runs", "table.json", "table.md", "fig5.svg"],
+    resumable: false,
+};
 
-/// Table II as JSON: per method `return_at_budget` {mean, stderr, per_seed} and
-/// `samples_to_target` {mean over the seeds that reached it, per_seed with null where never
-/// reached, reached, searched_up_to}.
-pub fn table_json(records: &[RunRecord], cfg: &P0Config) -> Value {
-    let mut out = serde_json::Map::new();
+/// p0's methods as the table names them, in row order.
+const LABELS: &[(&str, &str)] = &[
+    ("cold", "Cold start"),
+    ("warm", "Warm start"),
+    ("difference", "Difference model"),
+];
+
+/// How the sample ratios are taken.
+const RATIO_NOTE: &str =
+    "per-seed samples to the target, a seed that never reached it counted at the samples it used";
+
+/// Table II: per method, the return at the budget and the true samples to the target; the
+/// reference μ^true (the cold start's converged return); how many times more true samples each
+/// baseline needed than the difference method.
+pub fn table(records: &[RunRecord], cfg: &P0Config) -> Table {
+    let mut t = Table::default();
     // Per method: mean true samples to the target with a seed that never reached it counted at
-    // the samples it used, whether any seed did so, and the mean return at the budget.
-    let mut summary: Vec<(Method, f64, bool, f64)> = Vec::new();
+    // the samples it used, and whether any seed fell short.
+    let mut used: Vec<(Method, f64, bool)> = Vec::new();
     for m in Method::ALL {
         let runs: Vec<&RunRecord> = records.iter().filter(|r| r.method == m).collect();
         if runs.is_empty() {
@@ -159,39 +182,27 @@ pub fn table_json(records: &[RunRecord], cfg: &P0Config) -> Value {
             .iter()
             .map(|r| r.return_at(cfg.real_budget).unwrap_or(f64::NAN))
             .collect();
-        let (mean, se) = mean_stderr(&ret);
         let to: Vec<Option<u64>> = runs
             .iter()
             .map(|r| r.samples_to(cfg.target_return))
             .collect();
-        let reached: Vec<f64> = to.iter().flatten().map(|v| *v as f64).collect();
-        let (tm, tse) = mean_stderr(&reached);
         let searched = runs.iter().map(|r| r.true_samples).max().unwrap_or(0);
-        let used: Vec<f64> = runs
+        let samples: Vec<f64> = runs
             .iter()
             .zip(&to)
             .map(|(r, t)| t.unwrap_or(r.true_samples) as f64)
             .collect();
-        let used_mean = used.iter().sum::<f64>() / used.len() as f64;
-        summary.push((m, used_mean, reached.len() < runs.len(), mean));
-        out.insert(
+        let mean_samples = samples.iter().sum::<f64>() / samples.len() as f64;
+        used.push((m, mean_samples, to.iter().any(Option::is_none)));
+        t.methods.insert(
             m.name().into(),
-            json!({
-                "return_at_budget": {"budget": cfg.real_budget, "mean": mean, "stderr": se, "per_seed": ret},
-                "samples_to_target": {
-                    "target": cfg.target_return,
-                    "mean": if reached.is_empty() { Value::Null } else { json!(tm) },
-                    "stderr": if reached.is_empty() { Value::Null } else { json!(tse) },
-                    "per_seed": to,
-                    "reached": reached.len(),
-                    "seeds": runs.len(),
-                    "searched_up_to": searched,
-                },
-                "seeds": runs.iter().map(|r| r.seed).collect::<Vec<_>>(),
-            }),
+            MethodFigures {
+                return_at_budget: ReturnAtBudget::from_seeds(cfg.real_budget, ret),
+                samples_to_target: SamplesToTarget::from_seeds(cfg.target_return, to, searched),
+                seeds: runs.iter().map(|r| r.seed).collect(),
+            },
         );
     }
-    // μ^true: the cold start's converged return after all of its samples.
     let cold: Vec<&RunRecord> = records
         .iter()
         .filter(|r| r.method == Method::Cold)
@@ -201,196 +212,117 @@ pub fn table_json(records: &[RunRecord], cfg: &P0Config) -> Value {
             .iter()
             .map(|r| r.final_return(cfg.reference_evals))
             .collect();
-        let (mean, se) = mean_stderr(&per_seed);
-        let gap = summary
-            .iter()
-            .find(|x| x.0 == Method::Difference)
-            .map(|x| (x.3 - mean).abs() / mean.abs());
-        out.insert(
-            "reference".into(),
-            json!({
-                "what": "cold start after all its true samples: mean of its last evaluations",
-                "true_samples": cold.iter().map(|r| r.true_samples).max().unwrap_or(0),
-                "last_evaluations": cfg.reference_evals,
-                "mean": mean,
-                "stderr": se,
-                "per_seed": per_seed,
-                "difference_relative_gap": gap,
-            }),
-        );
+        let (mean, stderr) = mean_stderr(&per_seed);
+        let gap = t
+            .methods
+            .get(Method::Difference.name())
+            .map(|d| (d.return_at_budget.mean - mean).abs() / mean.abs());
+        t.reference = Some(Reference {
+            what: "cold start after all its true samples: mean of its last evaluations".into(),
+            true_samples: cold.iter().map(|r| r.true_samples).max().unwrap_or(0),
+            last_evaluations: cfg.reference_evals,
+            mean,
+            stderr,
+            per_seed,
+            relative_gaps: [(Method::Difference.name().to_string(), gap)].into(),
+        });
     }
-    // How many times more true samples a baseline needed than the difference method. A seed
-    // that never reached the target counts with the samples it used, so the ratio is then a
-    // lower bound.
-    if let Some(&(_, d, d_bound, _)) = summary.iter().find(|x| x.0 == Method::Difference) {
-        for &(m, b, b_bound, _) in summary.iter().filter(|x| x.0 != Method::Difference) {
-            let ratio = if d > 0.0 { json!(b / d) } else { Value::Null };
-            out.insert(
-                format!("{}_over_difference", m.name()),
-                json!({
-                    "ratio": ratio,
-                    "baseline_mean_samples": b,
-                    "difference_mean_samples": d,
-                    "lower_bound": b_bound && !d_bound,
-                    "note": "per-seed samples to the target, a seed that never reached it counted at the samples it used",
-                }),
-            );
+    if let Some(&(d, d_mean, d_short)) = used.iter().find(|x| x.0 == Method::Difference) {
+        for &(b, b_mean, b_short) in used.iter().filter(|x| x.0 != Method::Difference) {
+            t.comparisons.push(Comparison::new(
+                (b.name(), b_mean, b_short),
+                (d.name(), d_mean, d_short),
+                RATIO_NOTE,
+            ));
         }
     }
-    Value::Object(out)
+    t
 }
 
-/// Table II as Markdown, from [`table_json`].
-pub fn table_md(t: &Value, cfg: &P0Config, n_seeds: u64, wall: f64) -> String {
-    let label = |m: &str| match m {
-        "cold" => "Cold start",
-        "warm" => "Warm start",
-        _ => "Difference model",
-    };
-    let mut s = format!(
-        "# p0 Table II on the DC-motor pendulum ({n_seeds} seeds)\n\n\
-         Return of the deterministic policy on the true system (undiscounted, one 400-step episode \
-         from (π, 0)). True samples are training samples on the true system, counted exactly; \
-         evaluation episodes are not counted. Mean ± standard error over seeds.\n\n\
-         | Method | Sample budget | Return |\n|---|---|---|\n"
-    );
-    s.push_str("| *Fixed budget* | | |\n");
-    for m in ["cold", "warm", "difference"] {
-        if let Some(v) = t.get(m) {
-            let r = &v["return_at_budget"];
-            s.push_str(&format!(
-                "| {} | {} | {:.1} ± {:.1} |\n",
-                label(m),
-                cfg.real_budget,
-                r["mean"].as_f64().unwrap_or(f64::NAN),
-                r["stderr"].as_f64().unwrap_or(f64::NAN)
-            ));
-        }
-    }
-    s.push_str("| *Fixed return* | | |\n");
-    for m in ["cold", "warm", "difference"] {
-        if let Some(v) = t.get(m) {
-            let r = &v["samples_to_target"];
-            let reached = r["reached"].as_u64().unwrap_or(0);
-            let seeds = r["seeds"].as_u64().unwrap_or(0);
-            let cell = match r["mean"].as_f64() {
-                Some(mean) => format!(
-                    "{mean:.0} ± {:.0} ({reached}/{seeds} seeds reached it)",
-                    r["stderr"].as_f64().unwrap_or(0.0)
-                ),
-                None => format!(
-                    "> {} (no seed reached it)",
-                    r["searched_up_to"].as_u64().unwrap_or(0)
-                ),
-            };
-            s.push_str(&format!(
-                "| {} | {cell} | {:.1} |\n",
-                label(m),
-                cfg.target_return
-            ));
-        }
-    }
-    let per_seed = |m: &str| -> Vec<String> {
-        t.get(m)
-            .and_then(|v| v["samples_to_target"]["per_seed"].as_array().cloned())
-            .unwrap_or_default()
-            .iter()
-            .map(|x| x.as_u64().map_or("never".to_string(), |v| v.to_string()))
-            .collect()
-    };
-    s.push_str("\nTrue samples to the target, per seed:\n\n");
-    for m in ["cold", "warm", "difference"] {
-        if t.get(m).is_some() {
-            s.push_str(&format!("- {}: {}\n", label(m), per_seed(m).join(", ")));
-        }
-    }
-    let ratios: Vec<String> = ["warm", "cold"]
-        .iter()
-        .filter_map(|m| {
-            let r = t.get(format!("{m}_over_difference"))?;
-            let x = r["ratio"].as_f64()?;
-            let ge = if r["lower_bound"].as_bool() == Some(true) {
-                "≥ "
-            } else {
-                ""
-            };
-            Some(format!("{} {ge}{x:.1}×", label(m)))
-        })
-        .collect();
-    if !ratios.is_empty() {
-        s.push_str(&format!(
-            "\nTrue samples to the target relative to the difference method (means over seeds; a \
-             seed that never reached it counts at the samples it used): {}.\n",
-            ratios.join(", ")
+/// Table II as Markdown: the shared rendering with p0's words; `wall` is the run's wall time.
+pub fn markdown(t: &Table, cfg: &P0Config, wall: f64) -> String {
+    let n_seeds = t.methods.values().map(|m| m.seeds.len()).max().unwrap_or(0);
+    let mut closing = Vec::new();
+    if let Some(r) = &t.reference {
+        let gap = r
+            .relative_gaps
+            .get(Method::Difference.name())
+            .copied()
+            .flatten();
+        closing.push(format!(
+            "Reference μ^true (cold start after {} true samples, mean of its last {} \
+             evaluations): {:.1} ± {:.1}; the difference method at the budget is {} from it.",
+            r.true_samples,
+            r.last_evaluations,
+            r.mean,
+            r.stderr,
+            gap.map_or("n/a".to_string(), |g| format!("{:.1} %", 100.0 * g)),
         ));
     }
-    if let Some(r) = t.get("reference") {
-        s.push_str(&format!(
-            "\nReference μ^true (cold start after {} true samples, mean of its last {} \
-             evaluations): {:.1} ± {:.1}; the difference method at the budget is {} from it.\n",
-            r["true_samples"].as_u64().unwrap_or(0),
-            cfg.reference_evals,
-            r["mean"].as_f64().unwrap_or(f64::NAN),
-            r["stderr"].as_f64().unwrap_or(f64::NAN),
-            r["difference_relative_gap"]
-                .as_f64()
-                .map_or("n/a".to_string(), |g| format!("{:.1} %", 100.0 * g)),
-        ));
-    }
-    s.push_str(&format!(
-        "\nCold and warm runs are evaluated every {} true samples; warm runs stop once they have \
+    closing.push(format!(
+        "Cold and warm runs are evaluated every {} true samples; warm runs stop once they have \
          reached the target and used the budget ({}), cold runs use all {} true samples; the \
          difference method is evaluated after each model update ({} true samples each, {} in \
-         all). Wall time {:.0} s.\n",
+         all). Wall time {wall:.0} s.",
         cfg.eval_interval,
         cfg.baseline_stop_early,
         cfg.baseline_max_samples,
         cfg.real_batch,
         cfg.real_budget,
-        wall
     ));
-    s
+    t.markdown(&MarkdownText {
+        title: format!("p0 Table II on the DC-motor pendulum ({n_seeds} seeds)"),
+        intro: "Return of the deterministic policy on the true system (undiscounted, one \
+                400-step episode from (π, 0)). True samples are training samples on the true \
+                system, counted exactly; evaluation episodes are not counted. Mean ± standard \
+                error over seeds."
+            .into(),
+        labels: LABELS,
+        comparison_intro: "True samples to the target relative to the difference method (means \
+                           over seeds; a seed that never reached it counts at the samples it \
+                           used)"
+            .into(),
+        comparison_order: &["warm", "cold"],
+        closing,
+    })
 }
 
 /// Fig. 5: the mean return on the true system against true samples, per method, with ± standard
 /// error bands over the seeds that have a point at that sample count.
-pub fn fig5_svg(records: &[RunRecord]) -> String {
-    let mut series = Vec::new();
-    for m in Method::ALL {
-        let runs: Vec<&RunRecord> = records.iter().filter(|r| r.method == m).collect();
-        if runs.is_empty() {
-            continue;
-        }
-        let mut xs: Vec<u64> = runs
-            .iter()
-            .flat_map(|r| r.curve.iter().map(|p| p.true_samples))
-            .collect();
-        xs.sort_unstable();
-        xs.dedup();
-        let mut points = Vec::new();
-        let mut band = Vec::new();
-        for x in xs {
-            let ys: Vec<f64> = runs
+pub fn fig5(records: &[RunRecord]) -> Figure {
+    let curves = Method::ALL
+        .iter()
+        .filter_map(|&m| {
+            let seeds: Vec<Vec<(u64, f64)>> = records
                 .iter()
-                .filter_map(|r| r.curve.iter().find(|p| p.true_samples == x))
-                .map(|p| p.eval_return)
+                .filter(|r| r.method == m)
+                .map(|r| {
+                    r.curve
+                        .iter()
+                        .map(|p| (p.true_samples, p.eval_return))
+                        .collect()
+                })
                 .collect();
-            let (m, se) = mean_stderr(&ys);
-            points.push((x as f64, m));
-            band.push((x as f64, m - se, m + se));
-        }
-        series.push(Series {
-            name: m.name().to_string(),
-            points,
-            band,
-        });
+            (!seeds.is_empty()).then(|| Curve::mean_over_seeds(m.name(), &seeds))
+        })
+        .collect();
+    Figure {
+        title: "p0 Fig. 5: DC-motor pendulum, policies evaluated on the true system".into(),
+        x_label: "true-system training samples".into(),
+        y_label: "return on the true system".into(),
+        curves,
     }
-    svg_chart(
-        "p0 Fig. 5: DC-motor pendulum, policies evaluated on the true system",
-        "true-system training samples",
-        "return on the true system",
-        &series,
-    )
+}
+
+/// What `config.json` records.
+#[derive(Debug, Serialize)]
+struct RunConfig<'a> {
+    config: &'a P0Config,
+    seeds: u64,
+    jobs: u64,
+    quick: bool,
+    wall_seconds: f64,
+    note: &'static str,
 }
 
 /// One job's seed and its records (or its error).
@@ -400,22 +332,19 @@ fn p0_pendulum(args: &P0Args) -> Result<()> {
     tandem_nn::set_gemm_threads(1);
     let cfg = read_config(args.quick, args.config.as_deref())?;
     cfg.validate().map_err(other)?;
-    let dir = match &args.out {
-        Some(p) => RunDir::create(Some(p), "", "", 0),
-        None => {
-            let now = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map(|d| d.as_secs())
-                .unwrap_or(0);
-            let p =
-                PathBuf::from("runs").join(format!("p0-pendulum__{}", tandem::run::utc_stamp(now)));
-            RunDir::create(Some(&p), "", "", 0)
-        }
+    let existing = if args.overwrite {
+        Existing::Overwrite
+    } else {
+        Existing::Refuse
+    };
+    let dir =
+        RunDir::create(args.out.as_deref(), "p0-pendulum", LAYOUT, existing).map_err(other)?;
+    if let Some(pid) = dir.stale_lock_taken_over() {
+        eprintln!(
+            "note: took over {} from process {pid}, which is no longer running",
+            dir.path().display()
+        );
     }
-    .map_err(|source| CliError::Io {
-        path: args.out.clone().unwrap_or_else(|| PathBuf::from("runs")),
-        source,
-    })?;
     let io = |p: &Path| {
         let p = p.to_path_buf();
         move |source| CliError::Io { path: p, source }
@@ -526,30 +455,33 @@ fn p0_pendulum(args: &P0Args) -> Result<()> {
             csv(&["true_samples", "eval_return"], &rows),
         )
         .map_err(io(&sub))?;
-        let text = serde_json::to_string_pretty(r).map_err(other)?;
+        let text = to_json_pretty(r)
+            .map_err(|e| CliError::Other(format!("{}: {e}", sub.join("record.json").display())))?;
         std::fs::write(sub.join("record.json"), text).map_err(io(&sub))?;
     }
-    let table = table_json(&records, &cfg);
-    let md = table_md(&table, &cfg, args.seeds, wall);
+    let table = table(&records, &cfg);
+    let md = markdown(&table, &cfg, wall);
     let w = |name: &str, text: &str| dir.write(name, text).map_err(io(dir.path()));
+    let run_config = RunConfig {
+        config: &cfg,
+        seeds: args.seeds,
+        jobs: args.jobs,
+        quick: args.quick,
+        wall_seconds: wall,
+        note: "evaluation episodes on the true system are not counted as training samples",
+    };
     w(
         "config.json",
-        &serde_json::to_string_pretty(&json!({
-            "config": &cfg,
-            "seeds": args.seeds,
-            "jobs": args.jobs,
-            "quick": args.quick,
-            "wall_seconds": wall,
-            "note": "evaluation episodes on the true system are not counted as training samples",
-        }))
-        .map_err(other)?,
+        &to_json_pretty(&run_config).map_err(|e| CliError::Other(format!("config.json: {e}")))?,
     )?;
     w(
         "table.json",
-        &serde_json::to_string_pretty(&table).map_err(other)?,
+        &table
+            .to_json()
+            .map_err(|e| CliError::Other(format!("table.json: {e}")))?,
     )?;
     w("table.md", &md)?;
-    w("fig5.svg", &fig5_svg(&records))?;
+    w("fig5.svg", &fig5(&records).svg())?;
     println!("{md}");
     println!("wrote {}", dir.path().display());
     Ok(())
@@ -613,28 +545,71 @@ mod tests {
                 &[(0, -4e3), (400, -900.0), (800, -660.0)],
             ),
         ];
-        let t = table_json(&recs, &cfg);
-        let close = |v: &Value, x: f64| (v.as_f64().unwrap() - x).abs() < 1e-12;
+        let t = table(&recs, &cfg);
+        let close = |v: f64, x: f64| (v - x).abs() < 1e-12;
+        let cmp = |b: &str| t.comparisons.iter().find(|c| c.baseline == b).unwrap();
         // Cold: (1200 + 1600) / 2 over 400, a lower bound (seed 1 never reached it).
-        assert!(close(&t["cold_over_difference"]["ratio"], 3.5));
-        assert_eq!(t["cold_over_difference"]["lower_bound"], json!(true));
-        assert!(close(&t["warm_over_difference"]["ratio"], 1.5));
-        assert_eq!(t["warm_over_difference"]["lower_bound"], json!(false));
+        assert!(close(cmp("cold").ratio.unwrap(), 3.5));
+        assert!(cmp("cold").lower_bound);
+        assert!(close(cmp("warm").ratio.unwrap(), 1.5));
+        assert!(!cmp("warm").lower_bound);
         assert_eq!(
-            t["cold"]["samples_to_target"]["per_seed"],
-            json!([1200, null])
+            t.methods["cold"].samples_to_target.per_seed,
+            [Some(1200), None]
         );
+        // Return at the 800 budget: the difference runs' −700 and −660.
+        let d_ret = &t.methods["difference"].return_at_budget;
+        assert_eq!(d_ret.per_seed, [-700.0, -660.0]);
+        assert!(close(d_ret.mean, -680.0) && close(d_ret.stderr, 20.0));
         // Reference: the mean of the cold runs' last two evaluations, per seed.
-        assert!(close(&t["reference"]["per_seed"][0], -800.0));
-        assert!(close(&t["reference"]["per_seed"][1], -2250.0));
+        let reference = t.reference.as_ref().unwrap();
+        assert_eq!(reference.per_seed, [-800.0, -2250.0]);
         let (r, d) = (-1525.0, -680.0);
-        assert!(close(&t["reference"]["mean"], r));
+        assert!(close(reference.mean, r));
         assert!(close(
-            &t["reference"]["difference_relative_gap"],
+            reference.relative_gaps["difference"].unwrap(),
             (d - r) / -r
         ));
-        let md = table_md(&t, &cfg, 2, 1.0);
+        let md = markdown(&t, &cfg, 1.0);
         assert!(md.contains("Cold start ≥ 3.5×"), "{md}");
         assert!(md.contains("Warm start 1.5×"), "{md}");
+        assert!(
+            md.starts_with("# p0 Table II on the DC-motor pendulum (2 seeds)"),
+            "{md}"
+        );
+        // The JSON reads back to the same table.
+        assert_eq!(Table::from_json(&t.to_json().unwrap(), "t").unwrap(), t);
+    }
+
+    #[test]
+    fn a_run_short_of_the_budget_is_an_error_naming_the_seed_not_a_null() {
+        let cfg = P0Config {
+            real_budget: 800,
+            ..P0Config::default()
+        };
+        // Seed 1's curve has no point at or before the budget... its first point is after it.
+        let recs = [
+            record(Method::Cold, 0, &[(0, -9e3), (800, -2e3)]),
+            record(Method::Cold, 1, &[(1200, -900.0)]),
+        ];
+        let e = table(&recs, &cfg).to_json().unwrap_err().to_string();
+        assert!(
+            e.contains("cold.return_at_budget.per_seed[1] is NaN"),
+            "{e}"
+        );
+    }
+
+    /// The committed p0 results (`results/p0-pendulum/`), 5 seeds, 787 s wall time.
+    const COMMITTED_JSON: &str = include_str!("../../results/p0-pendulum/table.json");
+    const COMMITTED_MD: &str = include_str!("../../results/p0-pendulum/table.md");
+
+    #[test]
+    fn the_committed_table_reads_back_and_renders_to_the_committed_files() {
+        let t = Table::from_json(COMMITTED_JSON, "table.json").unwrap();
+        assert_eq!(t.methods.len(), 3);
+        assert_eq!(t.comparisons.len(), 2);
+        assert_eq!(t.to_json().unwrap().trim_end(), COMMITTED_JSON.trim_end());
+        // The footer's figures are P0Config's defaults, which the committed run used.
+        assert_eq!(markdown(&t, &P0Config::default(), 787.0), COMMITTED_MD);
     }
 }

@@ -1,4 +1,5 @@
-//! `tandem rollout`: run a random or zero policy and print the returns.
+//! `tandem rollout`: run a random or zero policy and print the returns (a non-finite return is
+//! an error naming the episode, never a printed `NaN`).
 
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -6,7 +7,7 @@ use rand::Rng as _;
 use tandem_core::seeding::{Rng, SeedStream};
 use tandem_envs::{make, Action, Env, SampleCounter, Space};
 
-use super::Result;
+use super::{CliError, Result};
 
 /// Which policy acts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -85,6 +86,12 @@ pub fn run(args: &RolloutArgs) -> Result<()> {
             if step.done() {
                 break;
             }
+        }
+        if !ret.is_finite() {
+            return Err(CliError::Other(format!(
+                "{}: the return of episode {episode} is {ret}, not a finite number (step {len})",
+                env.id()
+            )));
         }
         bar.suspend(|| super::emit(&format!("episode {episode}: return {ret:.6} length {len}")))?;
         returns.push(ret);

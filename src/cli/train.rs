@@ -4,7 +4,9 @@
 //!
 //! A `--config` file has two optional tables, both checked for unknown keys:
 //! `[agent]` (the algorithm's `Config` fields, e.g. `learning_rate = 1e-3`) and `[train]`
-//! (the loop's `TrainSettings`, e.g. `eval_interval = 2000`).
+//! (the loop's `TrainSettings`, e.g. `eval_interval = 2000`). Without `--config`, the tuned
+//! preset for the (algorithm, environment) pair is used where one exists ([`super::presets`]);
+//! stderr, `config.toml` (`config_source`) and `summary.json` say which settings were used.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -12,10 +14,12 @@ use std::time::Instant;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
-use tandem::run::{csv, svg_chart, RunDir, Series};
+use tandem::report::{ensure_finite, to_json_pretty, NonFinite};
+use tandem::run::{csv, svg_chart, Existing, Layout, RunDir, Series};
 use tandem_agents::{Algo, AlgoConfig, TrainSettings, Trainer};
 use tandem_envs::make;
 
+use super::presets::{self, Preset};
 use super::{CliError, Result};
 
 /// Arguments of `tandem train`.
@@ -33,15 +37,25 @@ pub struct TrainArgs {
     /// Run seed (agent, environment resets, minibatches all derive from it).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// TOML file with `[agent]` and `[train]` overrides.
+    /// TOML file with `[agent]` and `[train]` overrides of the defaults. Without it, the tuned
+    /// preset for the (algorithm, environment) pair is used when there is one (the files in
+    /// `crates/agents/presets/`, built into the program).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Without `--config`, use the algorithm's defaults even where a preset exists.
+    #[arg(long, conflicts_with = "config")]
+    pub no_preset: bool,
     /// Output directory (default `runs/<env>__<algo>__<seed>__<time>/`).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Resume from a checkpoint written by an earlier run with the same configuration.
+    /// Resume from a checkpoint written by an earlier run with the same configuration; `--out`
+    /// may then name that run's directory, whose files are rewritten.
     #[arg(long)]
     pub resume: Option<PathBuf>,
+    /// Replace the run in an existing `--out` directory (without it, an existing run there is an
+    /// error).
+    #[arg(long)]
+    pub overwrite: bool,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -57,9 +71,66 @@ struct ConfigFile {
     train: Option<TrainSettings>,
 }
 
+/// The files `tandem train` writes into its directory (what `--overwrite` removes).
+pub const LAYOUT: Layout = Layout {
+    owned: &[
+        "config.toml",
+        "metrics.csv",
+        "episodes.csv",
+        "summary.json",
+        "curve.svg",
+        "checkpoint.safetensors",
+    ],
+    resumable: true,
+};
+
+/// Rejects a non-finite number anywhere in the settings (TOML accepts `nan` and `inf`), naming
+/// its key, before any work starts.
+pub fn ensure_finite_config(
+    source: &ConfigSource,
+    agent: &AlgoConfig,
+    train: &TrainSettings,
+) -> Result<()> {
+    let named = |table: &str, e: NonFinite| {
+        CliError::input(
+            format!("config ({})", source.label()),
+            format!("{table}.{e}"),
+        )
+    };
+    ensure_finite(agent).map_err(|e| named("agent", e))?;
+    ensure_finite(train).map_err(|e| named("train", e))
+}
+
+/// What `summary.json` holds.
+#[derive(Debug, Serialize)]
+struct Summary<'a> {
+    env: &'a str,
+    algo: &'a str,
+    config_source: String,
+    seed: u64,
+    steps: u64,
+    episodes: u64,
+    updates: u64,
+    eval_episodes: usize,
+    eval_return_mean: f64,
+    eval_return_std: f64,
+    eval_returns: &'a [f64],
+    real_samples: u64,
+    wall_seconds: f64,
+    train_seconds: f64,
+    env_steps_per_second: f64,
+    solved_threshold: Option<f64>,
+    solved_at_episode: Option<u64>,
+    best_window_return_mean: Option<f64>,
+    solved_window: usize,
+    checkpoint: String,
+}
+
 /// What `config.toml` records: everything needed to repeat the run.
 #[derive(Debug, Serialize)]
 struct ResolvedConfig<'a> {
+    /// Where the settings came from: `--config`'s path, `preset:<file>` or `defaults`.
+    config_source: String,
     algo: &'a str,
     env: &'a str,
     steps: u64,
@@ -68,26 +139,65 @@ struct ResolvedConfig<'a> {
     train: &'a TrainSettings,
 }
 
-/// Reads the algorithm's config and the loop settings from `path` (or the defaults).
-pub fn read_config(algo: Algo, path: Option<&Path>) -> Result<(AlgoConfig, TrainSettings)> {
-    let file: ConfigFile = match path {
-        None => ConfigFile::default(),
-        Some(p) => {
-            let text = std::fs::read_to_string(p).map_err(|source| CliError::Io {
-                path: p.to_path_buf(),
-                source,
-            })?;
-            toml::from_str(&text).map_err(|e| {
-                CliError::input(format!("config file {}", p.display()), e.to_string().trim())
-            })?
-        }
-    };
+/// Reads the algorithm's config and the loop settings from the text of a `--config` file
+/// (`what` names the file in errors).
+pub fn parse_config(algo: Algo, text: &str, what: &str) -> Result<(AlgoConfig, TrainSettings)> {
+    let file: ConfigFile =
+        toml::from_str(text).map_err(|e| CliError::input(what, e.to_string().trim()))?;
     let agent = match file.agent {
         Some(t) => AlgoConfig::from_toml(algo, t).map_err(CliError::other)?,
         None => AlgoConfig::default_for(algo),
     };
     let train = file.train.unwrap_or_default();
     Ok((agent, train))
+}
+
+/// Where a run's settings came from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ConfigSource {
+    /// `--config FILE`.
+    File(PathBuf),
+    /// The embedded preset for the (algorithm, environment) pair.
+    Preset(&'static Preset),
+    /// The algorithm's `Config::default()` and `TrainSettings::default()`.
+    Defaults,
+}
+
+impl ConfigSource {
+    /// Picks the source as rl-baselines3-zoo does: `--config` if given, else the preset for
+    /// (`algo`, `env`) unless `no_preset`, else the defaults.
+    pub fn choose(config: Option<&Path>, no_preset: bool, algo: Algo, env: &str) -> Self {
+        match (config, presets::find(algo.name(), env)) {
+            (Some(p), _) => ConfigSource::File(p.to_path_buf()),
+            (None, Some(preset)) if !no_preset => ConfigSource::Preset(preset),
+            _ => ConfigSource::Defaults,
+        }
+    }
+
+    /// How `config.toml` and `summary.json` name the source: the file's path,
+    /// `preset:<file>`, or `defaults`.
+    pub fn label(&self) -> String {
+        match self {
+            ConfigSource::File(p) => p.display().to_string(),
+            ConfigSource::Preset(p) => format!("preset:{}", p.file),
+            ConfigSource::Defaults => "defaults".into(),
+        }
+    }
+
+    /// Reads the algorithm's config and the loop settings from this source.
+    pub fn read(&self, algo: Algo) -> Result<(AlgoConfig, TrainSettings)> {
+        match self {
+            ConfigSource::File(p) => {
+                let text = std::fs::read_to_string(p).map_err(|source| CliError::Io {
+                    path: p.clone(),
+                    source,
+                })?;
+                parse_config(algo, &text, &format!("config file {}", p.display()))
+            }
+            ConfigSource::Preset(p) => parse_config(algo, p.text, &format!("preset {}", p.file)),
+            ConfigSource::Defaults => Ok((AlgoConfig::default_for(algo), TrainSettings::default())),
+        }
+    }
 }
 
 fn other(e: impl std::fmt::Display) -> CliError {
@@ -98,7 +208,25 @@ fn other(e: impl std::fmt::Display) -> CliError {
 pub fn run(args: &TrainArgs) -> Result<()> {
     tandem_nn::set_gemm_threads(1);
     let algo: Algo = args.algo.parse().map_err(other)?;
-    let (agent_cfg, settings) = read_config(algo, args.config.as_deref())?;
+    let source = ConfigSource::choose(args.config.as_deref(), args.no_preset, algo, &args.env);
+    let (agent_cfg, settings) = source.read(algo)?;
+    ensure_finite_config(&source, &agent_cfg, &settings)?;
+    if let ConfigSource::Preset(p) = &source {
+        eprintln!(
+            "using preset {} for {} on {} (tuned for --steps {}); --config FILE or --no-preset to \
+             choose other settings",
+            p.file,
+            algo.name(),
+            args.env,
+            p.steps
+        );
+        if args.steps != p.steps {
+            eprintln!(
+                "note: --steps {} differs from the {} steps preset {} was tuned for",
+                args.steps, p.steps, p.file
+            );
+        }
+    }
     let mut env = make(&args.env)?;
     let mut eval_env = make(&args.env)?;
     let mut trainer =
@@ -110,17 +238,25 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             .load(&ckpt, &mut *env)
             .map_err(|e| CliError::input(format!("--resume {}", p.display()), e.to_string()))?;
     }
-    let dir = RunDir::create(args.out.as_deref(), &args.env, algo.name(), args.seed).map_err(
-        |source| CliError::Io {
-            path: args.out.clone().unwrap_or_else(|| PathBuf::from("runs")),
-            source,
-        },
-    )?;
+    let existing = match (args.overwrite, &args.resume) {
+        (true, _) => Existing::Overwrite,
+        (false, Some(_)) => Existing::Resume,
+        (false, None) => Existing::Refuse,
+    };
+    let name = format!("{}__{}__{}", args.env, algo.name(), args.seed);
+    let dir = RunDir::create(args.out.as_deref(), &name, LAYOUT, existing).map_err(other)?;
+    if let Some(pid) = dir.stale_lock_taken_over() {
+        eprintln!(
+            "note: took over {} from process {pid}, which is no longer running",
+            dir.path().display()
+        );
+    }
     let io = |path: &Path| {
         let path = path.to_path_buf();
         move |source| CliError::Io { path, source }
     };
     let resolved = ResolvedConfig {
+        config_source: source.label(),
         algo: algo.name(),
         env: &args.env,
         steps: args.steps,
@@ -256,28 +392,30 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         .filter(|e| e.episode + 1 >= settings.solved_window as u64)
         .map(|e| e.ret_window_mean)
         .fold(f64::NEG_INFINITY, f64::max);
-    let summary = serde_json::json!({
-        "env": args.env,
-        "algo": algo.name(),
-        "seed": args.seed,
-        "steps": trainer.steps(),
-        "episodes": trainer.episodes(),
-        "updates": trainer.updates(),
-        "eval_episodes": final_eval.returns.len(),
-        "eval_return_mean": final_eval.mean,
-        "eval_return_std": final_eval.std,
-        "eval_returns": final_eval.returns,
-        "real_samples": trainer.steps(),
-        "wall_seconds": wall_seconds,
-        "train_seconds": train_seconds,
-        "env_steps_per_second": steps_run as f64 / wall_seconds,
-        "solved_threshold": settings.solved_threshold,
-        "solved_at_episode": log.solved_at_episode,
-        "best_window_return_mean": if best_window.is_finite() { Some(best_window) } else { None },
-        "solved_window": settings.solved_window,
-        "checkpoint": ckpt_path.display().to_string(),
-    });
-    let text = serde_json::to_string_pretty(&summary).map_err(other)?;
+    let summary = Summary {
+        env: &args.env,
+        algo: algo.name(),
+        config_source: source.label(),
+        seed: args.seed,
+        steps: trainer.steps(),
+        episodes: trainer.episodes(),
+        updates: trainer.updates(),
+        eval_episodes: final_eval.returns.len(),
+        eval_return_mean: final_eval.mean,
+        eval_return_std: final_eval.std,
+        eval_returns: &final_eval.returns,
+        real_samples: trainer.steps(),
+        wall_seconds,
+        train_seconds,
+        env_steps_per_second: steps_run as f64 / wall_seconds,
+        solved_threshold: settings.solved_threshold,
+        solved_at_episode: log.solved_at_episode,
+        best_window_return_mean: best_window.is_finite().then_some(best_window),
+        solved_window: settings.solved_window,
+        checkpoint: ckpt_path.display().to_string(),
+    };
+    let text =
+        to_json_pretty(&summary).map_err(|e| CliError::Other(format!("summary.json: {e}")))?;
     dir.write("summary.json", &text).map_err(io(dir.path()))?;
 
     let eval_series = Series {
