@@ -9,8 +9,8 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use rand::Rng as _;
 use tandem_agents::{
-    Batch, Ddpg, DdpgConfig, Dqn, DqnConfig, OffPolicyAgent, ReplayBuffer, Sac, SacConfig,
-    TransitionRef,
+    Agent, Batch, BatchPolicy, Ddpg, DdpgConfig, Dqn, DqnConfig, Mode, OffPolicyAgent,
+    ReplayBuffer, Sac, SacConfig, TransitionRef,
 };
 use tandem_core::seeding::{rng_from_seed, Rng};
 use tandem_core::Space;
@@ -50,6 +50,19 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             buf.sample_into(&mut rng, &mut batch, 0..256).unwrap();
             sac.update(&batch).unwrap()
+        })
+    });
+    // One row through `Agent::act` (the environment loop's call).
+    c.bench_function("sac_act_explore_1row_h256x256", |b| {
+        b.iter(|| sac.act(&[0.1, -0.2, 0.5], Mode::Explore).unwrap())
+    });
+    // A planner's population through the `&self` batch path: 256 rows at once.
+    let rows = buf.sample(256, &mut rng).unwrap().obs.mapv(f64::from);
+    let mut act_rng = rng_from_seed(1);
+    c.bench_function("sac_act_batch_explore_b256_h256x256", |b| {
+        b.iter(|| {
+            sac.act_batch(rows.view(), Mode::Explore, &mut act_rng)
+                .unwrap()
         })
     });
 

@@ -1,9 +1,31 @@
 //! What every agent shares: the [`Agent`] trait (acting), the two ways of learning
 //! ([`OffPolicyAgent`] from minibatches, [`EpisodicAgent`] from whole episodes), and the data they
 //! learn from ([`Batch`], [`Episode`]).
+//!
+//! Planners and model rollouts use agents read-only through two object-safe traits:
+//! [`BatchPolicy`] (acting on `B x obs_dim` observations with an explicit generator) and
+//! [`Critic`] (`Q(s, a)` and `V(s)`). They take `&self`, so DMD-MPC can hold a `&dyn BatchPolicy`
+//! and a `&dyn Critic` of the SAC agent it trains, and they draw every random number from the
+//! caller's generator, never from the agent's own stream.
+//!
+//! ```
+//! use ndarray::array;
+//! use tandem_agents::{BatchPolicy, Critic, Mode, Sac, SacConfig};
+//! use tandem_core::{seeding::rng_from_seed, Space};
+//!
+//! let obs_space = Space::boxed(vec![-1.0; 3], vec![1.0; 3]);
+//! let act_space = Space::boxed(vec![-2.0], vec![2.0]);
+//! let sac = Sac::new(SacConfig::default(), &obs_space, &act_space, 0).unwrap();
+//! let policy: &dyn BatchPolicy = &sac;
+//! let obs = array![[0.1, 0.2, 0.3], [-0.5, 0.0, 0.9]];
+//! let mut rng = rng_from_seed(7);
+//! let a = policy.act_batch(obs.view(), Mode::Explore, &mut rng).unwrap(); // 2 x 1, in [-2, 2]
+//! let v = sac.v_batch(obs.view(), Mode::Explore, &mut rng).unwrap(); // soft values, length 2
+//! assert_eq!((a.dim(), v.len()), ((2, 1), 2));
+//! ```
 
-use ndarray::{Array1, Array2};
-use tandem_core::Action;
+use ndarray::{Array1, Array2, ArrayView2};
+use tandem_core::{Action, Rng};
 
 use crate::error::{AgentError, Result};
 
@@ -48,6 +70,71 @@ pub trait Agent {
     /// the agent included (stable-baselines3's `_on_step`). DQN counts its ε schedule and its
     /// target-network updates here; the default does nothing.
     fn on_env_step(&mut self) {}
+}
+
+/// Batched acting through `&self`: `B x obs_dim` observations (environment units, `f64`) in,
+/// `B` actions out, every random number drawn from the caller's `rng`.
+///
+/// With [`Mode::Explore`] the agent explores as it does in [`Agent::act`]: SAC samples its
+/// squashed Gaussian, DQN is ε-greedy with its current ε, REINFORCE samples its softmax, DDPG adds
+/// its configured noise, drawn independently per row (for Ornstein–Uhlenbeck noise, from the
+/// process's stationary distribution: the batch API keeps no per-episode state; see
+/// [`crate::Ddpg`]). With [`Mode::Deterministic`] no random number is drawn.
+///
+/// Rows are independent: row `i` of a batch equals [`BatchPolicy::act_batch`] of row `i` alone in
+/// deterministic mode; in explore mode the draws are made row by row, in order.
+pub trait BatchPolicy {
+    /// Observation dimension.
+    fn obs_dim(&self) -> usize;
+
+    /// Width of an action row: the action dimension, or 1 (the index) for a discrete action.
+    fn action_width(&self) -> usize;
+
+    /// `Some(n)` for a policy over `n` discrete actions, `None` for a continuous one.
+    fn discrete_actions(&self) -> Option<usize> {
+        None
+    }
+
+    /// The actions for the rows of `obs`, `B x action_width`: environment units for a continuous
+    /// action, the index (as `f64`) for a discrete one, the layout of [`Batch::actions`]. Errors
+    /// on a wrong width, an empty batch or a non-finite observation.
+    fn act_batch(&self, obs: ArrayView2<'_, f64>, mode: Mode, rng: &mut Rng)
+        -> Result<Array2<f64>>;
+
+    /// [`BatchPolicy::act_batch`] as one [`Action`] per row.
+    fn act_rows(&self, obs: ArrayView2<'_, f64>, mode: Mode, rng: &mut Rng) -> Result<Vec<Action>> {
+        let a = self.act_batch(obs, mode, rng)?;
+        Ok(match self.discrete_actions() {
+            Some(_) => a
+                .column(0)
+                .iter()
+                .map(|k| Action::Discrete(*k as usize))
+                .collect(),
+            None => a
+                .rows()
+                .into_iter()
+                .map(|r| Action::Continuous(r.to_vec()))
+                .collect(),
+        })
+    }
+}
+
+/// Critic values through `&self`, on `B` rows: `Q(s, a)` and `V(s)` (a planner's terminal value,
+/// p3's `-V` terminal cost).
+pub trait Critic {
+    /// `Q(s_i, a_i)` for the rows of `obs` (`B x obs_dim`) and `actions` (`B x action_width`, in
+    /// the layout of [`BatchPolicy::act_batch`]). Errors on wrong widths, differing row counts,
+    /// out-of-range or non-finite input.
+    fn q_batch(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        actions: ArrayView2<'_, f64>,
+    ) -> Result<Array1<f64>>;
+
+    /// `V(s_i)` for the rows of `obs`. What `mode` and `rng` mean is the agent's: SAC's soft value
+    /// is estimated from one sampled action per row (`Explore`) or at the mean action
+    /// (`Deterministic`); DDPG's `Q(s, μ(s))` and DQN's `max_a Q(s, a)` ignore both.
+    fn v_batch(&self, obs: ArrayView2<'_, f64>, mode: Mode, rng: &mut Rng) -> Result<Array1<f64>>;
 }
 
 /// An agent that learns from minibatches of transitions, whatever produced them (real data, model
@@ -237,6 +324,61 @@ pub fn action_row(action: &Action, out: &mut [f32]) {
         }
         Action::Discrete(k) => out[0] = *k as f32,
     }
+}
+
+/// Checks a batch of observations (`B x dim`, `B >= 1`) and converts it to row-major `f32`.
+pub(crate) fn obs_rows(obs: ArrayView2<'_, f64>, dim: usize) -> Result<Vec<f32>> {
+    if obs.ncols() != dim {
+        return Err(AgentError::Dim {
+            what: "observation batch width",
+            expected: dim,
+            got: obs.ncols(),
+        });
+    }
+    if obs.nrows() == 0 {
+        return Err(AgentError::Empty("observation batch"));
+    }
+    if let Some(v) = obs.iter().find(|v| !v.is_finite()) {
+        return Err(AgentError::NonFinite {
+            what: "observation",
+            value: *v,
+        });
+    }
+    Ok(obs.iter().map(|v| *v as f32).collect())
+}
+
+/// Checks that a batch of actions has `rows x width` entries, all finite.
+pub(crate) fn check_action_rows(
+    actions: ArrayView2<'_, f64>,
+    rows: usize,
+    width: usize,
+) -> Result<()> {
+    if actions.ncols() != width {
+        return Err(AgentError::Dim {
+            what: "action batch width",
+            expected: width,
+            got: actions.ncols(),
+        });
+    }
+    if actions.nrows() != rows {
+        return Err(AgentError::Dim {
+            what: "action batch rows (one per observation)",
+            expected: rows,
+            got: actions.nrows(),
+        });
+    }
+    if let Some(v) = actions.iter().find(|v| !v.is_finite()) {
+        return Err(AgentError::NonFinite {
+            what: "action",
+            value: *v,
+        });
+    }
+    Ok(())
+}
+
+/// One observation as a `1 x dim` view, for the single-row [`Agent::act`] over the batch path.
+pub(crate) fn one_row(obs: &[f64]) -> ArrayView2<'_, f64> {
+    ArrayView2::from_shape((1, obs.len()), obs).expect("a slice is one contiguous row")
 }
 
 /// Checks an observation's length and finiteness.

@@ -1,8 +1,11 @@
 //! Pieces the agents share: space checks, action scaling, a network bundled with its optimizer,
 //! workspace and gradient buffer, and checkpoint helpers.
 
+use ndarray::{Array2, ArrayView2};
 use tandem_core::{Rng, Space};
-use tandem_nn::{Adam, AdamConfig, Checkpoint, Checkpointable, Mlp, MlpConfig, MlpWorkspace};
+use tandem_nn::{
+    Adam, AdamConfig, Checkpoint, Checkpointable, Mlp, MlpConfig, MlpWorkspace, SharedWorkspace,
+};
 
 use crate::error::{AgentError, Result};
 
@@ -62,6 +65,29 @@ impl ActionScale {
             .collect()
     }
 
+    /// Rows of `[-1, 1]` actions (`n x dim`, row-major) in environment units, `n x dim`.
+    pub(crate) fn to_env_rows(&self, a: &[f32]) -> Array2<f64> {
+        let d = self.dim();
+        let mut out = Array2::zeros((a.len() / d, d));
+        for (mut o, x) in out.rows_mut().into_iter().zip(a.chunks_exact(d)) {
+            for k in 0..d {
+                o[k] = self.center[k] + self.half[k] * f64::from(x[k]);
+            }
+        }
+        out
+    }
+
+    /// Environment-unit rows (`n x dim`) to `[-1, 1]`, row-major `f32`.
+    pub(crate) fn normalize_view(&self, rows: ArrayView2<'_, f64>) -> Vec<f32> {
+        let mut out = Vec::with_capacity(rows.len());
+        for r in rows.rows() {
+            for k in 0..self.dim() {
+                out.push(((r[k] - self.center[k]) / self.half[k]) as f32);
+            }
+        }
+        out
+    }
+
     /// Environment units to `[-1, 1]`, row by row in place (`n x dim`).
     pub(crate) fn normalize_rows(&self, rows: &[f32], out: &mut [f32]) {
         let d = self.dim();
@@ -85,13 +111,15 @@ pub(crate) fn discrete_n(agent: &'static str, space: &Space) -> Result<usize> {
     }
 }
 
-/// A trained network: parameters, its Adam state, a workspace and a gradient buffer.
+/// A trained network: parameters, its Adam state, a workspace and a gradient buffer, and a
+/// second workspace behind a mutex for inference through `&self` ([`Net::infer`]).
 #[derive(Debug, Clone)]
 pub(crate) struct Net {
     pub(crate) mlp: Mlp,
     pub(crate) opt: Adam,
     pub(crate) ws: MlpWorkspace,
     pub(crate) grads: Vec<f32>,
+    shared: SharedWorkspace,
 }
 
 impl Net {
@@ -105,7 +133,14 @@ impl Net {
             opt,
             ws,
             grads,
+            shared: SharedWorkspace::default(),
         })
+    }
+
+    /// The outputs for `n` rows of `x` through `&self` (the batched acting and critic paths).
+    pub(crate) fn infer(&self, x: &[f32], n: usize) -> Result<Vec<f32>> {
+        self.shared
+            .with(|_, ws| Ok(self.mlp.forward(x, n, ws)?.to_vec()))
     }
 
     /// Applies the gradient in `self.grads` with Adam.

@@ -256,6 +256,14 @@ impl ConvQNet {
         Ok(())
     }
 
+    /// Q-values of `n` flat images (`n × n_actions`, row-major) through `&self` (batched
+    /// acting), into a new vector.
+    pub fn infer(&self, x: &[f32], n: usize) -> Result<Vec<f32>> {
+        let mut v = Vec::new();
+        Self::read(&self.graph(x, n)?, &mut v)?;
+        Ok(v)
+    }
+
     /// Q-values of `n` flat images (`n × n_actions`, row-major), without keeping the graph.
     pub fn forward(&mut self, x: &[f32], n: usize) -> Result<&[f32]> {
         let t = self.graph(x, n)?;

@@ -6,18 +6,31 @@
 //! `y = r + γ (1 - done) Q'(s', μ'(s'))` (MSE), then the actor ascends `Q(s, μ(s))` through the
 //! freshly updated critic (`dQ/da` from the critic's input gradient), then both targets move by τ.
 //! Actions are `[-1, 1]` inside the networks and environment units outside.
+//!
+//! Exploration noise is the agent's: [`NoiseConfig`] in [`DdpgConfig`], changed between phases
+//! with [`Ddpg::set_noise`] (p0 lowers σ after pre-training). [`Agent::act`] adds the stateful
+//! noise (an Ornstein–Uhlenbeck process restarted by [`Agent::reset_episode`]). The batched
+//! `&self` path ([`BatchPolicy::act_batch`] with [`Mode::Explore`]) keeps no per-episode state: it
+//! adds independent Gaussian noise per row and component with the process's stationary standard
+//! deviation ([`NoiseConfig::stationary_std`]), drawn from the caller's generator, then clips to
+//! the action box as `act` does.
 
+use ndarray::{Array1, Array2, ArrayView2};
 use rand::Rng as _;
+use rand_distr::{Distribution, StandardNormal};
 use tandem_core::{Action, Rng, SeedStream, Space};
 use tandem_nn::{Activation, Checkpoint, Init, MlpConfig};
 
-use crate::agent::{check_obs, Agent, Batch, Metrics, Mode, OffPolicyAgent};
+use crate::agent::{
+    check_action_rows, check_obs, obs_rows, Agent, Batch, BatchPolicy, Critic, Metrics, Mode,
+    OffPolicyAgent,
+};
 use crate::common::{
     check_header, concat_rows, fit, obs_dim, save_header, ActionScale, Net, Target,
 };
 use crate::config::DdpgConfig;
 use crate::error::{AgentError, Result};
-use crate::noise::Noise;
+use crate::noise::{Noise, NoiseConfig};
 
 /// A DDPG agent.
 #[derive(Debug, Clone)]
@@ -97,6 +110,28 @@ impl Ddpg {
         self.actor.mlp.params()
     }
 
+    /// Replaces the exploration noise (p0 changes σ between its phases); the process restarts
+    /// at zero. Errors on an out-of-range configuration, leaving the noise unchanged.
+    pub fn set_noise(&mut self, noise: NoiseConfig) -> Result<()> {
+        self.noise = Noise::new(noise, self.scale.dim())?;
+        self.config.noise = noise;
+        Ok(())
+    }
+
+    /// The exploration noise in use.
+    pub fn noise(&self) -> NoiseConfig {
+        self.noise.config()
+    }
+
+    /// `Q(s, a)` for row-major `f32` observations and actions in `[-1, 1]`.
+    fn q_rows(&self, x: &[f32], a: &[f32], n: usize) -> Result<Array1<f64>> {
+        let (od, ad) = (self.od, self.scale.dim());
+        let mut xa = vec![0.0; n * (od + ad)];
+        concat_rows(x, od, a, ad, &mut xa);
+        let q = self.critic.infer(&xa, n)?;
+        Ok(q.iter().map(|v| f64::from(*v)).collect())
+    }
+
     /// Stores networks, optimizer states, noise state and generator.
     pub fn save(&self, ckpt: &mut Checkpoint) -> Result<()> {
         save_header(
@@ -133,10 +168,11 @@ impl Agent for Ddpg {
         "ddpg"
     }
 
+    /// The batch path's deterministic action of one row plus the stateful noise (`Explore`).
     fn act(&mut self, obs: &[f64], mode: Mode) -> Result<Action> {
         check_obs(obs, self.od)?;
         let x: Vec<f32> = obs.iter().map(|v| *v as f32).collect();
-        let mut a = self.actor.mlp.forward(&x, 1, &mut self.actor.ws)?.to_vec();
+        let mut a = self.actor.infer(&x, 1)?;
         if mode == Mode::Explore {
             let n = self.noise.sample(&mut self.rng);
             for (ai, ni) in a.iter_mut().zip(n) {
@@ -148,6 +184,60 @@ impl Agent for Ddpg {
 
     fn reset_episode(&mut self) {
         self.noise.reset();
+    }
+}
+
+impl BatchPolicy for Ddpg {
+    fn obs_dim(&self) -> usize {
+        self.od
+    }
+
+    fn action_width(&self) -> usize {
+        self.scale.dim()
+    }
+
+    /// `μ(s)`; Explore adds independent `N(0, stationary_std²)` noise per row and component
+    /// (drawn from `rng` row by row) and clips to the box.
+    fn act_batch(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        mode: Mode,
+        rng: &mut Rng,
+    ) -> Result<Array2<f64>> {
+        let x = obs_rows(obs, self.od)?;
+        let mut a = self.actor.infer(&x, obs.nrows())?;
+        if mode == Mode::Explore {
+            let sd = self.noise.config().stationary_std();
+            for ai in a.iter_mut() {
+                let e: f64 = StandardNormal.sample(rng);
+                *ai = (*ai + (sd * e) as f32).clamp(-1.0, 1.0);
+            }
+        }
+        Ok(self.scale.to_env_rows(&a))
+    }
+}
+
+impl Critic for Ddpg {
+    fn q_batch(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        actions: ArrayView2<'_, f64>,
+    ) -> Result<Array1<f64>> {
+        let x = obs_rows(obs, self.od)?;
+        check_action_rows(actions, obs.nrows(), self.scale.dim())?;
+        self.q_rows(&x, &self.scale.normalize_view(actions), obs.nrows())
+    }
+
+    /// `V(s) = Q(s, μ(s))`, the deterministic policy's value (`mode` and `rng` unused).
+    fn v_batch(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        _mode: Mode,
+        _rng: &mut Rng,
+    ) -> Result<Array1<f64>> {
+        let x = obs_rows(obs, self.od)?;
+        let mu = self.actor.infer(&x, obs.nrows())?;
+        self.q_rows(&x, &mu, obs.nrows())
     }
 }
 

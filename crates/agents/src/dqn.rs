@@ -7,14 +7,22 @@
 //! The Q-network is an MLP over flat observations (`network = "mlp"`) or, for image observations
 //! such as p2's 16×16 RGB maze, a [`ConvQNet`] (`network = "conv"`, layers in `DqnConfig::conv`).
 //! Both are trained by the same loss code: the agent computes `∂L/∂Q` of the Huber loss on
-//! `Q(s, a)` and the network back-propagates it.
+//! `Q(s, a)` (`tandem-nn`'s [`huber`]) and the network back-propagates it.
+//!
+//! Batched acting through `&self` ([`BatchPolicy`], indices in [`Dqn::act_indices`]) is ε-greedy
+//! with the agent's current ε and the caller's generator; [`Dqn::q_table`] gives `Q(s, ·)` and
+//! [`Critic`] `Q(s, a)` and `V(s) = max_a Q(s, a)`.
 
+use ndarray::{Array1, Array2, ArrayView2};
 use rand::Rng as _;
 use tandem_core::{Action, Rng, SeedStream, Space};
-use tandem_nn::{clip_grad_norm, Adam, AdamConfig, Checkpoint, Checkpointable, MlpConfig};
+use tandem_nn::{clip_grad_norm, huber, Adam, AdamConfig, Checkpoint, Checkpointable, MlpConfig};
 use tandem_nn::{MlpWorkspace, Optimizer};
 
-use crate::agent::{check_obs, Agent, Batch, Metrics, Mode, OffPolicyAgent};
+use crate::agent::{
+    check_action_rows, check_obs, obs_rows, one_row, Agent, Batch, BatchPolicy, Critic, Metrics,
+    Mode, OffPolicyAgent,
+};
 use crate::common::{check_header, discrete_n, fit, obs_dim, save_header, Net, Target};
 use crate::config::{DqnConfig, QNetwork};
 use crate::conv_qnet::ConvQNet;
@@ -38,11 +46,11 @@ enum QNets {
 }
 
 impl QNets {
-    /// Online-network Q-values of `n` observations (no graph kept).
-    fn online(&mut self, x: &[f32], n: usize) -> Result<&[f32]> {
+    /// Online-network Q-values of `n` observations through `&self`.
+    fn infer(&self, x: &[f32], n: usize) -> Result<Vec<f32>> {
         match self {
-            QNets::Mlp { q, .. } => Ok(q.mlp.forward(x, n, &mut q.ws)?),
-            QNets::Conv { q, .. } => q.forward(x, n),
+            QNets::Mlp { q, .. } => q.infer(x, n),
+            QNets::Conv { q, .. } => q.infer(x, n),
         }
     }
 
@@ -167,8 +175,9 @@ pub struct Dqn {
     env_steps: u64,
     updates: u64,
     rng: Rng,
-    x: Vec<f32>,
     y: Vec<f32>,
+    q_sa: Vec<f32>,
+    d_sa: Vec<f32>,
     d_q: Vec<f32>,
     best: Vec<usize>,
 }
@@ -227,8 +236,9 @@ impl Dqn {
             n_actions,
             env_steps: 0,
             updates: 0,
-            x: Vec::new(),
             y: Vec::new(),
+            q_sa: Vec::new(),
+            d_sa: Vec::new(),
             d_q: Vec::new(),
             best: Vec::new(),
         })
@@ -262,9 +272,56 @@ impl Dqn {
     /// The greedy Q-values of one observation.
     pub fn q_values(&mut self, obs: &[f64]) -> Result<Vec<f32>> {
         check_obs(obs, self.od)?;
-        self.x.clear();
-        self.x.extend(obs.iter().map(|v| *v as f32));
-        Ok(self.nets.online(&self.x, 1)?.to_vec())
+        let x: Vec<f32> = obs.iter().map(|v| *v as f32).collect();
+        self.nets.infer(&x, 1)
+    }
+
+    /// `Q(s, ·)` of the online network for the rows of `obs`: `B x n_actions`.
+    pub fn q_table(&self, obs: ArrayView2<'_, f64>) -> Result<Array2<f64>> {
+        let x = obs_rows(obs, self.od)?;
+        let q = self.nets.infer(&x, obs.nrows())?;
+        Ok(Array2::from_shape_fn(
+            (obs.nrows(), self.n_actions),
+            |(i, j)| f64::from(q[i * self.n_actions + j]),
+        ))
+    }
+
+    /// ε-greedy action indices for the rows of `obs` with the current ε, drawing from `rng` row
+    /// by row (a uniform number, then the random index when it falls below ε) as [`Agent::act`]
+    /// does; Deterministic is greedy and draws nothing. Only the greedy rows go through the
+    /// network.
+    pub fn act_indices(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        mode: Mode,
+        rng: &mut Rng,
+    ) -> Result<Vec<usize>> {
+        let x = obs_rows(obs, self.od)?;
+        let (od, na) = (self.od, self.n_actions);
+        let mut out: Vec<Option<usize>> = vec![None; obs.nrows()];
+        if mode == Mode::Explore {
+            let eps = self.epsilon();
+            for o in out.iter_mut() {
+                if rng.random::<f64>() < eps {
+                    *o = Some(rng.random_range(0..na));
+                }
+            }
+        }
+        let greedy: Vec<usize> = (0..out.len()).filter(|i| out[*i].is_none()).collect();
+        if !greedy.is_empty() {
+            let xg: Vec<f32> = greedy
+                .iter()
+                .flat_map(|i| x[i * od..(i + 1) * od].iter().copied())
+                .collect();
+            let q = self.nets.infer(&xg, greedy.len())?;
+            for (row, i) in q.chunks_exact(na).zip(&greedy) {
+                out[*i] = Some(argmax(row));
+            }
+        }
+        Ok(out
+            .into_iter()
+            .map(|k| k.expect("every row chosen"))
+            .collect())
     }
 
     /// Stores networks, optimizer, counters and generator.
@@ -298,18 +355,13 @@ impl Agent for Dqn {
         "dqn"
     }
 
+    /// The one-row case of [`Dqn::act_indices`], drawing from the agent's own generator.
     fn act(&mut self, obs: &[f64], mode: Mode) -> Result<Action> {
         check_obs(obs, self.od)?;
-        if mode == Mode::Explore {
-            let eps = self.epsilon();
-            if self.rng.random::<f64>() < eps {
-                return Ok(Action::Discrete(self.rng.random_range(0..self.n_actions)));
-            }
-        }
-        self.x.clear();
-        self.x.extend(obs.iter().map(|v| *v as f32));
-        let q = self.nets.online(&self.x, 1)?;
-        Ok(Action::Discrete(argmax(q)))
+        let mut rng = self.rng.clone();
+        let k = self.act_indices(one_row(obs), mode, &mut rng)?;
+        self.rng = rng;
+        Ok(Action::Discrete(k[0]))
     }
 
     /// Advances the ε schedule and copies the online network into the target every
@@ -319,6 +371,74 @@ impl Agent for Dqn {
         if self.env_steps % self.config.target_update_interval as u64 == 0 {
             self.sync_target();
         }
+    }
+}
+
+impl BatchPolicy for Dqn {
+    fn obs_dim(&self) -> usize {
+        self.od
+    }
+
+    fn action_width(&self) -> usize {
+        1
+    }
+
+    fn discrete_actions(&self) -> Option<usize> {
+        Some(self.n_actions)
+    }
+
+    /// [`Dqn::act_indices`] as a column of indices.
+    fn act_batch(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        mode: Mode,
+        rng: &mut Rng,
+    ) -> Result<Array2<f64>> {
+        let k = self.act_indices(obs, mode, rng)?;
+        Ok(Array2::from_shape_fn((k.len(), 1), |(i, _)| k[i] as f64))
+    }
+}
+
+impl Critic for Dqn {
+    /// `Q(s, a)` for actions given as indices (one column).
+    fn q_batch(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        actions: ArrayView2<'_, f64>,
+    ) -> Result<Array1<f64>> {
+        check_action_rows(actions, obs.nrows(), 1)?;
+        let na = self.n_actions;
+        let idx = actions
+            .column(0)
+            .iter()
+            .map(|a| {
+                if *a >= 0.0 && *a < na as f64 && a.fract() == 0.0 {
+                    Ok(*a as usize)
+                } else {
+                    Err(AgentError::WrongActionSpace {
+                        agent: "dqn",
+                        expected: "action indices 0 <= k < n_actions",
+                        got: a.to_string(),
+                    })
+                }
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let q = self.q_table(obs)?;
+        Ok(idx.iter().enumerate().map(|(i, k)| q[[i, *k]]).collect())
+    }
+
+    /// `V(s) = max_a Q(s, a)`, the greedy policy's value (`mode` and `rng` unused).
+    fn v_batch(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        _mode: Mode,
+        _rng: &mut Rng,
+    ) -> Result<Array1<f64>> {
+        let q = self.q_table(obs)?;
+        Ok(q.rows()
+            .into_iter()
+            .map(|r| r.iter().copied().fold(f64::NEG_INFINITY, f64::max))
+            .collect())
     }
 }
 
@@ -335,6 +455,8 @@ impl OffPolicyAgent for Dqn {
             });
         }
         fit(&mut self.y, n);
+        fit(&mut self.q_sa, n);
+        fit(&mut self.d_sa, n);
         fit(&mut self.d_q, n * na);
         self.best.resize(n, 0);
         let obs = batch.obs.as_slice().expect("standard layout");
@@ -359,29 +481,18 @@ impl OffPolicyAgent for Dqn {
             self.y[i] = batch.rewards[i] + gamma * (1.0 - batch.terminated[i]) * row[k];
         }
 
-        // Huber (smooth L1) on Q(s, a), mean over the batch.
+        // Huber (smooth L1) on Q(s, a), mean over the batch; its gradient scattered into the
+        // taken actions' outputs. A non-finite loss is nn's error.
         let q = self.nets.forward_train(obs, n)?;
+        for i in 0..n {
+            self.q_sa[i] = q[i * na + actions[i]];
+        }
+        let q_mean = self.q_sa.iter().map(|v| f64::from(*v)).sum::<f64>();
         let delta = self.config.huber_delta as f32;
-        let mut loss = 0.0f64;
-        let mut q_mean = 0.0f64;
+        let loss = f64::from(huber(&self.q_sa, &self.y, delta, Some(&mut self.d_sa))?);
         self.d_q.iter_mut().for_each(|d| *d = 0.0);
         for i in 0..n {
-            let v = q[i * na + actions[i]];
-            q_mean += f64::from(v);
-            let e = v - self.y[i];
-            loss += f64::from(if e.abs() <= delta {
-                0.5 * e * e
-            } else {
-                delta * (e.abs() - 0.5 * delta)
-            });
-            self.d_q[i * na + actions[i]] = e.clamp(-delta, delta) / n as f32;
-        }
-        loss /= n as f64;
-        if !loss.is_finite() {
-            return Err(AgentError::NonFinite {
-                what: "dqn loss",
-                value: loss,
-            });
+            self.d_q[i * na + actions[i]] = self.d_sa[i];
         }
         let lr = self.learning_rate();
         self.nets

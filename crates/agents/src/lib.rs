@@ -6,6 +6,7 @@
 //! | item | what |
 //! |---|---|
 //! | [`Agent`], [`OffPolicyAgent`], [`EpisodicAgent`], [`Mode`] | acting and the two ways of learning |
+//! | [`BatchPolicy`], [`Critic`] | batched `&self` acting (explicit generator) and `Q(s, a)`, `V(s)`, for planners and model rollouts |
 //! | [`ReplayBuffer`], [`MixedSampler`], [`Batch`], [`Episode`] | data (ring buffer in `ndarray`, keeps the previous action) |
 //! | [`Ddpg`], [`Sac`], [`Dqn`], [`Reinforce`] and their `*Config` | the agents; each `Default` cites its source |
 //! | [`Noise`], [`NoiseConfig`] | Ornstein–Uhlenbeck and Gaussian exploration |
@@ -52,7 +53,9 @@ pub mod replay;
 pub mod sac;
 pub mod trainer;
 
-pub use agent::{Agent, Batch, Episode, EpisodicAgent, Metrics, Mode, OffPolicyAgent};
+pub use agent::{
+    Agent, Batch, BatchPolicy, Critic, Episode, EpisodicAgent, Metrics, Mode, OffPolicyAgent,
+};
 pub use config::{
     Baseline, DdpgConfig, DqnConfig, OffPolicySchedule, QNetwork, ReinforceConfig, SacConfig,
 };

@@ -67,6 +67,22 @@ impl NoiseConfig {
     }
 }
 
+impl NoiseConfig {
+    /// The standard deviation of one component of the noise at a step far from the episode's
+    /// start: `sigma` for Gaussian noise; for Ornstein–Uhlenbeck the stationary value of the AR(1)
+    /// process `x' = phi x + sigma sqrt(dt) N(0, 1)`, `phi = 1 - theta dt`:
+    /// `sigma sqrt(dt / (1 - phi^2))`. What the batched, stateless acting path of DDPG adds per row.
+    pub fn stationary_std(&self) -> f64 {
+        match *self {
+            NoiseConfig::OrnsteinUhlenbeck { theta, sigma, dt } => {
+                let phi = 1.0 - theta * dt;
+                sigma * (dt / (1.0 - phi * phi)).sqrt()
+            }
+            NoiseConfig::Gaussian { sigma } => sigma,
+        }
+    }
+}
+
 /// Noise state: the OU process's current value (empty state for Gaussian noise).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Noise {
@@ -82,6 +98,11 @@ impl Noise {
             config,
             state: vec![0.0; dim],
         })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> NoiseConfig {
+        self.config
     }
 
     /// Restarts the process at zero (each episode's start).
@@ -140,6 +161,14 @@ mod tests {
         assert!(mean.abs() < 0.02);
         n.reset();
         assert_eq!(n.state, vec![0.0]);
+    }
+
+    #[test]
+    fn stationary_std_is_the_long_run_std_of_the_process() {
+        // phi = 0.85: var = 0.12^2 / (1 - 0.7225); Gaussian: sigma itself.
+        let ou = NoiseConfig::default();
+        assert!((ou.stationary_std() - 0.12 / 0.2775f64.sqrt()).abs() < 1e-12);
+        assert_eq!(NoiseConfig::Gaussian { sigma: 0.3 }.stationary_std(), 0.3);
     }
 
     #[test]

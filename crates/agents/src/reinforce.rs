@@ -4,13 +4,18 @@
 //! Loss over the `N` steps of the episodes in one update:
 //! `L = -(1/N) Σ_t log π(a_t|s_t) A_t`, with `A_t` the return-to-go `G_t`, standardized, or
 //! `G_t - V(s_t)` for a learned value baseline (fitted by MSE on `G_t` in the same update).
-//! Its gradient wrt the logits is `(softmax - onehot(a_t)) A_t / N`.
+//! Its gradient wrt the logits is `(softmax - onehot(a_t)) A_t / N`: `tandem-nn`'s
+//! [`Categorical`] head (log-softmax, sampling, argmax and this gradient with weights `-A_t / N`).
+//!
+//! Batched acting through `&self`: [`Reinforce::act_indices`] and [`BatchPolicy`].
 
-use rand::Rng as _;
+use ndarray::{Array2, ArrayView2};
 use tandem_core::{Action, Rng, SeedStream, Space};
-use tandem_nn::{Checkpoint, MlpConfig};
+use tandem_nn::{Categorical, Checkpoint, MlpConfig};
 
-use crate::agent::{check_obs, Agent, Episode, EpisodicAgent, Metrics, Mode};
+use crate::agent::{
+    check_obs, obs_rows, one_row, Agent, BatchPolicy, Episode, EpisodicAgent, Metrics, Mode,
+};
 use crate::common::{check_header, discrete_n, obs_dim, save_header, Net};
 use crate::config::{Baseline, ReinforceConfig};
 use crate::error::{AgentError, Result};
@@ -21,19 +26,10 @@ pub struct Reinforce {
     config: ReinforceConfig,
     od: usize,
     n_actions: usize,
+    head: Categorical,
     policy: Net,
     value: Option<Net>,
     rng: Rng,
-}
-
-fn softmax_in_place(row: &mut [f32]) {
-    let m = row.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
-    let mut z = 0.0;
-    for v in row.iter_mut() {
-        *v = (*v - m).exp();
-        z += *v;
-    }
-    row.iter_mut().for_each(|v| *v /= z);
 }
 
 impl Reinforce {
@@ -65,6 +61,7 @@ impl Reinforce {
         };
         Ok(Self {
             rng: seeds.rng("reinforce-sample"),
+            head: Categorical::new(n_actions),
             config,
             od,
             n_actions,
@@ -76,14 +73,36 @@ impl Reinforce {
     /// Action probabilities for one observation.
     pub fn probabilities(&mut self, obs: &[f64]) -> Result<Vec<f32>> {
         check_obs(obs, self.od)?;
-        let x: Vec<f32> = obs.iter().map(|v| *v as f32).collect();
-        let mut p = self
-            .policy
-            .mlp
-            .forward(&x, 1, &mut self.policy.ws)?
-            .to_vec();
-        softmax_in_place(&mut p);
-        Ok(p)
+        let mut lp = self.log_probs(one_row(obs))?;
+        lp.iter_mut().for_each(|v| *v = v.exp());
+        Ok(lp)
+    }
+
+    /// Log-probabilities of every action for the rows of `obs` (`B x n_actions`, row-major).
+    fn log_probs(&self, obs: ArrayView2<'_, f64>) -> Result<Vec<f32>> {
+        let x = obs_rows(obs, self.od)?;
+        let logits = self.policy.infer(&x, obs.nrows())?;
+        let mut lp = vec![0.0; logits.len()];
+        self.head.log_softmax(&logits, obs.nrows(), &mut lp)?;
+        Ok(lp)
+    }
+
+    /// Action indices for the rows of `obs`: sampled from the softmax with one uniform draw per
+    /// row from `rng` (Explore), or the most probable (Deterministic, no draw).
+    pub fn act_indices(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        mode: Mode,
+        rng: &mut Rng,
+    ) -> Result<Vec<usize>> {
+        let n = obs.nrows();
+        let lp = self.log_probs(obs)?;
+        let mut k = vec![0; n];
+        match mode {
+            Mode::Deterministic => self.head.argmax(&lp, n, &mut k)?,
+            Mode::Explore => self.head.sample(&lp, n, rng, &mut k)?,
+        }
+        Ok(k)
     }
 
     /// The policy's flat parameters.
@@ -124,33 +143,38 @@ impl Agent for Reinforce {
         "reinforce"
     }
 
+    /// The one-row case of [`Reinforce::act_indices`], drawing from the agent's own generator.
     fn act(&mut self, obs: &[f64], mode: Mode) -> Result<Action> {
-        let p = self.probabilities(obs)?;
-        let k = match mode {
-            Mode::Deterministic => {
-                let mut k = 0;
-                for (j, v) in p.iter().enumerate() {
-                    if *v > p[k] {
-                        k = j;
-                    }
-                }
-                k
-            }
-            Mode::Explore => {
-                let u: f32 = self.rng.random();
-                let mut c = 0.0;
-                let mut k = self.n_actions - 1;
-                for (j, v) in p.iter().enumerate() {
-                    c += v;
-                    if u < c {
-                        k = j;
-                        break;
-                    }
-                }
-                k
-            }
-        };
-        Ok(Action::Discrete(k))
+        check_obs(obs, self.od)?;
+        let mut rng = self.rng.clone();
+        let k = self.act_indices(one_row(obs), mode, &mut rng)?;
+        self.rng = rng;
+        Ok(Action::Discrete(k[0]))
+    }
+}
+
+impl BatchPolicy for Reinforce {
+    fn obs_dim(&self) -> usize {
+        self.od
+    }
+
+    fn action_width(&self) -> usize {
+        1
+    }
+
+    fn discrete_actions(&self) -> Option<usize> {
+        Some(self.n_actions)
+    }
+
+    /// [`Reinforce::act_indices`] as a column of indices.
+    fn act_batch(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        mode: Mode,
+        rng: &mut Rng,
+    ) -> Result<Array2<f64>> {
+        let k = self.act_indices(obs, mode, rng)?;
+        Ok(Array2::from_shape_fn((k.len(), 1), |(i, _)| k[i] as f64))
     }
 }
 
@@ -226,21 +250,23 @@ impl EpisodicAgent for Reinforce {
             .policy
             .mlp
             .forward_train(&x, n, &mut self.policy.ws, None)?;
-        let mut d = logits.to_vec();
+        let mut lp = vec![0.0; n * na];
+        self.head.log_softmax(logits, n, &mut lp)?;
         let mut loss = 0.0f64;
         let mut entropy = 0.0f64;
         for i in 0..n {
-            let row = &mut d[i * na..(i + 1) * na];
-            softmax_in_place(row);
-            loss -= f64::from(row[acts[i]].max(1e-30).ln() * adv[i]) / n as f64;
+            let row = &lp[i * na..(i + 1) * na];
+            loss -= f64::from(row[acts[i]] * adv[i]) / n as f64;
             entropy -= row
                 .iter()
-                .map(|p| f64::from(*p) * f64::from(p.max(1e-30)).ln())
+                .map(|l| f64::from(l.exp()) * f64::from(*l))
                 .sum::<f64>()
                 / n as f64;
-            row[acts[i]] -= 1.0;
-            row.iter_mut().for_each(|v| *v *= adv[i] / n as f32);
         }
+        // L = Σ_i w_i log π(a_i|s_i) with w_i = -A_i / N.
+        let w: Vec<f32> = adv.iter().map(|a| -a / n as f32).collect();
+        let mut d = vec![0.0; n * na];
+        self.head.backward(&lp, &acts, &w, 0.0, &mut d)?;
         self.policy
             .mlp
             .backward(&mut self.policy.ws, &d, Some(&mut self.policy.grads), None)?;

@@ -1,30 +1,38 @@
 //! SAC (Haarnoja et al. 2018) with twin critics, target critics, automatic entropy tuning and a
 //! tanh-squashed Gaussian actor, following stable-baselines3's `SAC.train` step by step.
 //!
-//! The actor outputs `[mean, log_std]` (log-std clamped to `[log_std_min, log_std_max]`, zero
-//! gradient outside, as `torch.clamp`); an action is `a = tanh(u)`, `u = mean + std ε`,
-//! `ε ~ N(0, I)` from the agent's own seeded generator, with
-//! `log π(a|s) = Σ_j [-ε_j²/2 - log_std_j - log(2π)/2 - log(1 - a_j² + 1e-6)]`.
+//! The actor outputs `[mean, log_std]` and `tandem-nn`'s [`TanhGaussian`] head turns them into
+//! actions and log-probabilities: log-std clamped to `[log_std_min, log_std_max]` (zero gradient
+//! outside, as `torch.clamp`), `a = tanh(u)`, `u = mean + std ε`, `ε ~ N(0, I)` from the agent's
+//! own seeded generator, with the exact change of variables
+//! `log π(a|s) = Σ_j [-ε_j²/2 - log_std_j - log(2π)/2 - log(1 - tanh² u_j)]` (stable form; SB3
+//! writes `log(1 - a² + 1e-6)`, which differs by at most `1e-6 / (1 - a²)` per component).
 //!
-//! The actor gradient is derived by hand (reparametrization): with
-//! `L = mean_i(α log π_i - min(Q1, Q2)(s_i, a_i))`,
-//! `dL/du = (α · 2a(1-a²)/(1-a²+1e-6) - dQmin/da · (1-a²)) / n`,
-//! `dL/dmean = dL/du`, `dL/dlog_std = -α/n + dL/du · std · ε`, where `dQmin/da` is the input
-//! gradient of whichever critic is smaller for that row. Tested against finite differences.
+//! The actor gradient is the head's reparametrized backward: with
+//! `L = mean_i(α log π_i - min(Q1, Q2)(s_i, a_i))`, `dL/da = -dQmin/da / n` (the input gradient
+//! of whichever critic is smaller for that row) and `dL/dlog π = α / n`. Tested against finite
+//! differences.
+//!
+//! Acting and critic values through `&self` ([`BatchPolicy`], [`Critic`]) use the caller's
+//! generator; [`Agent::act`] is the one-row case of [`BatchPolicy::act_batch`] drawn from the
+//! agent's own stream.
 
-use rand_distr::{Distribution, StandardNormal};
+use ndarray::{Array1, Array2, ArrayView2};
 use tandem_core::{Action, Rng, SeedStream, Space};
-use tandem_nn::{Adam, AdamConfig, Checkpoint, Checkpointable, MlpConfig, MlpWorkspace, Optimizer};
+use tandem_nn::{
+    Adam, AdamConfig, Checkpoint, Checkpointable, MlpConfig, MlpWorkspace, Optimizer, TanhGaussian,
+    TanhGaussianSample,
+};
 
-use crate::agent::{check_obs, Agent, Batch, Metrics, Mode, OffPolicyAgent};
+use crate::agent::{
+    check_action_rows, check_obs, obs_rows, one_row, Agent, Batch, BatchPolicy, Critic, Metrics,
+    Mode, OffPolicyAgent,
+};
 use crate::common::{
     check_header, concat_rows, fit, obs_dim, save_header, ActionScale, Net, Target,
 };
 use crate::config::SacConfig;
 use crate::error::{AgentError, Result};
-
-const LOG_2PI_HALF: f32 = 0.918_938_5; // ln(2π)/2
-const SQUASH_EPS: f32 = 1e-6;
 
 /// A SAC agent.
 #[derive(Debug, Clone)]
@@ -32,9 +40,10 @@ pub struct Sac {
     config: SacConfig,
     od: usize,
     scale: ActionScale,
-    actor: Net,
-    q1: Net,
-    q2: Net,
+    head: TanhGaussian,
+    pub(crate) actor: Net,
+    pub(crate) q1: Net,
+    pub(crate) q2: Net,
     q1_t: Target,
     q2_t: Target,
     log_alpha: [f32; 1],
@@ -55,46 +64,15 @@ struct Scratch {
     d_x: Vec<f32>,
     d_x2: Vec<f32>,
     d_out: Vec<f32>,
-    eps: Vec<f32>,
-    act: Vec<f32>,
-    logp: Vec<f32>,
-    next_act: Vec<f32>,
-    next_logp: Vec<f32>,
+    d_a: Vec<f32>,
+    dq_da: Vec<f32>,
+    d_logp: Vec<f32>,
     actor_out: Vec<f32>,
-    eps_next: Vec<f32>,
+    next_out: Vec<f32>,
+    pi: TanhGaussianSample,
+    pi_next: TanhGaussianSample,
     q_pi1: Vec<f32>,
     q_pi2: Vec<f32>,
-}
-
-/// Draws `ε ~ N(0, I)` into `eps` from `rng`.
-fn draw_noise(rng: &mut Rng, eps: &mut [f32]) {
-    for e in eps.iter_mut() {
-        *e = StandardNormal.sample(rng);
-    }
-}
-
-/// `a = tanh(mean + std ε)` for each row of `out` (`n x 2ad`: mean then log-std) with the given
-/// noise, and its log-probability; clamps log-std in place. Writes `act` (`n x ad`), `logp` (`n`).
-fn squash(
-    out: &mut [f32],
-    ad: usize,
-    (lo, hi): (f32, f32),
-    eps: &[f32],
-    act: &mut [f32],
-    logp: &mut [f32],
-) {
-    for (i, row) in out.chunks_exact_mut(2 * ad).enumerate() {
-        let mut lp = 0.0f32;
-        for j in 0..ad {
-            let ls = row[ad + j].clamp(lo, hi);
-            row[ad + j] = ls;
-            let e = eps[i * ad + j];
-            let a = (row[j] + ls.exp() * e).tanh();
-            act[i * ad + j] = a;
-            lp += -0.5 * e * e - ls - LOG_2PI_HALF - (1.0 - a * a + SQUASH_EPS).ln();
-        }
-        logp[i] = lp;
-    }
 }
 
 impl Sac {
@@ -116,7 +94,13 @@ impl Sac {
         let q1 = Net::new(MlpConfig::new(&sizes), config.learning_rate, &mut init)?;
         let q2 = Net::new(MlpConfig::new(&sizes), config.learning_rate, &mut init)?;
         let alpha_opt = Adam::new(AdamConfig::with_lr(config.learning_rate as f32), 1)?;
+        let head = TanhGaussian {
+            dim: ad,
+            log_std_min: config.log_std_min as f32,
+            log_std_max: config.log_std_max as f32,
+        };
         Ok(Self {
+            head,
             q1_t: Target::of(&q1),
             q2_t: Target::of(&q2),
             log_alpha: [config.init_alpha.ln() as f32],
@@ -182,37 +166,117 @@ impl Sac {
         Ok(())
     }
 
-    /// The actor loss's gradient wrt the actor outputs (`n x 2ad`), given the clamped outputs,
-    /// the noise, the squashed actions and `dQmin/da` (`n x ad`).
-    #[allow(clippy::too_many_arguments)]
+    /// The actor loss's gradient wrt the actor outputs (`n x 2ad`) for the sample `pi` and
+    /// `dQmin/da` (`n x ad`): the head's backward with `dL/da = -dQmin/da / n` and
+    /// `dL/dlog π = α / n`. `d_a` and `d_logp` are scratch.
     pub(crate) fn actor_output_grad(
-        out: &[f32],
-        raw_log_std_in_range: impl Fn(usize) -> bool,
-        eps: &[f32],
-        act: &[f32],
+        head: &TanhGaussian,
+        pi: &TanhGaussianSample,
         dq_da: &[f32],
         alpha: f32,
-        ad: usize,
+        (d_a, d_logp): (&mut Vec<f32>, &mut Vec<f32>),
         d_out: &mut [f32],
-    ) {
-        let n = eps.len() / ad;
+    ) -> Result<()> {
+        let n = pi.batch();
         let inv_n = 1.0 / n as f32;
-        for i in 0..n {
-            for j in 0..ad {
-                let k = i * ad + j;
-                let a = act[k];
-                let one_m = 1.0 - a * a;
-                let g_u =
-                    (alpha * 2.0 * a * one_m / (one_m + SQUASH_EPS) - dq_da[k] * one_m) * inv_n;
-                let std = out[i * 2 * ad + ad + j].exp();
-                d_out[i * 2 * ad + j] = g_u;
-                d_out[i * 2 * ad + ad + j] = if raw_log_std_in_range(i * 2 * ad + ad + j) {
-                    -alpha * inv_n + g_u * std * eps[k]
-                } else {
-                    0.0
-                };
+        d_a.clear();
+        d_a.extend(dq_da.iter().map(|g| -g * inv_n));
+        d_logp.clear();
+        d_logp.resize(n, alpha * inv_n);
+        head.backward(pi, Some(d_a), Some(d_logp), d_out)?;
+        Ok(())
+    }
+
+    /// The policy at the rows of `obs`: actions in `[-1, 1]` and their log-probabilities. Explore
+    /// samples with noise from `rng`; Deterministic takes the mean (`ε = 0`, no draw).
+    fn policy(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        mode: Mode,
+        rng: &mut Rng,
+    ) -> Result<(Vec<f32>, TanhGaussianSample)> {
+        let x = obs_rows(obs, self.od)?;
+        let n = obs.nrows();
+        let out = self.actor.infer(&x, n)?;
+        let mut pi = TanhGaussianSample::default();
+        match mode {
+            Mode::Explore => self.head.sample(&out, n, rng, &mut pi)?,
+            Mode::Deterministic => {
+                let zeros = vec![0.0; n * self.head.dim];
+                self.head.sample_with_noise(&out, n, &zeros, &mut pi)?
             }
         }
+        Ok((x, pi))
+    }
+
+    /// `min(Q1, Q2)(s, a)` of the online critics for row-major `f32` observations and actions in
+    /// `[-1, 1]`.
+    fn min_q(&self, x: &[f32], a: &[f32], n: usize) -> Result<Vec<f32>> {
+        let mut xa = vec![0.0; n * (self.od + self.head.dim)];
+        concat_rows(x, self.od, a, self.head.dim, &mut xa);
+        let (q1, q2) = (self.q1.infer(&xa, n)?, self.q2.infer(&xa, n)?);
+        Ok(q1.iter().zip(&q2).map(|(a, b)| a.min(*b)).collect())
+    }
+}
+
+impl BatchPolicy for Sac {
+    fn obs_dim(&self) -> usize {
+        self.od
+    }
+
+    fn action_width(&self) -> usize {
+        self.scale.dim()
+    }
+
+    /// Explore: `a = tanh(μ + σε)` with `ε` from `rng` (row by row); Deterministic: `tanh(μ)`.
+    fn act_batch(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        mode: Mode,
+        rng: &mut Rng,
+    ) -> Result<Array2<f64>> {
+        let x = obs_rows(obs, self.od)?;
+        let n = obs.nrows();
+        let out = self.actor.infer(&x, n)?;
+        let mut a = vec![0.0; n * self.head.dim];
+        match mode {
+            Mode::Deterministic => self.head.mode(&out, n, &mut a)?,
+            Mode::Explore => {
+                let mut pi = TanhGaussianSample::default();
+                self.head.sample(&out, n, rng, &mut pi)?;
+                a.copy_from_slice(&pi.action);
+            }
+        }
+        Ok(self.scale.to_env_rows(&a))
+    }
+}
+
+impl Critic for Sac {
+    /// `min(Q1, Q2)(s, a)` of the online critics (the value SAC's targets and actor use).
+    fn q_batch(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        actions: ArrayView2<'_, f64>,
+    ) -> Result<Array1<f64>> {
+        let x = obs_rows(obs, self.od)?;
+        check_action_rows(actions, obs.nrows(), self.head.dim)?;
+        let a = self.scale.normalize_view(actions);
+        let q = self.min_q(&x, &a, obs.nrows())?;
+        Ok(q.iter().map(|v| f64::from(*v)).collect())
+    }
+
+    /// The soft value `V(s) = E_{a~π}[min(Q1, Q2)(s, a) - α log π(a|s)]` with the current α,
+    /// estimated from one action per row: Explore samples it from `rng` (an unbiased, noisy
+    /// estimate); Deterministic takes the mean action `tanh(μ)` and its log-density (no draw; a
+    /// biased but smooth estimate for a planner's terminal value).
+    fn v_batch(&self, obs: ArrayView2<'_, f64>, mode: Mode, rng: &mut Rng) -> Result<Array1<f64>> {
+        let n = obs.nrows();
+        let (x, pi) = self.policy(obs, mode, rng)?;
+        let q = self.min_q(&x, &pi.action, n)?;
+        let alpha = self.log_alpha[0].exp();
+        Ok((0..n)
+            .map(|i| f64::from(q[i] - alpha * pi.log_prob[i]))
+            .collect())
     }
 }
 
@@ -221,23 +285,13 @@ impl Agent for Sac {
         "sac"
     }
 
+    /// The one-row case of [`BatchPolicy::act_batch`], drawing from the agent's own generator.
     fn act(&mut self, obs: &[f64], mode: Mode) -> Result<Action> {
         check_obs(obs, self.od)?;
-        let ad = self.scale.dim();
-        let x: Vec<f32> = obs.iter().map(|v| *v as f32).collect();
-        let mut out = self.actor.mlp.forward(&x, 1, &mut self.actor.ws)?.to_vec();
-        let a: Vec<f32> = match mode {
-            Mode::Deterministic => out[..ad].iter().map(|m| m.tanh()).collect(),
-            Mode::Explore => {
-                let (mut e, mut a, mut lp) = (vec![0.0; ad], vec![0.0; ad], [0.0f32]);
-                let c = &self.config;
-                let lims = (c.log_std_min as f32, c.log_std_max as f32);
-                draw_noise(&mut self.rng, &mut e);
-                squash(&mut out, ad, lims, &e, &mut a, &mut lp);
-                a
-            }
-        };
-        Ok(Action::Continuous(self.scale.to_env(&a)))
+        let mut rng = self.rng.clone();
+        let a = self.act_batch(one_row(obs), mode, &mut rng)?;
+        self.rng = rng;
+        Ok(Action::Continuous(a.row(0).to_vec()))
     }
 }
 
@@ -246,10 +300,7 @@ impl OffPolicyAgent for Sac {
         let (od, ad) = (self.od, self.scale.dim());
         batch.check(od, ad)?;
         let n = batch.len();
-        let lims = (
-            self.config.log_std_min as f32,
-            self.config.log_std_max as f32,
-        );
+        let head = self.head;
         let s = &mut self.s;
         let obs = batch.obs.as_slice().expect("standard layout");
         let next_obs = batch.next_obs.as_slice().expect("standard layout");
@@ -261,13 +312,8 @@ impl OffPolicyAgent for Sac {
         fit(&mut s.d_x, n * (od + ad));
         fit(&mut s.d_x2, n * (od + ad));
         fit(&mut s.d_out, n * 2 * ad);
-        fit(&mut s.eps, n * ad);
-        fit(&mut s.act, n * ad);
-        fit(&mut s.logp, n);
-        fit(&mut s.next_act, n * ad);
-        fit(&mut s.next_logp, n);
         fit(&mut s.actor_out, n * 2 * ad);
-        fit(&mut s.eps_next, n * ad);
+        fit(&mut s.next_out, n * 2 * ad);
         fit(&mut s.q_pi1, n);
         fit(&mut s.q_pi2, n);
         self.scale.normalize_rows(
@@ -278,11 +324,13 @@ impl OffPolicyAgent for Sac {
         // 1. The policy at s (kept on the actor's tape for the actor step) and at s' (second
         //    workspace), side by side. Noise is drawn first, in a fixed order (s, then s'), so the
         //    numbers do not depend on threads.
-        draw_noise(&mut self.rng, &mut s.eps);
-        draw_noise(&mut self.rng, &mut s.eps_next);
+        s.pi.eps.resize(n * ad, 0.0);
+        s.pi_next.eps.resize(n * ad, 0.0);
+        tandem_nn::fill_standard_normal(&mut self.rng, &mut s.pi.eps);
+        tandem_nn::fill_standard_normal(&mut self.rng, &mut s.pi_next.eps);
         {
             let (actor, ws, next_ws) = (&self.actor.mlp, &mut self.actor.ws, &mut self.next_ws);
-            let (out_s, out_n) = (&mut s.actor_out, &mut s.d_out);
+            let (out_s, out_n) = (&mut s.actor_out, &mut s.next_out);
             let (r1, r2) = tandem_nn::join(
                 || -> Result<()> {
                     out_s.copy_from_slice(actor.forward_train(obs, n, ws, None)?);
@@ -296,27 +344,20 @@ impl OffPolicyAgent for Sac {
             r1?;
             r2?;
         }
-        squash(&mut s.actor_out, ad, lims, &s.eps, &mut s.act, &mut s.logp);
-        squash(
-            &mut s.d_out,
-            ad,
-            lims,
-            &s.eps_next,
-            &mut s.next_act,
-            &mut s.next_logp,
-        );
+        head.resample(&s.actor_out, n, &mut s.pi)?;
+        head.resample(&s.next_out, n, &mut s.pi_next)?;
 
         // 2. Entropy coefficient: loss = -log α · mean(log π + H_target); α used below is the
         //    value before this step (stable-baselines3).
         let alpha = self.log_alpha[0].exp();
-        let mean_logp = s.logp.iter().map(|v| f64::from(*v)).sum::<f64>() / n as f64;
+        let mean_logp = s.pi.log_prob.iter().map(|v| f64::from(*v)).sum::<f64>() / n as f64;
         if self.config.auto_entropy {
             let g = [-(mean_logp as f32 + self.target_entropy)];
             self.alpha_opt.step(&mut self.log_alpha, &g)?;
         }
 
         // 3. Critic targets with the policy at s', both target critics side by side.
-        concat_rows(next_obs, od, &s.next_act, ad, &mut s.x);
+        concat_rows(next_obs, od, &s.pi_next.action, ad, &mut s.x);
         {
             let (t1, t2) = (&mut self.q1_t, &mut self.q2_t);
             let (x, o1, o2) = (&s.x, &mut s.d_q, &mut s.d_q2);
@@ -335,7 +376,7 @@ impl OffPolicyAgent for Sac {
         }
         let gamma = self.config.gamma as f32;
         for i in 0..n {
-            let v = s.d_q[i].min(s.d_q2[i]) - alpha * s.next_logp[i];
+            let v = s.d_q[i].min(s.d_q2[i]) - alpha * s.pi_next.log_prob[i];
             s.y[i] = batch.rewards[i] + gamma * (1.0 - batch.terminated[i]) * v;
         }
 
@@ -370,7 +411,7 @@ impl OffPolicyAgent for Sac {
         //    Each thread also moves its target critic towards the updated critic (stable-baselines3
         //    does this after the actor step; the critics do not change in between, so the numbers
         //    are the same).
-        concat_rows(obs, od, &s.act, ad, &mut s.x);
+        concat_rows(obs, od, &s.pi.action, ad, &mut s.x);
         {
             let (q1, q2) = (&mut self.q1, &mut self.q2);
             let (t1, t2) = (&mut self.q1_t, &mut self.q2_t);
@@ -409,28 +450,22 @@ impl OffPolicyAgent for Sac {
             r1?;
             r2?;
         }
-        // dQmin/da into d_q-sized rows of `next_act` (reused as scratch).
+        // dQmin/da (the smaller critic's input gradient; the other's d_q is zero) into `d_a`.
+        fit(&mut s.dq_da, n * ad);
         for i in 0..n {
             for j in 0..ad {
                 let k = i * (od + ad) + od + j;
-                s.next_act[i * ad + j] = s.d_x[k] + s.d_x2[k];
+                s.dq_da[i * ad + j] = s.d_x[k] + s.d_x2[k];
             }
         }
-        let actor_out = &s.actor_out;
-        let (lo, hi) = lims;
-        // The clamp passes gradient only where the raw log-std lay inside [lo, hi]; the clamped
-        // value equals the raw one exactly there.
-        let in_range = |k: usize| actor_out[k] > lo && actor_out[k] < hi;
         Sac::actor_output_grad(
-            actor_out,
-            in_range,
-            &s.eps,
-            &s.act,
-            &s.next_act,
+            &head,
+            &s.pi,
+            &s.dq_da,
             alpha,
-            ad,
+            (&mut s.d_a, &mut s.d_logp),
             &mut s.d_out,
-        );
+        )?;
         self.actor.mlp.backward(
             &mut self.actor.ws,
             &s.d_out,

@@ -96,8 +96,9 @@ fn sac_learns_the_optimal_action_of_a_one_step_task() {
     assert!(last.unwrap().get("critic_loss").unwrap().is_finite());
 }
 
-/// The hand-derived actor gradient equals finite differences of the actor loss
-/// `mean_i(α log π_i - w·a_i)` (a linear critic, so `dQ/da = w`).
+/// The actor gradient SAC feeds its network equals finite differences of the actor loss
+/// `mean_i(α log π_i - w·a_i)` (a linear critic, so `dQ/da = w`), with the exact log-density
+/// written out independently in f64.
 #[test]
 fn sac_actor_gradient_matches_finite_differences() {
     let (ad, n, alpha) = (2usize, 3usize, 0.7f32);
@@ -122,25 +123,32 @@ fn sac_actor_gradient_matches_finite_differences() {
                     o[i * 2 * ad + ad + j],
                     f64::from(eps[i * ad + j]),
                 );
-                let a = (m + ls.exp() * e).tanh();
+                let u = m + ls.exp() * e;
+                let a = u.tanh();
                 let lp = -0.5 * e * e
                     - ls
                     - 0.5 * (2.0 * std::f64::consts::PI).ln()
-                    - (1.0 - a * a + 1e-6).ln();
+                    - (1.0 - a * a).ln();
                 l += f64::from(alpha) * lp - w[j] * a;
             }
         }
         l / n as f64
     };
-    let act: Vec<f32> = (0..n * ad)
-        .map(|k| {
-            let (i, j) = (k / ad, k % ad);
-            (out[i * 2 * ad + j] + out[i * 2 * ad + ad + j].exp() * eps[k]).tanh()
-        })
-        .collect();
+    let head = tandem_nn::TanhGaussian::new(ad);
+    let mut pi = tandem_nn::TanhGaussianSample::default();
+    head.sample_with_noise(&out, n, &eps, &mut pi).unwrap();
     let dq: Vec<f32> = (0..n * ad).map(|k| w[k % ad] as f32).collect();
     let mut g = vec![0.0f32; n * 2 * ad];
-    Sac::actor_output_grad(&out, |_| true, &eps, &act, &dq, alpha, ad, &mut g);
+    let mut scratch = (Vec::new(), Vec::new());
+    Sac::actor_output_grad(
+        &head,
+        &pi,
+        &dq,
+        alpha,
+        (&mut scratch.0, &mut scratch.1),
+        &mut g,
+    )
+    .unwrap();
     let o64: Vec<f64> = out.iter().map(|v| f64::from(*v)).collect();
     for k in 0..o64.len() {
         let h = 1e-5;
@@ -615,4 +623,374 @@ fn checkpoints_restore_exact_numbers_and_reject_other_architectures() {
     let mut q = Dqn::new(DqnConfig::default(), &os, &Space::discrete(3), 0).unwrap();
     let e = q.load(&ckpt).unwrap_err();
     assert!(matches!(e, AgentError::Checkpoint(_)), "{e}");
+}
+
+mod batch {
+    //! The `&self` batch API ([`BatchPolicy`], [`Critic`]) against the single-row path and
+    //! against independent computations from the networks' outputs.
+
+    use ndarray::{Array2, ArrayView2};
+    use rand::Rng as _;
+    use tandem_core::seeding::rng_from_seed;
+    use tandem_core::{Rng, Space};
+
+    use crate::agent::{Agent, BatchPolicy, Critic, Mode};
+    use crate::config::{DdpgConfig, DqnConfig, ReinforceConfig, SacConfig};
+    use crate::{Ddpg, Dqn, NoiseConfig, Reinforce, Sac};
+
+    const OD: usize = 3;
+
+    fn obs_batch(b: usize, seed: u64) -> Array2<f64> {
+        let mut rng = rng_from_seed(seed);
+        Array2::from_shape_fn((b, OD), |_| rng.random_range(-1.0..1.0))
+    }
+
+    /// `b` copies of one observation.
+    fn repeated(b: usize) -> Array2<f64> {
+        Array2::from_shape_fn((b, OD), |(_, j)| [0.3, -0.6, 0.1][j])
+    }
+
+    fn box_spaces(ad: usize) -> (Space, Space) {
+        (
+            Space::symmetric(OD, 1.0),
+            Space::boxed(vec![-2.0; ad], vec![3.0; ad]),
+        )
+    }
+
+    fn sac() -> Sac {
+        let (o, a) = box_spaces(2);
+        let cfg = SacConfig {
+            hidden: vec![32, 32],
+            ..SacConfig::default()
+        };
+        Sac::new(cfg, &o, &a, 11).unwrap()
+    }
+
+    fn ddpg(noise: NoiseConfig) -> Ddpg {
+        let (o, a) = box_spaces(2);
+        let cfg = DdpgConfig {
+            actor_hidden: vec![32, 32],
+            critic_hidden: vec![32, 32],
+            noise,
+            ..DdpgConfig::default()
+        };
+        Ddpg::new(cfg, &o, &a, 12).unwrap()
+    }
+
+    fn dqn() -> Dqn {
+        let cfg = DqnConfig {
+            hidden: vec![32, 32],
+            ..DqnConfig::default()
+        };
+        Dqn::new(cfg, &Space::symmetric(OD, 1.0), &Space::discrete(4), 13).unwrap()
+    }
+
+    fn reinforce() -> Reinforce {
+        let cfg = ReinforceConfig {
+            hidden: vec![32],
+            ..ReinforceConfig::default()
+        };
+        Reinforce::new(cfg, &Space::symmetric(OD, 1.0), &Space::discrete(3), 14).unwrap()
+    }
+
+    /// Deterministic batch rows equal the single-row `act` of each row (f32 networks: 1e-6
+    /// relative; a batch of 7 may take other gemm kernels than a batch of 1).
+    fn assert_rows_match_act(agent: &mut (impl Agent + BatchPolicy)) {
+        let obs = obs_batch(7, 1);
+        let mut rng = rng_from_seed(0);
+        let batch = agent
+            .act_batch(obs.view(), Mode::Deterministic, &mut rng)
+            .unwrap();
+        let rows = agent
+            .act_rows(obs.view(), Mode::Deterministic, &mut rng)
+            .unwrap();
+        assert_eq!(batch.nrows(), 7);
+        for (i, o) in obs.rows().into_iter().enumerate() {
+            let single = agent
+                .act(o.as_slice().unwrap(), Mode::Deterministic)
+                .unwrap();
+            assert_eq!(rows[i], single.clone());
+            let want: Vec<f64> = match single {
+                tandem_core::Action::Continuous(v) => v,
+                tandem_core::Action::Discrete(k) => vec![k as f64],
+            };
+            for (g, w) in batch.row(i).iter().zip(&want) {
+                assert!(
+                    (g - w).abs() <= 1e-6 * (1.0 + w.abs()),
+                    "row {i}: {g} vs {w}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn deterministic_batches_equal_row_by_row_acting() {
+        assert_rows_match_act(&mut sac());
+        assert_rows_match_act(&mut ddpg(NoiseConfig::default()));
+        assert_rows_match_act(&mut dqn());
+        assert_rows_match_act(&mut reinforce());
+    }
+
+    #[test]
+    fn agents_are_usable_as_trait_objects_and_explore_reproducibly() {
+        let (s, d, q, r) = (sac(), ddpg(NoiseConfig::default()), dqn(), reinforce());
+        let policies: [&dyn BatchPolicy; 4] = [&s, &d, &q, &r];
+        let obs = obs_batch(5, 2);
+        for p in policies {
+            let a = p
+                .act_batch(obs.view(), Mode::Explore, &mut rng_from_seed(3))
+                .unwrap();
+            let b = p
+                .act_batch(obs.view(), Mode::Explore, &mut rng_from_seed(3))
+                .unwrap();
+            assert_eq!(a, b);
+            assert_eq!(a.dim(), (5, p.action_width()));
+        }
+        let critics: [&dyn Critic; 3] = [&s, &d, &q];
+        for c in critics {
+            let v1 = c
+                .v_batch(obs.view(), Mode::Explore, &mut rng_from_seed(4))
+                .unwrap();
+            let v2 = c
+                .v_batch(obs.view(), Mode::Explore, &mut rng_from_seed(4))
+                .unwrap();
+            assert_eq!(v1, v2);
+            assert!(v1.iter().all(|v| v.is_finite()));
+        }
+    }
+
+    /// `[mean | log-std]` of SAC's actor for the rows of `obs`, in f64.
+    fn sac_actor_out(agent: &Sac, obs: ArrayView2<'_, f64>) -> Vec<f64> {
+        let x: Vec<f32> = obs.iter().map(|v| *v as f32).collect();
+        let out = agent.actor.infer(&x, obs.nrows()).unwrap();
+        out.iter().map(|v| f64::from(*v)).collect()
+    }
+
+    /// Environment actions (box [-2, 3]) back to `[-1, 1]`.
+    fn unscale(a: f64) -> f64 {
+        (a - 0.5) / 2.5
+    }
+
+    #[test]
+    fn sac_samples_have_the_policy_mean_and_std_before_the_squash() {
+        let agent = sac();
+        let b = 20_000;
+        let obs = repeated(b);
+        let out = sac_actor_out(&agent, obs.slice(ndarray::s![0..1, ..]));
+        let a = agent
+            .act_batch(obs.view(), Mode::Explore, &mut rng_from_seed(9))
+            .unwrap();
+        for j in 0..2 {
+            let u: Vec<f64> = a.column(j).iter().map(|v| unscale(*v).atanh()).collect();
+            let mean = u.iter().sum::<f64>() / b as f64;
+            let sd = (u.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / b as f64).sqrt();
+            let (mu, sigma) = (out[j], out[2 + j].clamp(-20.0, 2.0).exp());
+            // Standard errors: sigma / sqrt(b) for the mean, sigma / sqrt(2b) for the std.
+            assert!(
+                (mean - mu).abs() < 4.0 * sigma / (b as f64).sqrt(),
+                "{mean} vs {mu}"
+            );
+            assert!(
+                (sd - sigma).abs() < 4.0 * sigma / (2.0 * b as f64).sqrt(),
+                "{sd} vs {sigma}"
+            );
+        }
+    }
+
+    /// `log π(a|s)` of actions in `[-1, 1]` from the actor's output, written out in f64: the
+    /// Gaussian density of `u = atanh a` minus `log(1 - a²)`.
+    fn log_pi(out: &[f64], a: &[f64]) -> f64 {
+        let ad = a.len();
+        (0..ad)
+            .map(|j| {
+                let ls = out[ad + j].clamp(-20.0, 2.0);
+                let z = (a[j].atanh() - out[j]) / ls.exp();
+                -0.5 * z * z
+                    - ls
+                    - 0.5 * (2.0 * std::f64::consts::PI).ln()
+                    - (1.0 - a[j] * a[j]).ln()
+            })
+            .sum()
+    }
+
+    #[test]
+    fn sac_soft_value_matches_its_q_nets_and_log_probs() {
+        let agent = sac();
+        let obs = obs_batch(6, 5);
+        let out = sac_actor_out(&agent, obs.view());
+        let alpha = agent.alpha();
+        // Deterministic: at the mean action tanh(μ).
+        let mean_a = Array2::from_shape_fn((6, 2), |(i, j)| 0.5 + 2.5 * out[i * 4 + j].tanh());
+        let q = agent.q_batch(obs.view(), mean_a.view()).unwrap();
+        let v = agent
+            .v_batch(obs.view(), Mode::Deterministic, &mut rng_from_seed(0))
+            .unwrap();
+        for i in 0..6 {
+            let a: Vec<f64> = (0..2).map(|j| out[i * 4 + j].tanh()).collect();
+            let want = q[i] - alpha * log_pi(&out[i * 4..i * 4 + 4], &a);
+            assert!(
+                (v[i] - want).abs() < 1e-4 * (1.0 + want.abs()),
+                "{} vs {want}",
+                v[i]
+            );
+        }
+        // Explore: the action act_batch draws with the same generator state.
+        let a = agent
+            .act_batch(obs.view(), Mode::Explore, &mut rng_from_seed(8))
+            .unwrap();
+        let q = agent.q_batch(obs.view(), a.view()).unwrap();
+        let v = agent
+            .v_batch(obs.view(), Mode::Explore, &mut rng_from_seed(8))
+            .unwrap();
+        for i in 0..6 {
+            let an: Vec<f64> = a.row(i).iter().map(|x| unscale(*x)).collect();
+            let want = q[i] - alpha * log_pi(&out[i * 4..i * 4 + 4], &an);
+            assert!(
+                (v[i] - want).abs() < 1e-3 * (1.0 + want.abs()),
+                "{} vs {want}",
+                v[i]
+            );
+        }
+        // Q is the smaller twin: never above either critic's own value.
+        let x: Vec<f32> = obs.iter().map(|v| *v as f32).collect();
+        let an: Vec<f32> = a.iter().map(|v| unscale(*v) as f32).collect();
+        let mut xa = vec![0.0; 6 * 5];
+        crate::common::concat_rows(&x, 3, &an, 2, &mut xa);
+        let (q1, q2) = (
+            agent.q1.infer(&xa, 6).unwrap(),
+            agent.q2.infer(&xa, 6).unwrap(),
+        );
+        for i in 0..6 {
+            assert!((q[i] - f64::from(q1[i].min(q2[i]))).abs() < 1e-5 * (1.0 + q[i].abs()));
+        }
+    }
+
+    #[test]
+    fn ddpg_value_is_q_at_the_policy_action_and_explores_with_its_noise() {
+        let mut agent = ddpg(NoiseConfig::default());
+        let obs = obs_batch(6, 6);
+        let mut rng = rng_from_seed(0);
+        let mu = agent
+            .act_batch(obs.view(), Mode::Deterministic, &mut rng)
+            .unwrap();
+        let q = agent.q_batch(obs.view(), mu.view()).unwrap();
+        let v = agent.v_batch(obs.view(), Mode::Explore, &mut rng).unwrap();
+        for i in 0..6 {
+            assert!(
+                (v[i] - q[i]).abs() < 1e-5 * (1.0 + q[i].abs()),
+                "{} vs {}",
+                v[i],
+                q[i]
+            );
+        }
+        // Gaussian noise σ = 0.1 (in [-1, 1] units) set between phases: the batch's deviations
+        // from μ(s) have that std, and so does the OU default's stationary std.
+        for noise in [NoiseConfig::Gaussian { sigma: 0.1 }, NoiseConfig::default()] {
+            agent.set_noise(noise).unwrap();
+            assert_eq!(agent.noise(), noise);
+            let b = 20_000;
+            let obs = repeated(b);
+            let mu = agent
+                .act_batch(obs.view(), Mode::Deterministic, &mut rng)
+                .unwrap();
+            let a = agent
+                .act_batch(obs.view(), Mode::Explore, &mut rng)
+                .unwrap();
+            let d: Vec<f64> = (0..b).map(|i| (a[[i, 0]] - mu[[i, 0]]) / 2.5).collect();
+            let mean = d.iter().sum::<f64>() / b as f64;
+            let sd = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / b as f64).sqrt();
+            let want = noise.stationary_std();
+            assert!(mean.abs() < 4.0 * want / (b as f64).sqrt(), "{mean}");
+            assert!((sd / want - 1.0).abs() < 0.03, "{sd} vs {want}");
+        }
+        assert!(agent
+            .set_noise(NoiseConfig::Gaussian { sigma: -1.0 })
+            .is_err());
+        assert_eq!(agent.noise(), NoiseConfig::default());
+    }
+
+    #[test]
+    fn dqn_q_table_argmax_is_the_greedy_action_and_explores_epsilon_greedily() {
+        let agent = dqn();
+        let obs = obs_batch(8, 7);
+        let mut rng = rng_from_seed(0);
+        let q = agent.q_table(obs.view()).unwrap();
+        let greedy = agent
+            .act_indices(obs.view(), Mode::Deterministic, &mut rng)
+            .unwrap();
+        let v = agent
+            .v_batch(obs.view(), Mode::Deterministic, &mut rng)
+            .unwrap();
+        let col = Array2::from_shape_fn((8, 1), |(i, _)| greedy[i] as f64);
+        let q_sa = agent.q_batch(obs.view(), col.view()).unwrap();
+        for i in 0..8 {
+            let row = q.row(i);
+            assert!(row.iter().all(|x| *x <= row[greedy[i]]));
+            assert_eq!(q_sa[i], row[greedy[i]]);
+            assert_eq!(v[i], row[greedy[i]]);
+        }
+        // ε-greedy: the greedy action with probability 1 - ε + ε/4.
+        let mut agent = agent;
+        for _ in 0..6000 {
+            agent.on_env_step();
+        }
+        let eps = agent.epsilon();
+        assert!(eps > 0.2 && eps < 0.8, "{eps}");
+        let b = 20_000;
+        let obs = repeated(b);
+        let g = agent.act_indices(
+            obs.slice(ndarray::s![0..1, ..]),
+            Mode::Deterministic,
+            &mut rng,
+        );
+        let k = agent
+            .act_indices(obs.view(), Mode::Explore, &mut rng)
+            .unwrap();
+        let f = k.iter().filter(|x| **x == g.as_ref().unwrap()[0]).count() as f64 / b as f64;
+        let want = 1.0 - eps + eps / 4.0;
+        assert!(
+            (f - want).abs() < 4.0 * (want * (1.0 - want) / b as f64).sqrt(),
+            "{f} vs {want}"
+        );
+    }
+
+    #[test]
+    fn reinforce_samples_with_its_softmax_probabilities() {
+        let mut agent = reinforce();
+        let b = 30_000;
+        let obs = repeated(b);
+        let p = agent.probabilities(obs.row(0).as_slice().unwrap()).unwrap();
+        let k = agent
+            .act_indices(obs.view(), Mode::Explore, &mut rng_from_seed(2))
+            .unwrap();
+        for (j, pj) in p.iter().enumerate() {
+            let f = k.iter().filter(|x| **x == j).count() as f64 / b as f64;
+            let pj = f64::from(*pj);
+            assert!(
+                (f - pj).abs() < 4.0 * (pj * (1.0 - pj) / b as f64).sqrt(),
+                "{f} vs {pj}"
+            );
+        }
+    }
+
+    #[test]
+    fn bad_batches_are_named_errors() {
+        let (s, q) = (sac(), dqn());
+        let mut rng: Rng = rng_from_seed(0);
+        let wide = Array2::<f64>::zeros((2, OD + 1));
+        assert!(s.act_batch(wide.view(), Mode::Explore, &mut rng).is_err());
+        let empty = Array2::<f64>::zeros((0, OD));
+        assert!(q.act_batch(empty.view(), Mode::Explore, &mut rng).is_err());
+        let mut nan = Array2::<f64>::zeros((2, OD));
+        nan[[1, 2]] = f64::NAN;
+        assert!(s
+            .v_batch(nan.view(), Mode::Deterministic, &mut rng)
+            .is_err());
+        let obs = Array2::<f64>::zeros((2, OD));
+        assert!(s.q_batch(obs.view(), Array2::zeros((3, 2)).view()).is_err());
+        for bad in [4.0, -1.0, 0.5, f64::NAN] {
+            let a = Array2::from_elem((2, 1), bad);
+            assert!(q.q_batch(obs.view(), a.view()).is_err(), "{bad}");
+        }
+    }
 }

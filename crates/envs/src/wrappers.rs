@@ -393,70 +393,21 @@ impl<E: Env, H: ObservationHook> Env for TransformObservation<E, H> {
     }
 }
 
+pub use tandem_core::RunningNormalizer;
+
 /// Running mean/variance normalization, as gymnasium's `NormalizeObservation`:
-/// `(obs − mean) / sqrt(var + ε)` with the statistics updated (Welford) from every observation
-/// first, unless frozen.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct RunningNormalizer {
-    mean: Vec<f64>,
-    m2: Vec<f64>,
-    count: u64,
-    /// Added to the variance before the square root (gymnasium: 1e-8).
-    pub epsilon: f64,
-    /// When true, the statistics are used but no longer updated.
-    pub frozen: bool,
-}
-
-impl RunningNormalizer {
-    /// A normalizer for `dim`-component observations with no statistics yet.
-    pub fn new(dim: usize) -> Self {
-        Self {
-            mean: vec![0.0; dim],
-            m2: vec![0.0; dim],
-            count: 0,
-            epsilon: 1e-8,
-            frozen: false,
-        }
-    }
-
-    /// Adds one observation to the statistics.
-    pub fn update(&mut self, obs: &[f64]) {
-        self.count += 1;
-        let n = self.count as f64;
-        for ((m, s), &x) in self.mean.iter_mut().zip(&mut self.m2).zip(obs) {
-            let d = x - *m;
-            *m += d / n;
-            *s += d * (x - *m);
-        }
-    }
-
-    /// Observations seen.
-    pub fn count(&self) -> u64 {
-        self.count
-    }
-
-    /// Running mean.
-    pub fn mean(&self) -> &[f64] {
-        &self.mean
-    }
-
-    /// Running (population) variance; 1 before any observation.
-    pub fn var(&self) -> Vec<f64> {
-        if self.count == 0 {
-            return vec![1.0; self.m2.len()];
-        }
-        self.m2.iter().map(|s| s / self.count as f64).collect()
-    }
-}
-
+/// `(obs − mean) / sqrt(var + ε)` (ε = 1e-8) with the statistics updated from every observation
+/// first, unless frozen ([`RunningNormalizer::set_frozen`]). A non-finite observation is not added
+/// to the statistics (it would spoil them for the rest of the run); it is normalized like any
+/// other, so the non-finite value reaches whoever checks the observation.
 impl ObservationHook for RunningNormalizer {
     fn apply(&mut self, obs: &mut [f64]) {
-        if !self.frozen {
-            self.update(obs);
+        if !self.is_frozen() && obs.iter().all(|v| v.is_finite()) {
+            // Length and finiteness are what update_f64 checks: the length is the env's.
+            let _ = self.update_f64(obs);
         }
-        let var = self.var();
-        for ((x, m), v) in obs.iter_mut().zip(&self.mean).zip(var) {
-            *x = (*x - m) / (v + self.epsilon).sqrt();
+        if self.normalize_f64(obs).is_err() {
+            obs.iter_mut().for_each(|v| *v = f64::NAN);
         }
     }
 }
@@ -576,10 +527,10 @@ mod tests {
         assert!((n.var()[0] - var0).abs() < 1e-12);
         // The last observation is normalized by statistics that include it.
         assert!((out[3][0] - (7.0 - mean0) / (var0 + 1e-8).sqrt()).abs() < 1e-12);
-        n.frozen = true;
+        n.set_frozen(true);
         let mut o = vec![3.5, 6.25];
         n.apply(&mut o);
-        assert_eq!(n.count(), 4);
+        assert_eq!(n.count(), 4.0);
         assert!(o[0].abs() < 1e-12);
     }
 
@@ -592,7 +543,7 @@ mod tests {
         for _ in 0..50 {
             env.step(&Action::Continuous(vec![2.0])).unwrap();
         }
-        assert_eq!(env.hook().count(), 51);
+        assert_eq!(env.hook().count(), 51.0);
         assert!(
             matches!(env.observation_space(), Space::Box { high, .. } if high[0].is_infinite())
         );

@@ -4,7 +4,7 @@
 use ndarray::{Array1, Array2};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
-use tandem_nn::{sigmoid, Activation, Mlp, MlpConfig};
+use tandem_nn::{bce_with_logits, sigmoid, Activation, Mlp, MlpConfig};
 
 use crate::data::check_input;
 use crate::model::{
@@ -182,14 +182,23 @@ impl Objective for MlpObjective {
                     d[k * dout + j] = 2.0 * e / n;
                 }
             }
-            if self.term {
-                // Stable binary cross-entropy with logits.
-                let z = o[dout - 1];
-                let t = self.done[i];
-                let bce = z.max(0.0) - z * t + (-z.abs()).exp().ln_1p();
-                total += f64::from(bce);
-                if let Some(d) = d_out.as_deref_mut() {
-                    d[k * dout + dout - 1] = (sigmoid(z) - t) / n;
+        }
+        if self.term && !idx.is_empty() {
+            // Termination logit: tandem-nn's stable binary cross-entropy, summed over the rows
+            // like the squared errors (its mean times the row count; its gradient is already
+            // divided by the row count).
+            let z: Vec<f32> = (0..idx.len()).map(|k| out[k * dout + dout - 1]).collect();
+            let t: Vec<f32> = idx.iter().map(|&i| self.done[i]).collect();
+            let mut g = vec![0.0; idx.len()];
+            let grad = d_out.is_some().then_some(g.as_mut_slice());
+            match bce_with_logits(&z, &t, grad) {
+                Ok(l) => total += f64::from(l) * idx.len() as f64,
+                // A non-finite logit: report a non-finite loss, as the sum above would.
+                Err(_) => total = f64::NAN,
+            }
+            if let Some(d) = d_out {
+                for (k, gk) in g.iter().enumerate() {
+                    d[k * dout + dout - 1] = *gk;
                 }
             }
         }

@@ -303,31 +303,5 @@ pub(crate) fn standardized_inputs_into(
     }
 }
 
-/// Reusable buffers of a model's `predict` (standardized inputs and the network workspace), so
-/// that repeated predictions of one batch size (a planner's rollouts) allocate only their result.
-/// Behind a mutex so the model stays `Sync`; a contended lock falls back to fresh buffers. Cloning
-/// gives fresh, empty buffers.
-#[derive(Debug, Default)]
-pub(crate) struct PredictScratch(std::sync::Mutex<(Vec<f32>, tandem_nn::MlpWorkspace)>);
-
-impl Clone for PredictScratch {
-    fn clone(&self) -> Self {
-        Self::default()
-    }
-}
-
-impl PredictScratch {
-    /// Runs `f` on the buffers (or on fresh ones when another thread holds them).
-    pub(crate) fn with<R>(
-        &self,
-        f: impl FnOnce(&mut Vec<f32>, &mut tandem_nn::MlpWorkspace) -> R,
-    ) -> R {
-        match self.0.try_lock() {
-            Ok(mut g) => {
-                let (x, ws) = &mut *g;
-                f(x, ws)
-            }
-            Err(_) => f(&mut Vec::new(), &mut tandem_nn::MlpWorkspace::default()),
-        }
-    }
-}
+/// Reusable buffers of a model's `predict` (standardized inputs and the network workspace).
+pub(crate) type PredictScratch = tandem_nn::SharedWorkspace;

@@ -252,6 +252,20 @@ impl TanhGaussian {
         self.fill(net_out, batch, s)
     }
 
+    /// Samples with the noise already in `s.eps` (`batch × dim`), without copying it: draw it
+    /// up front with [`fill_standard_normal`] so that the order of draws does not depend on how
+    /// the forward passes are scheduled (SAC draws the noise of `s` and `s'` before running both
+    /// actor passes side by side).
+    pub fn resample(
+        &self,
+        net_out: &[f32],
+        batch: usize,
+        s: &mut TanhGaussianSample,
+    ) -> Result<()> {
+        check_len("tanh-gaussian noise", batch * self.dim, s.eps.len())?;
+        self.fill(net_out, batch, s)
+    }
+
     fn fill(&self, net_out: &[f32], batch: usize, s: &mut TanhGaussianSample) -> Result<()> {
         let d = self.dim;
         check_len("tanh-gaussian input", batch * 2 * d, net_out.len())?;

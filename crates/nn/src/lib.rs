@@ -10,10 +10,13 @@
 //! * Distribution heads with gradients ([`TanhGaussian`] for SAC, [`GaussianHead`] for PETS-style
 //!   models, [`Categorical`]) and losses ([`mse`], [`huber`], [`bce_with_logits`],
 //!   [`gaussian_nll`]).
-//! * [`RunningNormalizer`]: running mean/variance (f64, Chan merge) for inputs and targets.
+//! * [`RunningNormalizer`]: running mean/variance (f64, Chan merge) for inputs and targets;
+//!   defined in `tandem-core` (shared with `tandem-envs`' observation wrapper), checkpointed here.
 //! * Checkpoints ([`Checkpoint`], [`Checkpointable`]) in the safetensors format, bit-exact.
 //! * [`candle_ext`]: seeded candle parameters ([`candle_ext::ParamSet`]: linear, conv,
 //!   transposed conv) stepped by the same optimizers, and [`candle_ext::configure_cpu_threads`].
+//! * [`SharedWorkspace`]: a network workspace behind a mutex, for inference through `&self`
+//!   (models' `predict`, agents' batched acting).
 //! * [`join`]: run two closures on two threads (rayon), e.g. SAC's twin critics.
 //! * [`fastmath`]: vectorizable `exp`/`sigmoid`/`tanh` (≤ 5e-7 error) used by the activations.
 //! * Errors: one enum, [`NnError`]; shape mismatches and non-finite numbers are errors.
@@ -90,6 +93,7 @@ pub mod loss;
 pub mod mlp;
 pub mod normalizer;
 pub mod optim;
+pub mod shared;
 mod simd;
 
 /// Runs two closures, potentially in parallel (rayon's `join`), returning both results.
@@ -104,8 +108,9 @@ pub use heads::{
 pub use kernels::{gemm_threads, set_gemm_threads};
 pub use loss::{bce_with_logits, gaussian_nll, huber, mse};
 pub use mlp::{sigmoid, Activation, Init, LayerShape, Mlp, MlpConfig, MlpWorkspace};
-pub use normalizer::{NormalizerState, RunningNormalizer};
+pub use normalizer::{NormalizerError, NormalizerState, RunningNormalizer};
 pub use optim::{
     clip_grad_norm, clip_grad_norm_many, grad_norm, polyak_update, AdaGrad, AdaGradConfig, Adam,
     AdamConfig, Optimizer, Sgd, SgdConfig,
 };
+pub use shared::SharedWorkspace;
