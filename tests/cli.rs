@@ -359,3 +359,15 @@ fn usage_errors_exit_non_zero_without_panicking() {
     );
     assert_fails_with(&tandem(&["frobnicate"]), &["frobnicate"]);
 }
+
+#[test]
+fn replay_outputs_that_overflow_are_errors_not_null() {
+    // A finite start state whose next state is not: theta_dot² overflows.
+    let o = replay("CartPole-v1", "[0,0,0,1e200]", "[0, 1]", "overflow");
+    assert_fails_with(&o, &["CartPole-v1 replay, step 0", "state is not finite"]);
+    assert!(stdout(&o).is_empty(), "no partial JSON: {}", stdout(&o));
+    // The same environment from a representable state still replays.
+    let o = replay("CartPole-v1", "[0,0,0,1e3]", "[0]", "large-ok");
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stdout(&o).contains("null"), "{}", stdout(&o));
+}

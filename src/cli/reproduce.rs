@@ -99,16 +99,22 @@ fn read_config(quick: bool, path: Option<&Path>) -> Result<P0Config> {
         path: p.to_path_buf(),
         source,
     })?;
+    parse_config(base, &text, &format!("--config {}", p.display()))
+}
+
+/// Applies the overrides in `text` (a `--config` file, named `what` in errors) to `base` and
+/// validates the result.
+pub fn parse_config(base: P0Config, text: &str, what: &str) -> Result<P0Config> {
     // Overrides on top of `base`: merge the file's table into the serialized base.
     let mut v = toml::Value::try_from(&base).map_err(other)?;
-    let over: toml::Table = toml::from_str(&text)
-        .map_err(|e| CliError::input(format!("--config {}", p.display()), e.to_string()))?;
+    let over: toml::Table =
+        toml::from_str(text).map_err(|e| CliError::input(what, e.to_string()))?;
     merge(&mut v, toml::Value::Table(over));
-    let cfg: P0Config = v.try_into().map_err(|e: toml::de::Error| {
-        CliError::input(format!("--config {}", p.display()), e.to_string())
-    })?;
+    let cfg: P0Config = v
+        .try_into()
+        .map_err(|e: toml::de::Error| CliError::input(what, e.to_string()))?;
     cfg.validate()
-        .map_err(|e| CliError::input(format!("--config {}", p.display()), e.to_string()))?;
+        .map_err(|e| CliError::input(what, e.to_string()))?;
     Ok(cfg)
 }
 

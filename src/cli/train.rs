@@ -70,18 +70,20 @@ struct ResolvedConfig<'a> {
 
 /// Reads the algorithm's config and the loop settings from `path` (or the defaults).
 pub fn read_config(algo: Algo, path: Option<&Path>) -> Result<(AlgoConfig, TrainSettings)> {
-    let file: ConfigFile = match path {
-        None => ConfigFile::default(),
-        Some(p) => {
-            let text = std::fs::read_to_string(p).map_err(|source| CliError::Io {
-                path: p.to_path_buf(),
-                source,
-            })?;
-            toml::from_str(&text).map_err(|e| {
-                CliError::input(format!("config file {}", p.display()), e.to_string().trim())
-            })?
-        }
+    let Some(p) = path else {
+        return Ok((AlgoConfig::default_for(algo), TrainSettings::default()));
     };
+    let text = std::fs::read_to_string(p).map_err(|source| CliError::Io {
+        path: p.to_path_buf(),
+        source,
+    })?;
+    parse_config(algo, &text, &format!("config file {}", p.display()))
+}
+
+/// Parses the text of a `--config` file (`what` names it in errors).
+pub fn parse_config(algo: Algo, text: &str, what: &str) -> Result<(AlgoConfig, TrainSettings)> {
+    let file: ConfigFile =
+        toml::from_str(text).map_err(|e| CliError::input(what, e.to_string().trim()))?;
     let agent = match file.agent {
         Some(t) => AlgoConfig::from_toml(algo, t).map_err(CliError::other)?,
         None => AlgoConfig::default_for(algo),
