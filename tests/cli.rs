@@ -421,3 +421,15 @@ fn reproduce_over_an_earlier_run_is_refused_and_overwrite_names_foreign_files() 
     assert!(out.join("runs/cold__seed4").exists() && out.join("notes.txt").exists());
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn replay_outputs_that_overflow_are_errors_not_null() {
+    // A finite start state whose next state is not: theta_dot² overflows.
+    let o = replay("CartPole-v1", "[0,0,0,1e200]", "[0, 1]", "overflow");
+    assert_fails_with(&o, &["CartPole-v1 replay, step 0", "state is not finite"]);
+    assert!(stdout(&o).is_empty(), "no partial JSON: {}", stdout(&o));
+    // The same environment from a representable state still replays.
+    let o = replay("CartPole-v1", "[0,0,0,1e3]", "[0]", "large-ok");
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stdout(&o).contains("null"), "{}", stdout(&o));
+}

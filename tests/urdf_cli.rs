@@ -173,3 +173,59 @@ fn eval_and_inspect_errors_are_clear() {
     ]);
     assert_fails_with(&o, &["/nonexistent/states.json"]);
 }
+
+/// `urdf eval` of `states` on `urdf`: must fail naming each of `needles`, and print no JSON.
+fn assert_eval_fails(name: &str, urdf: &str, states: &str, needles: &[&str]) {
+    let states = temp_file(&format!("{name}-states.json"), states);
+    let o = tandem(&["urdf", "eval", urdf, "--states", states.to_str().unwrap()]);
+    assert_fails_with(&o, needles);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        o.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+}
+
+#[test]
+fn eval_results_that_overflow_are_errors_naming_the_quantity() {
+    let leg = format!("{FIX}leg2r.urdf");
+    // Finite inputs, but v² overflows: the Coriolis terms of RNEA are infinite.
+    assert_eval_fails(
+        "huge-v",
+        &leg,
+        r#"[{"q": [0, 0]}, {"q": [0.1, 0.2], "v": [1e200, -1e200]}]"#,
+        &["state 1", "rnea is not finite"],
+    );
+    // A 1.7e308 kg link one metre off its joint: its gravity torque is out of range.
+    let heavy = temp_file(
+        "heavy.urdf",
+        r#"<robot name="heavy"><link name="base"/>
+        <link name="a"><inertial><origin xyz="1 0 0"/><mass value="1.7e308"/>
+        <inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
+        <joint name="j" type="continuous"><parent link="base"/><child link="a"/>
+        <axis xyz="0 1 0"/></joint></robot>"#,
+    );
+    assert_eval_fails(
+        "heavy",
+        heavy.to_str().unwrap(),
+        r#"[{"q": [0]}]"#,
+        &["state 0", "rnea is not finite"],
+    );
+    // A link spinning about an axis through its centre of mass: every torque is zero, but at
+    // 1e155 rad/s the kinetic energy 0.5 * 1 * 1e310 is beyond f64.
+    let light = temp_file(
+        "light.urdf",
+        r#"<robot name="light"><link name="base"/>
+        <link name="a"><inertial><mass value="2"/>
+        <inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
+        <joint name="j" type="continuous"><parent link="base"/><child link="a"/>
+        <axis xyz="0 1 0"/></joint></robot>"#,
+    );
+    assert_eval_fails(
+        "light",
+        light.to_str().unwrap(),
+        r#"[{"q": [0], "v": [1e155]}]"#,
+        &["state 0", "kinetic_energy is not finite"],
+    );
+}

@@ -14,6 +14,9 @@
 //!
 //! Every action is checked before the first step: wrong kinds, dimensions and non-finite values
 //! (`NaN`, `Infinity` as Python's `json` writes them) are errors naming the action's index.
+//! Every output is checked too: a finite start state can still overflow (CartPole from
+//! `[0, 0, 0, 1e200]` squares the angular velocity), and a state, observation or reward that is
+//! no longer finite is an error naming the step and the quantity, not a `null` in the JSON.
 
 use std::io::Read as _;
 use std::path::PathBuf;
@@ -139,20 +142,31 @@ pub fn replay(args: &ReplayArgs) -> Result<Value> {
     let state = parse_state(&args.state)?;
     let what = format!("actions file {}", args.actions.display());
     let text = read_file(&args.actions)?;
+    replay_from(&mut *env, &state, &text, &what)
+}
+
+/// Replays the JSON `actions` (named `what` in errors) on `env` from `state`: the trajectory
+/// object, or an error for bad actions, a bad state, or an output that is not finite.
+pub fn replay_from(env: &mut dyn Env, state: &[f64], actions: &str, what: &str) -> Result<Value> {
     let actions = parse_actions(
-        &json::parse(&text, &what)?,
+        &json::parse(actions, what)?,
         env.action_space(),
         env.id(),
-        &what,
+        what,
     )?;
-    env.set_state(&state)?;
+    env.set_state(state)?;
     let (mut states, mut observations, mut rewards) = (Vec::new(), Vec::new(), Vec::new());
     let (mut terminated, mut truncated) = (Vec::new(), Vec::new());
     for (t, a) in actions.iter().enumerate() {
         let step = env
             .step(a)
             .map_err(|e| CliError::other(format!("step {t}: {e}")))?;
-        states.push(env.state());
+        let at = format!("{} replay, step {t}", env.id());
+        let state = env.state();
+        json::check_output(&at, "state", &state)?;
+        json::check_output(&at, "observation", &step.observation)?;
+        json::check_output(&at, "reward", &[step.reward])?;
+        states.push(state);
         observations.push(step.observation.clone());
         rewards.push(step.reward);
         terminated.push(step.terminated);

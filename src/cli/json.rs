@@ -88,6 +88,19 @@ pub fn numbers(v: &Value, what: &str) -> Result<Vec<f64>> {
         .collect()
 }
 
+/// Checks a computed output before it is written as JSON, where a non-finite number would turn
+/// into `null`: `Ok` if every value is finite, otherwise an error naming `what` (the input, e.g.
+/// `states file s.json: state 3`), the `quantity` and the first offending element.
+pub fn check_output(what: &str, quantity: &str, values: &[f64]) -> Result<()> {
+    match values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        None => Ok(()),
+        Some((i, v)) => Err(CliError::Other(format!(
+            "{what}: {quantity} is not finite (element {i} is {v}): the input drives the \
+             computation beyond the range of f64"
+        ))),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -102,5 +115,17 @@ mod tests {
         assert_eq!(as_number(&a[3]), Some(f64::INFINITY));
         assert_eq!(a[4].as_str(), Some("NaN\" x"));
         assert!(parse("[1, 2", "t").is_err());
+    }
+
+    #[test]
+    fn check_output_names_the_quantity_and_element() {
+        assert!(check_output("s", "rnea", &[0.0, -1e308, 5.0]).is_ok());
+        let e = check_output("state 2", "rnea", &[1.0, f64::NEG_INFINITY]).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.starts_with("state 2: rnea is not finite (element 1 is -inf)"),
+            "{msg}"
+        );
+        assert!(check_output("s", "x", &[f64::NAN]).is_err());
     }
 }

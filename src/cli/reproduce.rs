@@ -106,26 +106,31 @@ fn read_config(quick: bool, path: Option<&Path>) -> Result<P0Config> {
         P0Config::default()
     };
     let Some(p) = path else { return Ok(base) };
-    let what = format!("--config {}", p.display());
     let text = std::fs::read_to_string(p).map_err(|source| CliError::Io {
         path: p.to_path_buf(),
         source,
     })?;
+    parse_config(base, &text, &format!("--config {}", p.display()))
+}
+
+/// Applies the overrides in `text` (a `--config` file, named `what` in errors) to `base` and
+/// validates the result.
+pub fn parse_config(base: P0Config, text: &str, what: &str) -> Result<P0Config> {
     // Overrides on top of `base`: merge the file's table into the serialized base.
     let mut v = toml::Value::try_from(&base).map_err(other)?;
-    let over: toml::Table = toml::from_str(&text)
-        .map_err(|e| CliError::input(format!("--config {}", p.display()), e.to_string()))?;
+    let over: toml::Table =
+        toml::from_str(text).map_err(|e| CliError::input(what, e.to_string()))?;
     merge(&mut v, toml::Value::Table(over));
-    let cfg: P0Config = v.try_into().map_err(|e: toml::de::Error| {
-        CliError::input(format!("--config {}", p.display()), e.to_string())
-    })?;
+    let cfg: P0Config = v
+        .try_into()
+        .map_err(|e: toml::de::Error| CliError::input(what, e.to_string()))?;
     cfg.validate()
-        .map_err(|e| CliError::input(&what, e.to_string()))?;
-    ensure_finite(&cfg).map_err(|e| CliError::input(&what, e.to_string()))?;
+        .map_err(|e| CliError::input(what, e.to_string()))?;
+    ensure_finite(&cfg).map_err(|e| CliError::input(what, e.to_string()))?;
     let h = cfg.fit.holdout_fraction;
     if !(0.0..1.0).contains(&h) {
         return Err(CliError::input(
-            &what,
+            what,
             format!("fit.holdout_fraction is {h}, must be in [0, 1)"),
         ));
     }

@@ -12,7 +12,7 @@ use tandem_dynamics::rigid::{
     Se3,
 };
 
-use super::json::{kind, numbers, parse};
+use super::json::{check_output, kind, numbers, parse};
 use super::{CliError, Result};
 
 /// `tandem urdf ...`
@@ -25,7 +25,9 @@ pub enum UrdfCommand {
     },
     /// Evaluate RNEA, CRBA, ABA, NLE, gravity torques, link placements, COM and energies for a
     /// list of states `[{"q": [...], "v": [...], "tau": [...], "a": [...]}, ...]` (`v`, `tau`, `a`
-    /// default to zeros) and print one JSON object `{joint_names, results}`.
+    /// default to zeros) and print one JSON object `{joint_names, results}`. Inputs must be
+    /// finite, and so must every result: a state or model whose dynamics overflow `f64` (huge
+    /// velocities, a 1e308 kg link) is an error naming the state and the quantity.
     Eval {
         /// The URDF file.
         file: PathBuf,
@@ -118,6 +120,24 @@ fn placement(m: &Se3) -> Value {
     })
 }
 
+/// The placements of named frames as a JSON map, each checked finite (`kind`: "link"/"joint").
+fn placements<'a>(
+    what: &str,
+    kind: &str,
+    names: impl Iterator<Item = &'a String>,
+    poses: &[Se3],
+) -> Result<Map<String, Value>> {
+    names
+        .zip(poses)
+        .map(|(name, m)| {
+            let quantity = format!("placement of {kind} '{name}'");
+            check_output(what, &quantity, m.trans.as_slice())?;
+            check_output(what, &quantity, m.rot.as_slice())?;
+            Ok((name.clone(), placement(m)))
+        })
+        .collect()
+}
+
 /// One vector field of a state: `nv` finite numbers, zeros when absent and `optional`.
 fn field(state: &Map<String, Value>, name: &str, nv: usize, what: &str) -> Result<Vec<f64>> {
     let Some(v) = state.get(name) else {
@@ -173,33 +193,42 @@ pub fn eval(model: &Model, states: &Value, what: &str) -> Result<Value> {
         let tau = field(obj, "tau", nv, &sw)?;
         let a = field(obj, "a", nv, &sw)?;
         let r = rnea(model, &mut data, &q, &v, &a).as_slice().to_vec();
+        check_output(&sw, "rnea", &r)?;
         let m = crba(model, &mut data, &q).clone();
+        check_output(&sw, "mass_matrix", m.as_slice())?;
         let mm: Vec<Vec<f64>> = (0..nv)
             .map(|i| (0..nv).map(|j| m[(i, j)]).collect())
             .collect();
         let ddq = aba(model, &mut data, &q, &v, &tau).as_slice().to_vec();
+        check_output(&sw, "aba", &ddq)?;
         let nle = nonlinear_effects(model, &mut data, &q, &v)
             .as_slice()
             .to_vec();
+        check_output(&sw, "nle", &nle)?;
         let g = gravity_torque(model, &mut data, &q).as_slice().to_vec();
+        check_output(&sw, "gravity_torque", &g)?;
         forward_kinematics(model, &mut data, &q);
         update_frame_placements(model, &mut data);
-        let links: Map<String, Value> = model
-            .frames
-            .iter()
-            .zip(&data.o_m_f)
-            .map(|(f, m)| (f.name.clone(), placement(m)))
-            .collect();
-        let joints: Map<String, Value> = model
-            .joints
-            .iter()
-            .zip(&data.o_m_i)
-            .map(|(j, m)| (j.name.clone(), placement(m)))
-            .collect();
+        let links = placements(
+            &sw,
+            "link",
+            model.frames.iter().map(|f| &f.name),
+            &data.o_m_f,
+        )?;
+        let joints = placements(
+            &sw,
+            "joint",
+            model.joints.iter().map(|j| &j.name),
+            &data.o_m_i,
+        )?;
         center_of_mass(model, &mut data, &q, &v);
         let (com, vcom) = (data.com, data.com_velocity);
+        check_output(&sw, "com", com.as_slice())?;
+        check_output(&sw, "com_velocity", vcom.as_slice())?;
         let ke = kinetic_energy(model, &mut data, &q, &v);
+        check_output(&sw, "kinetic_energy", &[ke])?;
         let pe = potential_energy(model, &mut data, &q);
+        check_output(&sw, "potential_energy", &[pe])?;
         results.push(json!({
             "q": q, "v": v, "a": a, "tau": tau,
             "rnea": r,

@@ -2,6 +2,7 @@
 //! every struct reads from TOML/JSON and rejects unknown keys.
 
 use serde::{Deserialize, Serialize};
+use tandem_nn::budget::MemoryEstimate;
 
 use crate::conv_qnet::ConvQNetConfig;
 use crate::error::{ensure, Result};
@@ -13,6 +14,34 @@ fn check_hidden(field: &'static str, h: &[usize]) -> Result<()> {
         field,
         format!("{h:?}"),
         "needs at least one hidden layer, each of 1..=16384 units",
+    )
+}
+
+/// Layer widths `[input, hidden..., output]`.
+fn widths(input: usize, hidden: &[usize], output: usize) -> Vec<usize> {
+    let mut w = Vec::with_capacity(hidden.len() + 2);
+    w.push(input);
+    w.extend(hidden);
+    w.push(output);
+    w
+}
+
+/// Parameter-sized buffers of a network trained with Adam and tracked by a target network:
+/// parameters, gradients, two moments, target.
+const WITH_TARGET: u64 = 5;
+/// The same without a target network.
+const NO_TARGET: u64 = 4;
+
+/// Adds the replay buffer of `schedule` for `obs_dim`/`act_dim` (as `ReplayBuffer::new`
+/// allocates it) and the minibatch.
+fn with_replay(est: MemoryEstimate, s: &OffPolicySchedule, od: usize, ad: usize) -> MemoryEstimate {
+    est.part(
+        "replay buffer",
+        crate::replay::ReplayBuffer::bytes(s.buffer_size, od, ad),
+    )
+    .part(
+        "minibatch",
+        crate::replay::ReplayBuffer::bytes(s.batch_size, od, ad),
     )
 }
 
@@ -144,6 +173,28 @@ impl DdpgConfig {
         self.noise.validate()?;
         self.schedule().validate()
     }
+
+    /// The memory a DDPG agent with this config needs for `obs_dim`-dimensional observations
+    /// and `act_dim`-dimensional actions: actor and critic (each with gradients, Adam moments
+    /// and a target copy, activations of a minibatch) and the replay buffer. Checked by
+    /// [`Ddpg::new`](crate::Ddpg::new) before anything is allocated.
+    pub fn memory(&self, obs_dim: usize, act_dim: usize) -> MemoryEstimate {
+        let b = self.batch_size;
+        let est = MemoryEstimate::new()
+            .mlp(
+                "actor",
+                &widths(obs_dim, &self.actor_hidden, act_dim),
+                WITH_TARGET,
+                b,
+            )
+            .mlp(
+                "critic",
+                &widths(obs_dim.saturating_add(act_dim), &self.critic_hidden, 1),
+                WITH_TARGET,
+                b,
+            );
+        with_replay(est, &self.schedule(), obs_dim, act_dim)
+    }
 }
 
 /// SAC (Haarnoja et al. 2018, with automatic entropy tuning).
@@ -227,6 +278,24 @@ impl SacConfig {
             "must be below log_std_max",
         )?;
         self.schedule().validate()
+    }
+
+    /// The memory a SAC agent with this config needs (see [`DdpgConfig::memory`]): the actor
+    /// (no target), two critics with targets, the replay buffer. Checked by
+    /// [`Sac::new`](crate::Sac::new) before anything is allocated.
+    pub fn memory(&self, obs_dim: usize, act_dim: usize) -> MemoryEstimate {
+        let b = self.batch_size;
+        let critic = widths(obs_dim.saturating_add(act_dim), &self.hidden, 1);
+        let est = MemoryEstimate::new()
+            .mlp(
+                "actor",
+                &widths(obs_dim, &self.hidden, act_dim.saturating_mul(2)),
+                NO_TARGET,
+                b,
+            )
+            .mlp("critic 1", &critic, WITH_TARGET, b)
+            .mlp("critic 2", &critic, WITH_TARGET, b);
+        with_replay(est, &self.schedule(), obs_dim, act_dim)
     }
 }
 
@@ -372,6 +441,31 @@ impl DqnConfig {
         self.schedule().validate()
     }
 
+    /// The memory a DQN agent with this config needs for `obs_dim`-dimensional observations
+    /// and `n_actions` actions: the Q-network (MLP, or convolutions and fully connected layers)
+    /// with gradients, Adam moments and the target copy, a minibatch's activations, and the
+    /// replay buffer (one number per discrete action). Checked by [`Dqn::new`](crate::Dqn::new)
+    /// before anything is allocated.
+    pub fn memory(&self, obs_dim: usize, n_actions: usize) -> MemoryEstimate {
+        let b = self.batch_size;
+        let est = match self.network {
+            QNetwork::Mlp => MemoryEstimate::new().mlp(
+                "Q-network",
+                &widths(obs_dim, &self.hidden, n_actions),
+                WITH_TARGET,
+                b,
+            ),
+            QNetwork::Conv => self.conv.memory(
+                MemoryEstimate::new(),
+                &self.hidden,
+                n_actions,
+                WITH_TARGET,
+                b,
+            ),
+        };
+        with_replay(est, &self.schedule(), obs_dim, 1)
+    }
+
     /// The learning rate after `steps` environment steps (see `learning_rate_final`).
     pub fn learning_rate_at(&self, steps: u64) -> f64 {
         match self.learning_rate_final {
@@ -471,6 +565,28 @@ impl ReinforceConfig {
             self.episodes_per_update,
             "must be >= 1",
         )
+    }
+
+    /// The memory of a REINFORCE agent's networks (policy, and the value network with
+    /// `baseline = "value"`, each with gradients and Adam moments); its episodes grow with the
+    /// run and are not counted. Checked by [`Reinforce::new`](crate::Reinforce::new).
+    pub fn memory(&self, obs_dim: usize, n_actions: usize) -> MemoryEstimate {
+        let est = MemoryEstimate::new().mlp(
+            "policy",
+            &widths(obs_dim, &self.hidden, n_actions),
+            NO_TARGET,
+            0,
+        );
+        if self.baseline == Baseline::Value {
+            est.mlp(
+                "value network",
+                &widths(obs_dim, &self.hidden, 1),
+                NO_TARGET,
+                0,
+            )
+        } else {
+            est
+        }
     }
 }
 

@@ -19,6 +19,7 @@ use candle_core::{DType, Device, Module, Tensor};
 use serde::{Deserialize, Serialize};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::{Rng, Space};
+use tandem_nn::budget::MemoryEstimate;
 use tandem_nn::candle_ext::ParamSet;
 use tandem_nn::{Checkpoint, Checkpointable};
 
@@ -55,6 +56,13 @@ impl ConvQNetConfig {
     /// Checks the layer lists; returns the feature map size `(channels, height, width)` after
     /// the last convolution.
     pub fn validate(&self) -> Result<(usize, usize, usize)> {
+        let maps = self.feature_maps()?;
+        Ok(*maps.last().expect("the image and at least one convolution"))
+    }
+
+    /// Checks the layer lists; returns the shape `(channels, height, width)` of the image and
+    /// of each convolution's output.
+    fn feature_maps(&self) -> Result<Vec<(usize, usize, usize)>> {
         let [h, w, c] = self.image;
         ensure(
             h >= 1 && w >= 1 && c >= 1,
@@ -74,7 +82,8 @@ impl ConvQNetConfig {
             format!("{:?} / strides {:?}", self.kernels, self.strides),
             "needs one kernel size and one stride per entry of conv.channels",
         )?;
-        let (mut ch, mut hh, mut ww) = (c, h, w);
+        let mut maps = vec![(c, h, w)];
+        let (mut hh, mut ww) = (h, w);
         for ((&co, &k), &s) in self.channels.iter().zip(&self.kernels).zip(&self.strides) {
             ensure(co >= 1, "conv.channels", co, "must be >= 1")?;
             ensure(k % 2 == 1, "conv.kernels", k, "must be odd (same padding)")?;
@@ -91,9 +100,60 @@ impl ConvQNetConfig {
             )?;
             hh = (hh + 2 * p - k) / s + 1;
             ww = (ww + 2 * p - k) / s + 1;
-            ch = co;
+            maps.push((co, hh, ww));
         }
-        Ok((ch, hh, ww))
+        Ok(maps)
+    }
+
+    /// Adds to `est` a Q-network of these convolutions followed by fully connected `hidden`
+    /// layers and `n_actions` outputs: `copies` parameter-sized buffers (see
+    /// [`MemoryEstimate::mlp`]) and the feature maps of a `batch`-image training pass. A
+    /// config that does not validate adds nothing (its error comes from [`Self::validate`]).
+    pub fn memory(
+        &self,
+        est: MemoryEstimate,
+        hidden: &[usize],
+        n_actions: usize,
+        copies: u64,
+        batch: usize,
+    ) -> MemoryEstimate {
+        let Ok(maps) = self.feature_maps() else {
+            return est;
+        };
+        let size =
+            |&(c, h, w): &(usize, usize, usize)| c.checked_mul(h).and_then(|x| x.checked_mul(w));
+        // Conv weights c_in·c_out·k² + c_out per layer, then the fully connected layers.
+        let conv_params = maps
+            .windows(2)
+            .zip(&self.kernels)
+            .try_fold(0u64, |acc, (m, &k)| {
+                let (ci, co) = (m[0].0 as u64, m[1].0 as u64);
+                let kk = (k as u64).checked_mul(k as u64)?;
+                acc.checked_add(ci.checked_mul(co)?.checked_mul(kk)?.checked_add(co)?)
+            });
+        let flat = maps.last().and_then(size);
+        let est = est.part(
+            "convolution parameters",
+            conv_params
+                .and_then(|p| p.checked_mul(copies))
+                .and_then(|p| p.checked_mul(4)),
+        );
+        let feature_elems = maps
+            .iter()
+            .try_fold(0usize, |acc, m| acc.checked_add(size(m)?));
+        let est = est.part(
+            "convolution feature maps",
+            feature_elems.and_then(|n| tandem_nn::budget::f32_bytes(&[n, batch, 3])),
+        );
+        match flat {
+            Some(f) => {
+                let mut sizes = vec![f];
+                sizes.extend(hidden);
+                sizes.push(n_actions);
+                est.mlp("fully connected layers", &sizes, copies, batch)
+            }
+            None => est.part("fully connected layers", None),
+        }
     }
 
     /// Checks that `space` is a `Box` of exactly this image shape.
@@ -156,6 +216,10 @@ impl ConvQNet {
     ) -> Result<Self> {
         let (fc, fh, fw) = config.validate()?;
         ensure(n_actions >= 1, "n_actions", n_actions, "must be >= 1")?;
+        // What this constructor allocates: the parameters, before any of them.
+        config
+            .memory(MemoryEstimate::new(), hidden, n_actions, 1, 0)
+            .check(&format!("conv Q-network {:?}", config.channels))?;
         let mut ps = ParamSet::new();
         let mut convs = Vec::new();
         let mut c_in = config.image[2];

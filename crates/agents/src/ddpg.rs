@@ -71,6 +71,9 @@ impl Ddpg {
         let od = obs_dim("ddpg", obs_space)?;
         let scale = ActionScale::new("ddpg", act_space)?;
         let ad = scale.dim();
+        config
+            .memory(od, ad)
+            .check(&format!("ddpg (obs {od}, act {ad})"))?;
         let seeds = SeedStream::new(seed);
         let mut init = seeds.rng("ddpg-init");
         let mut sizes = vec![od];

@@ -199,6 +199,9 @@ impl Dqn {
         config.validate()?;
         let od = obs_dim("dqn", obs_space)?;
         let n_actions = discrete_n("dqn", act_space)?;
+        config
+            .memory(od, n_actions)
+            .check(&format!("dqn (obs {od}, {n_actions} actions)"))?;
         let seeds = SeedStream::new(seed);
         let mut init = seeds.rng("dqn-init");
         let nets = match config.network {

@@ -71,6 +71,9 @@ pub enum AgentError {
     /// An error from the neural-network layer.
     #[error(transparent)]
     Nn(#[from] tandem_nn::NnError),
+    /// The configuration's estimated memory is above the limit (see `tandem_nn::budget`).
+    #[error(transparent)]
+    Memory(#[from] tandem_nn::budget::MemoryError),
     /// Reading or writing a file.
     #[error("{path}: {source}")]
     Io {

@@ -43,6 +43,9 @@ impl Reinforce {
         config.validate()?;
         let od = obs_dim("reinforce", obs_space)?;
         let n_actions = discrete_n("reinforce", act_space)?;
+        config
+            .memory(od, n_actions)
+            .check(&format!("reinforce (obs {od}, {n_actions} actions)"))?;
         let seeds = SeedStream::new(seed);
         let mut init = seeds.rng("reinforce-init");
         let mut sizes = vec![od];

@@ -50,6 +50,11 @@ impl ReplayBuffer {
         ensure(capacity > 0, "buffer_size", capacity, "must be at least 1")?;
         ensure(obs_dim > 0, "obs_dim", obs_dim, "must be at least 1")?;
         ensure(act_dim > 0, "act_dim", act_dim, "must be at least 1")?;
+        tandem_nn::budget::MemoryEstimate::new()
+            .part("transitions", Self::bytes(capacity, obs_dim, act_dim))
+            .check(&format!(
+                "replay buffer of {capacity} transitions (obs {obs_dim}, act {act_dim})"
+            ))?;
         Ok(Self {
             capacity,
             len: 0,
@@ -61,6 +66,16 @@ impl ReplayBuffer {
             next_obs: Array2::zeros((capacity, obs_dim)),
             terminated: Array1::zeros(capacity),
         })
+    }
+
+    /// Bytes a buffer of `capacity` transitions allocates (`f32` columns: observation, next
+    /// observation, action, previous action, reward, terminated); `None` on overflow.
+    pub fn bytes(capacity: usize, obs_dim: usize, act_dim: usize) -> Option<u64> {
+        let width = obs_dim
+            .checked_add(act_dim)?
+            .checked_mul(2)?
+            .checked_add(2)?;
+        tandem_nn::budget::f32_bytes(&[capacity, width])
     }
 
     /// Maximum number of transitions held.

@@ -82,6 +82,9 @@ impl Sac {
         let od = obs_dim("sac", obs_space)?;
         let scale = ActionScale::new("sac", act_space)?;
         let ad = scale.dim();
+        config
+            .memory(od, ad)
+            .check(&format!("sac (obs {od}, act {ad})"))?;
         let seeds = SeedStream::new(seed);
         let mut init = seeds.rng("sac-init");
         let mut sizes = vec![od];

@@ -281,3 +281,93 @@ fn corrupted_urdfs_never_panic() {
         }
     }
 }
+
+/// Runs `f` on a thread with a 256 KiB stack (the main thread has 8 MiB): anything recursing
+/// once per link or per XML level would overflow it on the inputs below.
+fn on_small_stack<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
+    std::thread::Builder::new()
+        .stack_size(256 << 10)
+        .spawn(f)
+        .unwrap()
+        .join()
+        .expect("no stack overflow or panic")
+}
+
+#[test]
+fn a_ten_thousand_link_chain_loads_without_recursion() {
+    const N: usize = 10_000;
+    let mut body = String::new();
+    let mut parent = "base".to_string();
+    for i in 0..N {
+        let name = format!("l{i:05}");
+        body += &link(&name);
+        body += &joint(&format!("j{i:05}"), "revolute", &parent, &name, "");
+        parent = name;
+    }
+    let xml = robot(&body);
+    let m = on_small_stack(move || Model::from_urdf_str(&xml)).unwrap();
+    assert_eq!(m.nv(), N);
+    assert_eq!(m.frames.len(), N + 1);
+    // A chain: joint i hangs from joint i - 1, in order, and each moves its 1 kg link.
+    for (i, j) in m.joints.iter().enumerate() {
+        assert_eq!(j.parent, i.checked_sub(1), "joint {i}");
+        assert_eq!(j.name, format!("j{i:05}"));
+    }
+    assert_eq!(m.total_mass(), N as f64);
+}
+
+#[test]
+fn deep_xml_nesting_is_rejected_before_parsing() {
+    use tandem_dynamics::rigid::MAX_XML_DEPTH;
+    // `<robot>` is level 1, so `levels` nested `<x>` reach depth `levels + 1`.
+    let nested = |levels: usize| robot(&("<x>".repeat(levels) + &"</x>".repeat(levels)));
+    let xml = nested(20_000);
+    let e = on_small_stack(move || err(&xml));
+    assert!(
+        matches!(
+            e,
+            UrdfError::TooLarge {
+                limit: MAX_XML_DEPTH,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let msg = e.to_string();
+    assert!(
+        msg.contains("XML nesting depth") && msg.contains("256"),
+        "{msg}"
+    );
+    // The limit itself is accepted (urdf-rs ignores unknown elements); one more level is not.
+    let xml = nested(MAX_XML_DEPTH - 1);
+    let m = on_small_stack(move || Model::from_urdf_str(&xml));
+    assert_eq!(m.map(|m| m.nv()), Ok(0));
+    let xml = nested(MAX_XML_DEPTH);
+    assert!(matches!(err(&xml), UrdfError::TooLarge { .. }));
+}
+
+#[test]
+fn oversized_input_is_rejected_by_size() {
+    use tandem_dynamics::rigid::MAX_URDF_BYTES;
+    let pad = MAX_URDF_BYTES + 1 - robot("").len();
+    let xml = robot(&" ".repeat(pad));
+    assert_eq!(xml.len(), MAX_URDF_BYTES + 1);
+    let e = err(&xml);
+    assert!(
+        matches!(
+            e,
+            UrdfError::TooLarge {
+                limit: MAX_URDF_BYTES,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("size"), "{e}");
+    // From a file, without reading past the limit.
+    let path = std::env::temp_dir().join(format!("tandem-oversized-{}.urdf", std::process::id()));
+    std::fs::write(&path, &xml).unwrap();
+    let e = Model::from_urdf_file(&path).expect_err("too large");
+    std::fs::remove_file(&path).unwrap();
+    assert!(matches!(e, UrdfError::TooLarge { .. }), "{e}");
+}

@@ -20,6 +20,8 @@
 //! * [`join`]: run two closures on two threads (rayon), e.g. SAC's twin critics.
 //! * [`fastmath`]: vectorizable `exp`/`sigmoid`/`tanh` (≤ 5e-7 error) used by the activations.
 //! * Errors: one enum, [`NnError`]; shape mismatches and non-finite numbers are errors.
+//! * [`budget`]: memory estimates checked against a limit (default 8 GiB,
+//!   `TANDEM_MEMORY_LIMIT`) before networks and buffers are allocated.
 //!
 //! Why a hand-derived MLP rather than candle modules: on the 2-core CPUs this project runs on,
 //! candle's per-op allocation and dispatch dominate RL-sized networks (`notes/candle-on-cpu.md`:
@@ -83,6 +85,7 @@
 //! `serde_json` (JSON payloads inside checkpoints), `thiserror`, `rayon` (two-thread task
 //! parallelism; already in the tree through candle and gemm).
 
+pub mod budget;
 pub mod candle_ext;
 pub mod checkpoint;
 pub mod error;

@@ -251,6 +251,11 @@ impl Mlp {
     /// A network with all parameters zero (to be filled by [`Mlp::set_params`] or a checkpoint).
     pub fn zeros(config: MlpConfig) -> Result<Self> {
         config.validate()?;
+        // The parameter vector is the allocation here; refuse it before making it.
+        crate::budget::MemoryEstimate::new()
+            .mlp("parameters", &config.sizes, 1, 0)
+            .check(&format!("mlp {:?}", config.sizes))
+            .map_err(|e| NnError::InvalidConfig(e.to_string()))?;
         let mut layers = Vec::with_capacity(config.sizes.len() - 1);
         let mut off = 0;
         for w in config.sizes.windows(2) {

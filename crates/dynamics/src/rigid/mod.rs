@@ -40,6 +40,8 @@ pub use energy::{center_of_mass, kinetic_energy, potential_energy};
 pub use kinematics::{
     forward_kinematics, forward_kinematics_velocity, frame_jacobian, update_frame_placements,
 };
-pub use model::{Frame, JointKind, JointModel, Model, UrdfError, STANDARD_GRAVITY};
+pub use model::{
+    Frame, JointKind, JointModel, Model, UrdfError, MAX_URDF_BYTES, MAX_XML_DEPTH, STANDARD_GRAVITY,
+};
 pub use rnea::{gravity_torque, nonlinear_effects, rnea};
 pub use spatial::{Force, Inertia, Motion, Se3};

@@ -9,6 +9,17 @@ use super::spatial::{axis_rotation, Inertia, Motion, Se3};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use std::collections::{BTreeMap, HashMap};
 
+/// Largest URDF accepted, in bytes (64 MiB). Robot descriptions are kilobytes to a few
+/// megabytes (meshes live in separate files); the limit keeps a hostile or mistaken input from
+/// exhausting memory in the XML parser. [`UrdfError::TooLarge`] names it.
+pub const MAX_URDF_BYTES: usize = 64 << 20;
+
+/// Deepest XML element nesting accepted (the `<robot>` element is depth 1). URDF itself needs 6
+/// (`robot/link/visual/geometry/mesh`, plus vendor extensions a few levels deeper); urdf-rs's
+/// parser recurses once per level, so thousands of nested elements would overflow its stack.
+/// The nesting is measured by an iterative scan before urdf-rs sees the text.
+pub const MAX_XML_DEPTH: usize = 256;
+
 /// Standard gravity of the fixtures and of the papers' robots: `(0, 0, -9.81)` m/s², z up.
 pub const STANDARD_GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
 
@@ -120,6 +131,17 @@ pub enum UrdfError {
         joint: String,
         /// `"revolute"` or `"prismatic"`.
         joint_type: String,
+    },
+    /// The input is larger or more deeply nested than [`MAX_URDF_BYTES`] or
+    /// [`MAX_XML_DEPTH`] allow; checked before the XML is parsed into a robot.
+    #[error("URDF {what} {found} exceeds the limit of {limit}")]
+    TooLarge {
+        /// `"size (bytes)"` or `"XML nesting depth"`.
+        what: &'static str,
+        /// The limit.
+        limit: usize,
+        /// What was found (the size, or the depth and where it was reached).
+        found: String,
     },
     /// A non-finite number in an origin or limit.
     #[error("joint '{joint}': non-finite {what}")]
@@ -348,6 +370,16 @@ fn prescan(xml: &str) -> Result<Scan, UrdfError> {
                 _ => {}
             }
             if !empty {
+                if stack.len() >= MAX_XML_DEPTH {
+                    return Err(UrdfError::TooLarge {
+                        what: "XML nesting depth",
+                        limit: MAX_XML_DEPTH,
+                        found: format!(
+                            "> {MAX_XML_DEPTH} (element <{tag}> at byte {})",
+                            reader.buffer_position()
+                        ),
+                    });
+                }
                 stack.push(tag);
             }
         }
@@ -385,6 +417,22 @@ fn prescan(xml: &str) -> Result<Scan, UrdfError> {
         return Err(UrdfError::Malformed("no <robot> element".into()));
     }
     Ok(scan)
+}
+
+/// Rejects inputs above [`MAX_URDF_BYTES`].
+fn check_size(len: usize) -> Result<(), UrdfError> {
+    if len > MAX_URDF_BYTES {
+        return Err(UrdfError::TooLarge {
+            what: "size (bytes)",
+            limit: MAX_URDF_BYTES,
+            found: if len == MAX_URDF_BYTES + 1 {
+                format!("> {MAX_URDF_BYTES}")
+            } else {
+                len.to_string()
+            },
+        });
+    }
+    Ok(())
 }
 
 fn check_inertia(link: &urdf_rs::Link) -> Result<Inertia, UrdfError> {
@@ -431,12 +479,27 @@ fn check_inertia(link: &urdf_rs::Link) -> Result<Inertia, UrdfError> {
 }
 
 impl Model {
-    /// Reads and parses a URDF file.
+    /// Reads and parses a URDF file. A file larger than [`MAX_URDF_BYTES`] is rejected before
+    /// it is read.
     pub fn from_urdf_file(path: impl AsRef<std::path::Path>) -> Result<Model, UrdfError> {
+        use std::io::Read as _;
         let path = path.as_ref();
-        let xml = std::fs::read_to_string(path).map_err(|e| UrdfError::Io {
+        let io = |e: std::io::Error| UrdfError::Io {
             path: path.display().to_string(),
             message: e.to_string(),
+        };
+        // Read at most one byte past the limit, so that a huge file (or an endless stream such
+        // as /dev/zero) is refused without being read whole.
+        let mut bytes = Vec::new();
+        std::fs::File::open(path)
+            .map_err(io)?
+            .take(MAX_URDF_BYTES as u64 + 1)
+            .read_to_end(&mut bytes)
+            .map_err(io)?;
+        check_size(bytes.len())?;
+        let xml = String::from_utf8(bytes).map_err(|e| UrdfError::Io {
+            path: path.display().to_string(),
+            message: format!("not UTF-8 text: {e}"),
         })?;
         Self::from_urdf_str(&xml)
     }
@@ -447,7 +510,12 @@ impl Model {
     /// `prismatic` joint must have a `<limit>` ([`UrdfError::MissingLimit`] names it otherwise);
     /// `continuous` joints are unbounded; a `<limit>` without `effort`/`velocity` (or with 0)
     /// leaves that limit infinite.
+    ///
+    /// Input is bounded before it is parsed: at most [`MAX_URDF_BYTES`] bytes and
+    /// [`MAX_XML_DEPTH`] levels of element nesting ([`UrdfError::TooLarge`] otherwise). The
+    /// number of links is not limited: building the model walks the tree without recursion.
     pub fn from_urdf_str(xml: &str) -> Result<Model, UrdfError> {
+        check_size(xml.len())?;
         const KNOWN: [&str; 7] = [
             "revolute",
             "continuous",
@@ -596,7 +664,7 @@ impl Model {
             links: &links,
             children: &children,
         };
-        tree.visit(&mut model, root, None, Se3::identity(), 0)?;
+        tree.visit(&mut model, root)?;
         if model.frames.len() != robot.links.len() {
             let reached: std::collections::HashSet<&str> =
                 model.frames.iter().map(|f| f.name.as_str()).collect();
@@ -709,24 +777,54 @@ struct Tree<'a> {
     children: &'a HashMap<&'a str, BTreeMap<&'a str, &'a urdf_rs::Joint>>,
 }
 
-impl Tree<'_> {
-    /// Visits the child joints of `link` (carried by `body`, at `in_body` in its frame) in
-    /// alphabetical order, each subtree before the next sibling.
-    fn visit(
+/// A joint waiting on the traversal stack: it hangs from a link carried by `body`, whose frame
+/// is `in_body` in that body's frame, `depth` joints below the root.
+struct Pending<'a> {
+    joint: &'a urdf_rs::Joint,
+    body: Option<usize>,
+    in_body: Se3,
+    depth: usize,
+}
+
+impl<'a> Tree<'a> {
+    /// Pushes the child joints of `link` so that they pop in alphabetical order.
+    fn push_children(
         &self,
-        model: &mut Model,
+        stack: &mut Vec<Pending<'a>>,
         link: &str,
         body: Option<usize>,
         in_body: Se3,
         depth: usize,
-    ) -> Result<(), UrdfError> {
-        if depth > self.links.len() {
-            return Err(UrdfError::Cycle { link: link.into() });
+    ) {
+        if let Some(kids) = self.children.get(link) {
+            stack.extend(kids.values().rev().map(|&joint| Pending {
+                joint,
+                body,
+                in_body,
+                depth,
+            }));
         }
-        let Some(kids) = self.children.get(link) else {
-            return Ok(());
-        };
-        for j in kids.values() {
+    }
+
+    /// Visits the joints below `root` depth-first, the child joints of a link in alphabetical
+    /// order, each subtree before the next sibling (Pinocchio's order), appending joints and
+    /// frames to `model`. An explicit stack instead of recursion: a chain of any length cannot
+    /// overflow the thread's stack.
+    fn visit(&self, model: &mut Model, root: &str) -> Result<(), UrdfError> {
+        let mut stack = Vec::new();
+        self.push_children(&mut stack, root, None, Se3::identity(), 0);
+        while let Some(Pending {
+            joint: j,
+            body,
+            in_body,
+            depth,
+        }) = stack.pop()
+        {
+            if depth > self.links.len() {
+                return Err(UrdfError::Cycle {
+                    link: j.parent.link.clone(),
+                });
+            }
             let child = self.links[j.child.link.as_str()];
             let xyz = *j.origin.xyz;
             let rpy = *j.origin.rpy;
@@ -755,7 +853,7 @@ impl Tree<'_> {
                     joint: body,
                     placement: origin,
                 });
-                self.visit(model, &child.name, body, origin, depth + 1)?;
+                self.push_children(&mut stack, &child.name, body, origin, depth + 1);
                 continue;
             };
             let a = Vector3::from(*j.axis.xyz);
@@ -811,7 +909,13 @@ impl Tree<'_> {
                 joint: Some(idx),
                 placement: Se3::identity(),
             });
-            self.visit(model, &child.name, Some(idx), Se3::identity(), depth + 1)?;
+            self.push_children(
+                &mut stack,
+                &child.name,
+                Some(idx),
+                Se3::identity(),
+                depth + 1,
+            );
         }
         Ok(())
     }

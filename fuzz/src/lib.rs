@@ -1,0 +1,204 @@
+//! Fuzz targets for the inputs a user hands the `tandem` program: URDF files, the TOML configs
+//! of `tandem train --config` and `tandem reproduce p0-pendulum --config`, the JSON state and
+//! actions of `tandem env replay`, and checkpoint bytes (`--resume`).
+//!
+//! Each target is a plain `fn(&[u8])` that runs the program's own code on the input (the
+//! `src/cli` modules are compiled in from the main crate) and panics only on a bug: bad input
+//! must come back as an error, never a panic, a stack overflow, an abort on allocation or a
+//! `null` in the JSON output. Two drivers call them:
+//!
+//! - libFuzzer: `cargo +nightly fuzz run <target>` (the `fuzz_targets/*.rs` binaries);
+//! - a stable, seeded mutation driver: the main workspace's `tests/fuzz_smoke.rs`, which runs
+//!   [`mutate::Mutator`] over the seed corpora in `fuzz/corpus/<target>/`.
+
+// The program's command modules, as the `tandem` binary compiles them; the targets use a few
+// of their functions.
+#[allow(dead_code, unused_imports)]
+#[path = "../../src/cli/mod.rs"]
+mod cli;
+
+pub mod mutate;
+
+use serde_json::{json, Value};
+use tandem::agents::{Algo, AlgoConfig, QNetwork, TrainSettings, Trainer};
+use tandem::dynamics::rigid::Model;
+use tandem::envs::{make, registered, Env};
+use tandem::nn::budget::MemoryEstimate;
+use tandem::nn::Checkpoint;
+
+/// A fuzz target.
+pub type Target = fn(&[u8]);
+
+/// The targets by name, as `cargo fuzz run` and `fuzz/corpus/<name>/` call them.
+pub const TARGETS: [(&str, Target); 5] = [
+    ("urdf", urdf),
+    ("train_config", train_config),
+    ("reproduce_config", reproduce_config),
+    ("env_replay", env_replay),
+    ("checkpoint", checkpoint),
+];
+
+/// Agents whose estimate is below this are built (allocated, initialized) by the config target;
+/// larger ones are only estimated, so that a million inputs stay fast.
+const BUILD_BELOW: u64 = 8 << 20;
+
+/// Robots up to this many joints are evaluated by the URDF target.
+const EVAL_MAX_DOF: usize = 64;
+
+/// A successful JSON output must hold no `null` (what a non-finite number turns into).
+fn assert_no_null(v: &Value, input: &str) {
+    let text = v.to_string();
+    assert!(
+        !text.contains("null"),
+        "{input}: output holds null (a non-finite number): {text}"
+    );
+}
+
+/// `tandem urdf inspect` and `tandem urdf eval`: the URDF loader on the input, then (for up to
+/// 64 joints) the dynamics at rest, at moderate values, and at values whose results overflow.
+pub fn urdf(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    let Ok(model) = Model::from_urdf_str(text) else {
+        return;
+    };
+    let _ = cli::urdf::inspect(&model);
+    let nv = model.nv();
+    if nv > EVAL_MAX_DOF {
+        return;
+    }
+    let states = json!([
+        {"q": vec![0.0; nv]},
+        {"q": vec![0.3; nv], "v": vec![-1.0; nv], "tau": vec![2.0; nv], "a": vec![0.5; nv]},
+        {"q": vec![1e6; nv], "v": vec![1e200; nv], "tau": vec![-1e300; nv]},
+    ]);
+    if let Ok(out) = cli::urdf::eval(&model, &states, "fuzz states") {
+        assert_no_null(&out, "urdf eval");
+    }
+}
+
+/// The environment a trainer for `cfg` runs on: pendulum for continuous agents, the pixel maze
+/// for a conv DQN, CartPole otherwise.
+fn env_for(cfg: &AlgoConfig) -> Box<dyn Env> {
+    let id = match cfg {
+        AlgoConfig::Ddpg(_) | AlgoConfig::Sac(_) => "Pendulum-v1",
+        AlgoConfig::Dqn(c) if c.network == QNetwork::Conv => "PixelMaze-v0",
+        _ => "CartPole-v1",
+    };
+    make(id).expect("a registered environment")
+}
+
+/// The estimate an agent's constructor checks.
+fn estimate(cfg: &AlgoConfig, env: &dyn Env) -> MemoryEstimate {
+    let od = env.observation_space().flat_dim();
+    let act = env.action_space();
+    let n = match act {
+        tandem::core::Space::Discrete { n } => *n,
+        _ => act.flat_dim(),
+    };
+    match cfg {
+        AlgoConfig::Ddpg(c) => c.memory(od, n),
+        AlgoConfig::Sac(c) => c.memory(od, n),
+        AlgoConfig::Dqn(c) => c.memory(od, n),
+        AlgoConfig::Reinforce(c) => c.memory(od, n),
+    }
+}
+
+/// `tandem train --config`: the file parsed for each of the four algorithms; a config that
+/// parses is built into a trainer (validation, the memory check, allocation) when its estimate
+/// is small, otherwise validated and estimated only.
+pub fn train_config(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    for algo in [Algo::Ddpg, Algo::Sac, Algo::Dqn, Algo::Reinforce] {
+        let Ok((cfg, settings)) = cli::train::parse_config(algo, text, "fuzz config") else {
+            continue;
+        };
+        let env = env_for(&cfg);
+        let est = estimate(&cfg, &*env);
+        if est.total().is_some_and(|b| b < BUILD_BELOW) {
+            let _ = Trainer::new(cfg, settings, &*env, 0);
+        } else {
+            let _ = est.check("fuzz");
+        }
+    }
+}
+
+/// `tandem reproduce p0-pendulum --config`: the overrides applied to both base configurations
+/// and validated; the DDPG agent is built when its estimate is small.
+pub fn reproduce_config(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    for base in [
+        cli::reproduce::quick_config(),
+        tandem::pipelines::p0::P0Config::default(),
+    ] {
+        let Ok(cfg) = cli::reproduce::parse_config(base, text, "fuzz config") else {
+            continue;
+        };
+        let agent = AlgoConfig::Ddpg(cfg.ddpg.clone());
+        let env = env_for(&agent);
+        if estimate(&agent, &*env)
+            .total()
+            .is_some_and(|b| b < BUILD_BELOW)
+        {
+            let _ = Trainer::new(agent, TrainSettings::default(), &*env, 0);
+        }
+    }
+}
+
+/// `tandem env replay`: the first byte picks the environment, the rest is the `--state` JSON,
+/// a newline, and the actions JSON. A replay that succeeds must print finite numbers only.
+pub fn env_replay(data: &[u8]) {
+    let Some((&pick, rest)) = data.split_first() else {
+        return;
+    };
+    let Ok(text) = std::str::from_utf8(rest) else {
+        return;
+    };
+    let (state, actions) = text.split_once('\n').unwrap_or((text, "[]"));
+    let envs = registered();
+    let id = &envs[pick as usize % envs.len()].id;
+    let mut env = make(id).expect("a registered environment");
+    // `--state` as the program reads a JSON argument (a path is never opened here).
+    let Ok(state) =
+        cli::json::parse(state, "--state").and_then(|v| cli::json::numbers(&v, "--state"))
+    else {
+        return;
+    };
+    if let Ok(out) = cli::env::replay_from(&mut *env, &state, actions, "fuzz actions") {
+        assert_no_null(&out, "env replay");
+    }
+}
+
+/// The small agents the checkpoint target restores into (DQN on CartPole, SAC on the
+/// pendulum): a few hundred parameters and a 64-transition replay, so a million loads are fast.
+pub fn small_trainers() -> Vec<(Trainer, Box<dyn Env>)> {
+    let table = |s: &str| s.parse::<toml::Table>().expect("valid TOML");
+    [
+        (Algo::Dqn, "hidden = [8]\nbuffer_size = 64\nbatch_size = 8"),
+        (Algo::Sac, "hidden = [8]\nbuffer_size = 64\nbatch_size = 8"),
+    ]
+    .into_iter()
+    .map(|(algo, t)| {
+        let cfg = AlgoConfig::from_toml(algo, table(t)).expect("a valid config");
+        let env = env_for(&cfg);
+        let trainer = Trainer::new(cfg, TrainSettings::default(), &*env, 0).expect("small");
+        (trainer, env)
+    })
+    .collect()
+}
+
+/// `tandem train --resume`: the bytes read as a checkpoint and, if they are one, restored into
+/// each small trainer (which must either accept them or say why).
+pub fn checkpoint(data: &[u8]) {
+    let Ok(ckpt) = Checkpoint::from_bytes(data) else {
+        return;
+    };
+    for (mut trainer, mut env) in small_trainers() {
+        let _ = trainer.load(&ckpt, &mut *env);
+    }
+}
