@@ -75,7 +75,7 @@ mod tests {
     fn every_preset_parses_for_its_algorithm_and_its_environment_exists() {
         for p in PRESETS {
             let algo: Algo = p.algo.parse().unwrap();
-            let (agent, train) = crate::cli::train::parse_config(algo, p.text, p.file).unwrap();
+            let (agent, train) = super::super::train::parse_config(algo, p.text, p.file).unwrap();
             assert!(
                 agent != AlgoConfig::default_for(algo) || train != TrainSettings::default(),
                 "{} changes nothing",

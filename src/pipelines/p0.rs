@@ -33,31 +33,13 @@ use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 use tandem_dynamics::Plant;
 use tandem_envs::{DcMotorPendulumEnv, DcMotorPendulumTask, Env, EnvError, SampleCounter, Task};
 use tandem_models::{
-    DynamicsModel, FitConfig, FitReport, ModelEnv, ModelError, PlantModel, ResidualModel,
-    ResidualModelConfig, Transitions, TransitionsBuilder,
+    DynamicsModel, FitConfig, FitReport, ModelEnv, PlantModel, ResidualModel, ResidualModelConfig,
+    Transitions, TransitionsBuilder,
 };
 
 use super::adapter::{feature_dim, Adapted, Feature};
 
-/// Why a pipeline stopped.
-#[derive(Debug, thiserror::Error)]
-pub enum PipelineError {
-    /// The agent failed (bad configuration, non-finite loss, ...).
-    #[error("agent: {0}")]
-    Agent(#[from] AgentError),
-    /// An environment failed.
-    #[error("environment: {0}")]
-    Env(#[from] EnvError),
-    /// The difference model failed to fit.
-    #[error("difference model: {0}")]
-    Model(#[from] ModelError),
-    /// A configuration value out of range.
-    #[error("configuration: {0}")]
-    Config(String),
-}
-
-/// Result of this module.
-pub type Result<T> = std::result::Result<T, PipelineError>;
+pub use super::{PipelineError, Result};
 
 /// One of the three methods of p0's Table II.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

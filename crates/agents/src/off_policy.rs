@@ -118,6 +118,20 @@ impl StepOptions {
     }
 }
 
+impl StepOptions {
+    /// The same step, recording the environment's internal state before and after.
+    pub fn recording_states(mut self) -> Self {
+        self.record_states = true;
+        self
+    }
+
+    /// The same step without the schedule's updates (the caller updates: G per real step).
+    pub fn without_updates(mut self) -> Self {
+        self.learn = false;
+        self
+    }
+}
+
 /// One step taken.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StepRecord {

@@ -48,6 +48,18 @@ impl Default for MlpModelConfig {
     }
 }
 
+impl MlpModelConfig {
+    /// The default network predicting the next state only (no reward or termination outputs):
+    /// for a task whose reward and termination are known.
+    pub fn state_only() -> Self {
+        Self {
+            learn_reward: false,
+            learn_termination: false,
+            ..Self::default()
+        }
+    }
+}
+
 /// p2's dynamics model: an MLP from `[s, a]` to `[Δs, r, logit p(done)]`, trained with p2 eq. (1)
 /// `Σ ‖s' − ŝ'‖² + (r − r̂)² − (d log p + (1 − d) log(1 − p))`.
 ///
