@@ -14,7 +14,8 @@
 //! | [`planners`] | `tandem-planners` | MPC planners and TVLG trajectory optimizers |
 //! | [`agents`] | `tandem-agents` | DDPG, SAC, REINFORCE, DQN, replay |
 //!
-//! [`run`] writes run directories; [`report`] renders reproduction tables and figures.
+//! [`run`] writes run directories; [`report`] renders reproduction tables and figures;
+//! [`interrupt`] turns SIGINT/SIGTERM into a stop request that long runs poll.
 
 pub use tandem_agents as agents;
 pub use tandem_core as core;
@@ -24,6 +25,7 @@ pub use tandem_models as models;
 pub use tandem_nn as nn;
 pub use tandem_planners as planners;
 
+pub mod interrupt;
 pub mod pipelines;
 pub mod report;
 pub mod run;

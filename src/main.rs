@@ -62,6 +62,10 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e @ cli::CliError::Interrupted { code, .. }) => {
+            eprintln!("{e}");
+            ExitCode::from(code)
+        }
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::FAILURE

@@ -284,10 +284,11 @@ impl RunDir {
         self.stale_lock
     }
 
-    /// Writes `contents` to `name` inside the directory and returns the file's path.
+    /// Writes `contents` to `name` inside the directory, atomically (a crash leaves the previous
+    /// file or the new one, never a half-written one), and returns the file's path.
     pub fn write(&self, name: &str, contents: &str) -> std::io::Result<PathBuf> {
         let p = self.path.join(name);
-        std::fs::write(&p, contents)?;
+        tandem_nn::write_atomic(&p, contents.as_bytes())?;
         Ok(p)
     }
 }

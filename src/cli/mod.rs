@@ -39,6 +39,15 @@ pub enum CliError {
     /// Anything else, already phrased for the user.
     #[error("{0}")]
     Other(String),
+    /// SIGINT or SIGTERM stopped the run after it wrote a checkpoint; `main` exits with `code`
+    /// (130 or 143).
+    #[error("interrupted: {what}")]
+    Interrupted {
+        /// What was saved and how to go on.
+        what: String,
+        /// The exit status.
+        code: u8,
+    },
 }
 
 impl CliError {

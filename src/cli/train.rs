@@ -8,15 +8,17 @@
 //! preset for the (algorithm, environment) pair is used where one exists ([`super::presets`]);
 //! stderr, `config.toml` (`config_source`) and `summary.json` say which settings were used.
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
+use tandem::interrupt::{Stop, EXIT_SIGINT};
 use tandem::report::{ensure_finite, to_json_pretty, NonFinite};
 use tandem::run::{csv, svg_chart, Existing, Layout, RunDir, Series};
-use tandem_agents::{Algo, AlgoConfig, TrainSettings, Trainer};
+use tandem_agents::{Algo, AlgoConfig, Pause, TrainSettings, Trainer};
 use tandem_envs::make;
 
 use super::presets::{self, Preset};
@@ -26,31 +28,33 @@ use super::{CliError, Result};
 #[derive(Debug, Args)]
 pub struct TrainArgs {
     /// Algorithm: ddpg, sac, dqn or reinforce.
-    #[arg(long)]
-    pub algo: String,
+    #[arg(long, required_unless_present = "resume")]
+    pub algo: Option<String>,
     /// Registered environment id (see `tandem envs`).
-    #[arg(long)]
-    pub env: String,
+    #[arg(long, required_unless_present = "resume")]
+    pub env: Option<String>,
     /// Environment steps (real samples) to train for.
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
-    pub steps: u64,
-    /// Run seed (agent, environment resets, minibatches all derive from it).
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    #[arg(long, required_unless_present = "resume", value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps: Option<u64>,
+    /// Run seed (agent, environment resets, minibatches all derive from it) [default: 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// TOML file with `[agent]` and `[train]` overrides of the defaults. Without it, the tuned
     /// preset for the (algorithm, environment) pair is used when there is one (the files in
     /// `crates/agents/presets/`, built into the program).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Without `--config`, use the algorithm's defaults even where a preset exists.
-    #[arg(long, conflicts_with = "config")]
+    #[arg(long, conflicts_with_all = ["config", "resume"])]
     pub no_preset: bool,
     /// Output directory (default `runs/<env>__<algo>__<seed>__<time>/`).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "resume")]
     pub out: Option<PathBuf>,
-    /// Resume from a checkpoint written by an earlier run with the same configuration; `--out`
-    /// may then name that run's directory, whose files are rewritten.
-    #[arg(long)]
+    /// Continue the run in DIR (interrupted or killed) from its latest checkpoint, with the
+    /// settings its `config.toml` records. `--algo`, `--env`, `--steps`, `--seed` and `--config`
+    /// may be given and must then agree with them. The finished run's files equal those of an
+    /// uninterrupted run (timings aside).
+    #[arg(long, value_name = "DIR", conflicts_with = "overwrite")]
     pub resume: Option<PathBuf>,
     /// Replace the run in an existing `--out` directory (without it, an existing run there is an
     /// error).
@@ -106,14 +110,19 @@ pub fn ensure_finite_config(
 struct Summary<'a> {
     env: &'a str,
     algo: &'a str,
+    /// `complete`, or `interrupted` (by SIGINT/SIGTERM; the checkpoint resumes it).
+    status: Status,
     config_source: String,
     seed: u64,
     steps: u64,
     episodes: u64,
     updates: u64,
+    /// The step of the evaluation reported below (the last one, when interrupted; none if the
+    /// run was interrupted before its first).
+    eval_step: Option<u64>,
     eval_episodes: usize,
-    eval_return_mean: f64,
-    eval_return_std: f64,
+    eval_return_mean: Option<f64>,
+    eval_return_std: Option<f64>,
     eval_returns: &'a [f64],
     real_samples: u64,
     wall_seconds: f64,
@@ -126,17 +135,25 @@ struct Summary<'a> {
     checkpoint: String,
 }
 
-/// What `config.toml` records: everything needed to repeat the run.
-#[derive(Debug, Serialize)]
-struct ResolvedConfig<'a> {
+/// What `config.toml` records: everything needed to repeat the run, and what `--resume`
+/// continues with.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ResolvedConfig {
     /// Where the settings came from: `--config`'s path, `preset:<file>` or `defaults`.
-    config_source: String,
-    algo: &'a str,
-    env: &'a str,
-    steps: u64,
-    seed: u64,
-    agent: &'a AlgoConfig,
-    train: &'a TrainSettings,
+    pub config_source: String,
+    /// The algorithm's name.
+    pub algo: String,
+    /// The environment's id.
+    pub env: String,
+    /// The step budget.
+    pub steps: u64,
+    /// The run seed.
+    pub seed: u64,
+    /// The agent's configuration.
+    pub agent: AlgoConfig,
+    /// The loop's settings.
+    pub train: TrainSettings,
 }
 
 /// Reads the algorithm's config and the loop settings from the text of a `--config` file
@@ -204,74 +221,159 @@ fn other(e: impl std::fmt::Display) -> CliError {
     CliError::other(e)
 }
 
-/// Runs `tandem train`.
-pub fn run(args: &TrainArgs) -> Result<()> {
-    tandem_nn::set_gemm_threads(1);
-    let algo: Algo = args.algo.parse().map_err(other)?;
-    let source = ConfigSource::choose(args.config.as_deref(), args.no_preset, algo, &args.env);
-    let (agent_cfg, settings) = source.read(algo)?;
-    ensure_finite_config(&source, &agent_cfg, &settings)?;
+/// How the run ends: all steps taken, or stopped by a signal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+enum Status {
+    Complete,
+    Interrupted,
+}
+
+/// The settings of a new run from the command line: `--config`, a preset or the defaults.
+fn fresh(args: &TrainArgs) -> Result<ResolvedConfig> {
+    let (Some(algo), Some(env), Some(steps)) = (&args.algo, &args.env, args.steps) else {
+        return Err(CliError::Other(
+            "--algo, --env and --steps are required without --resume".into(),
+        ));
+    };
+    let algo: Algo = algo.parse().map_err(other)?;
+    let source = ConfigSource::choose(args.config.as_deref(), args.no_preset, algo, env);
+    let (agent, train) = source.read(algo)?;
+    ensure_finite_config(&source, &agent, &train)?;
     if let ConfigSource::Preset(p) = &source {
         eprintln!(
-            "using preset {} for {} on {} (tuned for --steps {}); --config FILE or --no-preset to \
-             choose other settings",
+            "using preset {} for {} on {env} (tuned for --steps {}); --config FILE or --no-preset \
+             to choose other settings",
             p.file,
             algo.name(),
-            args.env,
             p.steps
         );
-        if args.steps != p.steps {
+        if steps != p.steps {
             eprintln!(
-                "note: --steps {} differs from the {} steps preset {} was tuned for",
-                args.steps, p.steps, p.file
+                "note: --steps {steps} differs from the {} steps preset {} was tuned for",
+                p.steps, p.file
             );
         }
     }
-    let mut env = make(&args.env)?;
-    let mut eval_env = make(&args.env)?;
-    let mut trainer =
-        Trainer::new(agent_cfg.clone(), settings.clone(), &*env, args.seed).map_err(other)?;
-    if let Some(p) = &args.resume {
-        let ckpt = tandem_nn::Checkpoint::load(p)
-            .map_err(|e| CliError::input(format!("--resume {}", p.display()), e.to_string()))?;
-        trainer
-            .load(&ckpt, &mut *env)
-            .map_err(|e| CliError::input(format!("--resume {}", p.display()), e.to_string()))?;
-    }
-    let existing = match (args.overwrite, &args.resume) {
-        (true, _) => Existing::Overwrite,
-        (false, Some(_)) => Existing::Resume,
-        (false, None) => Existing::Refuse,
+    Ok(ResolvedConfig {
+        config_source: source.label(),
+        algo: algo.name().into(),
+        env: env.clone(),
+        steps,
+        seed: args.seed.unwrap_or(0),
+        agent,
+        train,
+    })
+}
+
+/// The settings recorded in the run directory `dir`, checked against whatever the command line
+/// also says: a different algorithm, environment, step budget, seed or configuration is refused.
+fn recorded(args: &TrainArgs, dir: &Path) -> Result<ResolvedConfig> {
+    let what = format!("--resume {}", dir.display());
+    let path = dir.join("config.toml");
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        CliError::input(
+            &what,
+            format!(
+                "{} cannot be read ({e}): not a `tandem train` run directory",
+                path.display()
+            ),
+        )
+    })?;
+    let rc: ResolvedConfig = toml::from_str(&text)
+        .map_err(|e| CliError::input(format!("{}", path.display()), e.to_string().trim()))?;
+    let mut conflicts = Vec::new();
+    let mut differs = |name: &str, given: Option<String>, run: String| {
+        if let Some(g) = given.filter(|g| *g != run) {
+            conflicts.push(format!("--{name} {g} (the run has {run})"));
+        }
     };
-    let name = format!("{}__{}__{}", args.env, algo.name(), args.seed);
-    let dir = RunDir::create(args.out.as_deref(), &name, LAYOUT, existing).map_err(other)?;
+    differs("algo", args.algo.clone(), rc.algo.clone());
+    differs("env", args.env.clone(), rc.env.clone());
+    differs(
+        "steps",
+        args.steps.map(|v| v.to_string()),
+        rc.steps.to_string(),
+    );
+    differs(
+        "seed",
+        args.seed.map(|v| v.to_string()),
+        rc.seed.to_string(),
+    );
+    if let Some(p) = &args.config {
+        let algo: Algo = rc.algo.parse().map_err(other)?;
+        let (agent, train) = ConfigSource::File(p.clone()).read(algo)?;
+        if agent != rc.agent || train != rc.train {
+            conflicts.push(format!(
+                "--config {} (its settings differ from the run's config.toml)",
+                p.display()
+            ));
+        }
+    }
+    if !conflicts.is_empty() {
+        return Err(CliError::input(
+            what,
+            format!(
+                "conflicts with the run being resumed: {}; a resumed run keeps its settings \
+                 (start a new run with --out to change them)",
+                conflicts.join(", ")
+            ),
+        ));
+    }
+    Ok(rc)
+}
+
+/// The name of the checkpoint file in a run directory.
+const CHECKPOINT: &str = "checkpoint.safetensors";
+
+/// Runs `tandem train`.
+pub fn run(args: &TrainArgs) -> Result<()> {
+    tandem_nn::set_gemm_threads(1);
+    let stop = Stop::on_signals().map_err(|e| CliError::Other(format!("signal handlers: {e}")))?;
+    let rc = match &args.resume {
+        Some(dir) => recorded(args, dir)?,
+        None => fresh(args)?,
+    };
+    let algo: Algo = rc.algo.parse().map_err(other)?;
+    let mut env = make(&rc.env)?;
+    let mut eval_env = make(&rc.env)?;
+    let mut trainer =
+        Trainer::new(rc.agent.clone(), rc.train.clone(), &*env, rc.seed).map_err(other)?;
+    let (out, existing) = match (&args.resume, args.overwrite) {
+        (Some(dir), _) => (Some(dir.as_path()), Existing::Resume),
+        (None, true) => (args.out.as_deref(), Existing::Overwrite),
+        (None, false) => (args.out.as_deref(), Existing::Refuse),
+    };
+    let name = format!("{}__{}__{}", rc.env, algo.name(), rc.seed);
+    let dir = RunDir::create(out, &name, LAYOUT, existing).map_err(other)?;
     if let Some(pid) = dir.stale_lock_taken_over() {
         eprintln!(
             "note: took over {} from process {pid}, which is no longer running",
             dir.path().display()
         );
     }
-    let io = |path: &Path| {
-        let path = path.to_path_buf();
-        move |source| CliError::Io { path, source }
-    };
-    let resolved = ResolvedConfig {
-        config_source: source.label(),
-        algo: algo.name(),
-        env: &args.env,
-        steps: args.steps,
-        seed: args.seed,
-        agent: &agent_cfg,
-        train: &settings,
-    };
-    let cfg_text = toml::to_string(&resolved).map_err(other)?;
-    dir.write("config.toml", &cfg_text)
-        .map_err(io(dir.path()))?;
+    let ckpt_path = dir.path().join(CHECKPOINT);
+    if args.resume.is_some() && ckpt_path.exists() {
+        let bad = |e: String| CliError::input(format!("--resume {}", ckpt_path.display()), e);
+        let ckpt = tandem_nn::Checkpoint::load(&ckpt_path).map_err(|e| bad(e.to_string()))?;
+        trainer
+            .load(&ckpt, &mut *env)
+            .map_err(|e| bad(e.to_string()))?;
+        eprintln!(
+            "resuming {} at step {} of {}",
+            dir.path().display(),
+            trainer.steps(),
+            rc.steps
+        );
+    } else {
+        dir.write("config.toml", &toml::to_string(&rc).map_err(other)?)
+            .map_err(io(dir.path()))?;
+    }
 
     let bar = if args.quiet {
         ProgressBar::hidden()
     } else {
-        ProgressBar::new(args.steps)
+        ProgressBar::new(rc.steps)
     };
     bar.set_style(
         ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} steps ({per_sec}, eta {eta})")
@@ -282,38 +384,113 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     let start = Instant::now();
     let start_step = trainer.steps();
     let mut last_evals = 0;
-    trainer
-        .run(&mut *env, &mut *eval_env, args.steps, &mut |t| {
-            if t.steps() % 100 == 0 || t.log().evals.len() != last_evals {
-                bar.set_position(t.steps());
-                let ev = t.log().evals.last().map(|e| e.mean);
-                let tr = t.log().episodes.last().map(|e| e.ret_window_mean);
-                bar.set_message(format!(
-                    "{} {} ep {} train {} eval {}",
-                    algo.name(),
-                    args.env,
-                    t.episodes(),
-                    tr.map_or("-".into(), |v| format!("{v:.1}")),
-                    ev.map_or("-".into(), |v| format!("{v:.1}")),
-                ));
-                last_evals = t.log().evals.len();
-            }
-        })
-        .map_err(other)?;
+    let mut progress = |t: &Trainer| {
+        if t.steps() % 100 == 0 || t.log().evals.len() != last_evals {
+            bar.set_position(t.steps());
+            let ev = t.log().evals.last().map(|e| e.mean);
+            let tr = t.log().episodes.last().map(|e| e.ret_window_mean);
+            bar.set_message(format!(
+                "{} {} ep {} train {} eval {}",
+                algo.name(),
+                rc.env,
+                t.episodes(),
+                tr.map_or("-".into(), |v| format!("{v:.1}")),
+                ev.map_or("-".into(), |v| format!("{v:.1}")),
+            ));
+            last_evals = t.log().evals.len();
+        }
+        if stop.requested() {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    };
+    let status = loop {
+        let pause = trainer
+            .run_until_pause(&mut *env, &mut *eval_env, rc.steps, &mut progress)
+            .map_err(other)?;
+        match pause {
+            Pause::Checkpoint => save_progress(&dir, &trainer, &*env)?,
+            Pause::Stopped => break Status::Interrupted,
+            Pause::Finished => break Status::Complete,
+        }
+    };
     let train_seconds = start.elapsed().as_secs_f64();
     // Final deterministic evaluation (unless the last step just did one).
-    let final_eval = match trainer.log().evals.last() {
-        Some(e) if e.step == trainer.steps() => e.clone(),
-        _ => trainer.evaluate(&mut *eval_env).map_err(other)?,
+    let final_eval = match (status, trainer.log().evals.last()) {
+        (Status::Interrupted, last) => last.cloned(),
+        (Status::Complete, Some(e)) if e.step == trainer.steps() => Some(e.clone()),
+        (Status::Complete, _) => Some(trainer.evaluate(&mut *eval_env).map_err(other)?),
     };
     let wall_seconds = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
+    save_progress(&dir, &trainer, &*env)?;
 
-    let ckpt = trainer.save(&*env).map_err(other)?;
-    let ckpt_path = dir.path().join("checkpoint.safetensors");
-    ckpt.save(&ckpt_path).map_err(other)?;
+    let log = trainer.log();
+    let steps_run = trainer.steps() - start_step;
+    let best_window = log
+        .episodes
+        .iter()
+        .filter(|e| e.episode + 1 >= rc.train.solved_window as u64)
+        .map(|e| e.ret_window_mean)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let summary = Summary {
+        env: &rc.env,
+        algo: algo.name(),
+        status,
+        config_source: rc.config_source.clone(),
+        seed: rc.seed,
+        steps: trainer.steps(),
+        episodes: trainer.episodes(),
+        updates: trainer.updates(),
+        eval_step: final_eval.as_ref().map(|e| e.step),
+        eval_episodes: rc.train.eval_episodes,
+        eval_return_mean: final_eval.as_ref().map(|e| e.mean),
+        eval_return_std: final_eval.as_ref().map(|e| e.std),
+        eval_returns: final_eval.as_ref().map_or(&[], |e| &e.returns),
+        real_samples: trainer.steps(),
+        wall_seconds,
+        train_seconds,
+        env_steps_per_second: steps_run as f64 / wall_seconds,
+        solved_threshold: rc.train.solved_threshold,
+        solved_at_episode: log.solved_at_episode,
+        best_window_return_mean: best_window.is_finite().then_some(best_window),
+        solved_window: rc.train.solved_window,
+        checkpoint: ckpt_path.display().to_string(),
+    };
+    let text =
+        to_json_pretty(&summary).map_err(|e| CliError::Other(format!("summary.json: {e}")))?;
+    dir.write("summary.json", &text).map_err(io(dir.path()))?;
+    write_curve(&dir, &trainer, &rc)?;
 
-    let log = trainer.log().clone();
+    if status == Status::Interrupted {
+        return Err(CliError::Interrupted {
+            what: format!(
+                "checkpoint at step {} of {} written to {}; continue with `tandem train --resume {}`",
+                trainer.steps(),
+                rc.steps,
+                dir.path().display(),
+                dir.path().display()
+            ),
+            code: stop.exit_code().unwrap_or(EXIT_SIGINT),
+        });
+    }
+    println!("{text}");
+    println!("run written to {}", dir.path().display());
+    Ok(())
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CliError {
+    let path = path.to_path_buf();
+    move |source| CliError::Io { path, source }
+}
+
+/// Writes the checkpoint (atomically, the previous one kept until the new one is complete),
+/// then `metrics.csv` and `episodes.csv` as they stand.
+fn save_progress(dir: &RunDir, trainer: &Trainer, env: &dyn tandem_envs::Env) -> Result<()> {
+    let ckpt = trainer.save(env).map_err(other)?;
+    ckpt.save(dir.path().join(CHECKPOINT)).map_err(other)?;
+    let log = trainer.log();
     // metrics.csv: one row per evaluation, with the last update's figures.
     let mut names: Vec<String> = Vec::new();
     for e in &log.evals {
@@ -384,43 +561,17 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         ),
     )
     .map_err(io(dir.path()))?;
+    Ok(())
+}
 
-    let steps_run = trainer.steps() - start_step;
-    let best_window = log
-        .episodes
-        .iter()
-        .filter(|e| e.episode + 1 >= settings.solved_window as u64)
-        .map(|e| e.ret_window_mean)
-        .fold(f64::NEG_INFINITY, f64::max);
-    let summary = Summary {
-        env: &args.env,
-        algo: algo.name(),
-        config_source: source.label(),
-        seed: args.seed,
-        steps: trainer.steps(),
-        episodes: trainer.episodes(),
-        updates: trainer.updates(),
-        eval_episodes: final_eval.returns.len(),
-        eval_return_mean: final_eval.mean,
-        eval_return_std: final_eval.std,
-        eval_returns: &final_eval.returns,
-        real_samples: trainer.steps(),
-        wall_seconds,
-        train_seconds,
-        env_steps_per_second: steps_run as f64 / wall_seconds,
-        solved_threshold: settings.solved_threshold,
-        solved_at_episode: log.solved_at_episode,
-        best_window_return_mean: best_window.is_finite().then_some(best_window),
-        solved_window: settings.solved_window,
-        checkpoint: ckpt_path.display().to_string(),
-    };
-    let text =
-        to_json_pretty(&summary).map_err(|e| CliError::Other(format!("summary.json: {e}")))?;
-    dir.write("summary.json", &text).map_err(io(dir.path()))?;
-
+/// `curve.svg`: evaluations (mean ± std) and the windowed training return against steps.
+fn write_curve(dir: &RunDir, trainer: &Trainer, rc: &ResolvedConfig) -> Result<()> {
+    let log = trainer.log();
     let eval_series = Series {
-        name: "evaluation (10 deterministic episodes, mean ± std)"
-            .replace("10", &settings.eval_episodes.to_string()),
+        name: format!(
+            "evaluation ({} deterministic episodes, mean ± std)",
+            rc.train.eval_episodes
+        ),
         points: log.evals.iter().map(|e| (e.step as f64, e.mean)).collect(),
         band: log
             .evals
@@ -429,7 +580,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             .collect(),
     };
     let train_series = Series {
-        name: format!("training return ({}-episode mean)", settings.solved_window),
+        name: format!("training return ({}-episode mean)", rc.train.solved_window),
         points: log
             .episodes
             .iter()
@@ -438,14 +589,11 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         band: Vec::new(),
     };
     let svg = svg_chart(
-        &format!("{} on {} (seed {})", algo.name(), args.env, args.seed),
+        &format!("{} on {} (seed {})", rc.algo, rc.env, rc.seed),
         "environment steps",
         "return",
         &[eval_series, train_series],
     );
     dir.write("curve.svg", &svg).map_err(io(dir.path()))?;
-
-    println!("{text}");
-    println!("run written to {}", dir.path().display());
     Ok(())
 }

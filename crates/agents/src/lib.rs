@@ -71,7 +71,7 @@ pub use off_policy::{
 pub use reinforce::Reinforce;
 pub use replay::{MixedSampler, ReplayBuffer, TransitionRef};
 pub use sac::Sac;
-pub use trainer::{EpisodeRecord, EvalRecord, RunLog, TrainSettings, Trainer};
+pub use trainer::{EpisodeRecord, EvalRecord, Pause, RunLog, TrainSettings, Trainer};
 
 #[cfg(test)]
 mod tests;

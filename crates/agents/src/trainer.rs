@@ -17,6 +17,8 @@
 //! `handle_timeout_termination`). The episode length limit is enforced here as well as
 //! by any `TimeLimit` wrapper (so it survives a resume that restores the environment's state).
 
+use std::ops::ControlFlow;
+
 use serde::{Deserialize, Serialize};
 use tandem_core::SeedStream;
 use tandem_envs::Env;
@@ -44,6 +46,10 @@ pub struct TrainSettings {
     pub solved_threshold: Option<f64>,
     /// Window of that average.
     pub solved_window: usize,
+    /// [`Trainer::run_until_pause`] also pauses for a checkpoint every this many environment
+    /// steps (0: only at evaluations). A run killed at any moment loses at most this many steps
+    /// (or the evaluation interval, if smaller).
+    pub checkpoint_interval: u64,
 }
 
 impl Default for TrainSettings {
@@ -57,6 +63,7 @@ impl Default for TrainSettings {
             max_episode_steps: None,
             solved_threshold: None,
             solved_window: 100,
+            checkpoint_interval: 10_000,
         }
     }
 }
@@ -140,6 +147,19 @@ struct Progress {
     current: Episode,
     pending: Vec<Episode>,
     log: RunLog,
+}
+
+/// Why [`Trainer::run_until_pause`] returned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pause {
+    /// The step budget (or `max_episodes`) is spent.
+    Finished,
+    /// A checkpoint point: an evaluation just ran, or `checkpoint_interval` steps passed. Save
+    /// with [`Trainer::save`] and call again to go on.
+    Checkpoint,
+    /// The progress callback asked to stop; the step it saw is complete, so a checkpoint saved
+    /// now resumes exactly.
+    Stopped,
 }
 
 /// The agent and how it learns.
@@ -270,6 +290,25 @@ impl Trainer {
         until_step: u64,
         progress: &mut dyn FnMut(&Trainer),
     ) -> Result<()> {
+        let mut go_on = |t: &Trainer| {
+            progress(t);
+            ControlFlow::Continue(())
+        };
+        while self.run_until_pause(env, eval_env, until_step, &mut go_on)? != Pause::Finished {}
+        Ok(())
+    }
+
+    /// Like [`Trainer::run`], but returns at every checkpoint point (after an evaluation, and
+    /// every `checkpoint_interval` steps) and as soon as `progress` returns
+    /// [`ControlFlow::Break`] (after the step it was called for), saying which with [`Pause`].
+    /// Calling it again goes on where it stopped; where it pauses never changes the numbers.
+    pub fn run_until_pause(
+        &mut self,
+        env: &mut dyn Env,
+        eval_env: &mut dyn Env,
+        until_step: u64,
+        progress: &mut dyn FnMut(&Trainer) -> ControlFlow<()>,
+    ) -> Result<Pause> {
         while self.steps() < until_step && !self.episodes_done() {
             let rec = match &mut self.core {
                 Core::OffPolicy(l) => l.step(env, &mut self.p.runner, StepOptions::real())?,
@@ -288,13 +327,20 @@ impl Trainer {
             if rec.done() {
                 self.finish_episode(&rec)?;
             }
-            let ei = self.settings.eval_interval;
-            if ei > 0 && self.steps() % ei == 0 {
+            let steps = self.steps();
+            let every = |n: u64| n > 0 && steps % n == 0;
+            let evaluated = every(self.settings.eval_interval);
+            if evaluated {
                 self.evaluate(eval_env)?;
             }
-            progress(self);
+            if progress(self).is_break() {
+                return Ok(Pause::Stopped);
+            }
+            if evaluated || every(self.settings.checkpoint_interval) {
+                return Ok(Pause::Checkpoint);
+            }
         }
-        Ok(())
+        Ok(Pause::Finished)
     }
 
     fn finish_episode(&mut self, rec: &StepRecord) -> Result<()> {

@@ -7,8 +7,9 @@ use tandem_envs::{Env, EnvError, Step};
 
 use crate::config::{DdpgConfig, DqnConfig, ReinforceConfig, SacConfig};
 use crate::learner::{AlgoConfig, Learner};
-use crate::trainer::{TrainSettings, Trainer};
+use crate::trainer::{Pause, TrainSettings, Trainer};
 use crate::AgentError;
+use std::ops::ControlFlow;
 
 /// A damped point mass: obs `[x, v]`, push `u` in `[-1, 1]` (or 3 discrete pushes), reward
 /// `-x²`, terminated when `|x| > 2`, episodes of at most 30 steps.
@@ -213,6 +214,63 @@ fn a_run_saved_mid_episode_and_resumed_equals_an_uninterrupted_one() {
             "{name}: parameters differ"
         );
         assert_eq!(whole.updates(), resumed.updates());
+    }
+}
+
+/// Pausing at every checkpoint point, stopping at an arbitrary step and resuming from the bytes
+/// saved there changes nothing: the final checkpoints are the same bytes.
+#[test]
+fn pauses_and_a_stop_resumed_from_bytes_give_the_same_final_checkpoint() {
+    for (cfg, discrete) in configs() {
+        let name = cfg.algo().name();
+        let settings = TrainSettings {
+            checkpoint_interval: 40,
+            ..settings()
+        };
+        let (mut env, mut eval) = (PointMass::new(discrete), PointMass::new(discrete));
+        let mut whole = Trainer::new(cfg.clone(), settings.clone(), &env, 3).unwrap();
+        let mut pauses = Vec::new();
+        loop {
+            let go_on = &mut |_: &Trainer| ControlFlow::Continue(());
+            match whole
+                .run_until_pause(&mut env, &mut eval, 230, go_on)
+                .unwrap()
+            {
+                Pause::Checkpoint => pauses.push(whole.steps()),
+                Pause::Finished => break,
+                Pause::Stopped => unreachable!("never asked to stop"),
+            }
+        }
+        // Evaluations every 70 steps, checkpoints every 40.
+        assert_eq!(pauses, [40, 70, 80, 120, 140, 160, 200, 210], "{name}");
+        let whole_bytes = whole.save(&env).unwrap().to_bytes().unwrap();
+
+        let (mut env, mut eval) = (PointMass::new(discrete), PointMass::new(discrete));
+        let mut first = Trainer::new(cfg.clone(), settings.clone(), &env, 3).unwrap();
+        let stop_at_101 = &mut |t: &Trainer| {
+            if t.steps() == 101 {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        };
+        while first
+            .run_until_pause(&mut env, &mut eval, 230, stop_at_101)
+            .unwrap()
+            == Pause::Checkpoint
+        {}
+        assert_eq!(first.steps(), 101, "{name}");
+        let bytes = first.save(&env).unwrap().to_bytes().unwrap();
+
+        let (mut env, mut eval) = (PointMass::new(discrete), PointMass::new(discrete));
+        let mut resumed = Trainer::new(cfg.clone(), settings.clone(), &env, 3).unwrap();
+        let ckpt = tandem_nn::Checkpoint::from_bytes(&bytes).unwrap();
+        resumed.load(&ckpt, &mut env).unwrap();
+        resumed.run(&mut env, &mut eval, 230, &mut |_| {}).unwrap();
+        assert!(
+            resumed.save(&env).unwrap().to_bytes().unwrap() == whole_bytes,
+            "{name}: final checkpoints differ"
+        );
     }
 }
 

@@ -25,10 +25,11 @@
 //! assert!(err.to_string().contains("critic.layers.0.weight"));
 //! ```
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
+use std::io::Write as _;
 use std::path::Path;
 
-use safetensors::tensor::{Dtype, TensorView};
+use safetensors::tensor::Dtype;
 
 use crate::error::{NnError, Result};
 
@@ -53,6 +54,53 @@ struct Entry {
 pub struct Checkpoint {
     tensors: BTreeMap<String, Entry>,
     metadata: BTreeMap<String, String>,
+}
+
+/// The metadata key holding a checkpoint's CRC-32 (8 hex digits), written by
+/// [`Checkpoint::to_bytes`] and checked by [`Checkpoint::from_bytes`].
+pub const CHECKSUM_KEY: &str = "tandem.crc32";
+
+/// Writes `bytes` to `path` atomically (temporary file in the same directory, `fsync`, rename,
+/// directory `fsync`); on any error the temporary file is removed and `path` is untouched.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let name = path
+        .file_name()
+        .ok_or_else(|| std::io::Error::other("the path names no file"))?;
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(name);
+    tmp_name.push(".tmp");
+    let tmp = path.with_file_name(tmp_name);
+    let written = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    // Make the rename itself durable; a directory that cannot be opened for syncing (some
+    // platforms) does not make the write fail.
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        if let Ok(d) = std::fs::File::open(dir) {
+            let _ = d.sync_all();
+        }
+    }
+    Ok(())
+}
+
+fn dtype_size(dtype: Dtype) -> Result<usize> {
+    match dtype {
+        Dtype::U8 | Dtype::I8 | Dtype::BOOL => Ok(1),
+        Dtype::F16 | Dtype::BF16 | Dtype::I16 | Dtype::U16 => Ok(2),
+        Dtype::F32 | Dtype::I32 | Dtype::U32 => Ok(4),
+        Dtype::F64 | Dtype::I64 | Dtype::U64 => Ok(8),
+        other => Err(NnError::Checkpoint(format!(
+            "dtype {other:?} is not supported in checkpoints"
+        ))),
+    }
 }
 
 fn numel(shape: &[usize]) -> usize {
@@ -231,23 +279,80 @@ impl Checkpoint {
             .map_err(|e| NnError::Checkpoint(format!("decoding `{name}`: {e}")))
     }
 
-    /// Serializes to safetensors bytes.
+    /// Serializes to safetensors bytes, deterministically: tensors in name order, metadata keys
+    /// sorted, and a CRC-32 of everything else stored under the metadata key [`CHECKSUM_KEY`]
+    /// (so equal checkpoints are equal bytes, and [`Checkpoint::from_bytes`] detects any changed
+    /// byte).
     pub fn to_bytes(&self) -> Result<Vec<u8>> {
-        let mut views = Vec::with_capacity(self.tensors.len());
-        for (name, e) in &self.tensors {
-            let view = TensorView::new(e.dtype, e.shape.clone(), &e.bytes)
-                .map_err(|err| NnError::Checkpoint(format!("tensor `{name}`: {err}")))?;
-            views.push((name.clone(), view));
-        }
-        let meta: Option<HashMap<String, String>> = if self.metadata.is_empty() {
-            None
-        } else {
-            Some(self.metadata.clone().into_iter().collect())
-        };
-        safetensors::serialize(views, meta).map_err(|e| NnError::Checkpoint(e.to_string()))
+        let mut sealed = self.clone();
+        sealed.metadata.remove(CHECKSUM_KEY);
+        let body = sealed.canonical_bytes()?;
+        let crc = crc32fast::hash(&body);
+        sealed
+            .metadata
+            .insert(CHECKSUM_KEY.to_string(), format!("{crc:08x}"));
+        sealed.canonical_bytes()
     }
 
-    /// Parses safetensors bytes (any dtype is kept as stored; the typed getters check it).
+    /// The safetensors layout written by hand (the format is an 8-byte little-endian header
+    /// length, a JSON header padded with spaces to a multiple of 8 bytes, then the tensors'
+    /// bytes back to back), so that the header's order never depends on a hash map's.
+    fn canonical_bytes(&self) -> Result<Vec<u8>> {
+        let json = |s: &str| serde_json::to_string(s).expect("a string serializes");
+        let mut header = String::from("{");
+        let mut first = true;
+        let mut sep = |header: &mut String| {
+            if !std::mem::take(&mut first) {
+                header.push(',');
+            }
+        };
+        if !self.metadata.is_empty() {
+            sep(&mut header);
+            header.push_str("\"__metadata__\":{");
+            for (i, (k, v)) in self.metadata.iter().enumerate() {
+                if i > 0 {
+                    header.push(',');
+                }
+                header.push_str(&format!("{}:{}", json(k), json(v)));
+            }
+            header.push('}');
+        }
+        let mut offset = 0usize;
+        for (name, e) in &self.tensors {
+            if e.bytes.len() != numel(&e.shape) * dtype_size(e.dtype)? {
+                return Err(NnError::Checkpoint(format!(
+                    "tensor `{name}`: {} bytes for shape {}",
+                    e.bytes.len(),
+                    shape_str(&e.shape)
+                )));
+            }
+            sep(&mut header);
+            let end = offset + e.bytes.len();
+            header.push_str(&format!(
+                "{}:{{\"dtype\":{},\"shape\":{},\"data_offsets\":[{offset},{end}]}}",
+                json(name),
+                serde_json::to_string(&e.dtype)
+                    .map_err(|err| NnError::Checkpoint(err.to_string()))?,
+                shape_str(&e.shape).replace(' ', ""),
+            ));
+            offset = end;
+        }
+        header.push('}');
+        while header.len() % 8 != 0 {
+            header.push(' ');
+        }
+        let mut out = Vec::with_capacity(8 + header.len() + offset);
+        out.extend_from_slice(&(header.len() as u64).to_le_bytes());
+        out.extend_from_slice(header.as_bytes());
+        for e in self.tensors.values() {
+            out.extend_from_slice(&e.bytes);
+        }
+        Ok(out)
+    }
+
+    /// Parses safetensors bytes (any dtype is kept as stored; the typed getters check it). A
+    /// checkpoint written by [`Checkpoint::to_bytes`] carries a checksum, and any changed byte is
+    /// an error; files from other writers (no checksum) are read as they are.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self> {
         let st = safetensors::SafeTensors::deserialize(bytes)
             .map_err(|e| NnError::Checkpoint(format!("not a safetensors file: {e}")))?;
@@ -267,17 +372,25 @@ impl Checkpoint {
         if let Some(m) = header.metadata() {
             ckpt.metadata = m.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
         }
+        if let Some(stored) = ckpt.metadata.remove(CHECKSUM_KEY) {
+            let crc = crc32fast::hash(&ckpt.canonical_bytes()?);
+            if stored != format!("{crc:08x}") {
+                return Err(NnError::Checkpoint(format!(
+                    "checksum mismatch (stored {stored}, computed {crc:08x}): the checkpoint is \
+                     corrupt or was edited"
+                )));
+            }
+        }
         Ok(ckpt)
     }
 
-    /// Writes a safetensors file (via a temporary file and rename, so a crash never leaves a
-    /// half-written checkpoint under `path`).
+    /// Writes a safetensors file atomically: the bytes go to a temporary file beside `path`,
+    /// are flushed to disk (`fsync`), and the temporary file is renamed over `path` (then the
+    /// directory is synced). A crash or a full disk leaves either the previous file or the new
+    /// one under `path`, never a mix, and a failed write removes its temporary file.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
-        let bytes = self.to_bytes()?;
-        let tmp = path.with_extension("safetensors.tmp");
-        std::fs::write(&tmp, &bytes)
-            .and_then(|_| std::fs::rename(&tmp, path))
+        write_atomic(path, &self.to_bytes()?)
             .map_err(|e| NnError::Checkpoint(format!("writing {}: {e}", path.display())))
     }
 
@@ -327,6 +440,77 @@ mod tests {
             NnError::MissingTensor("y".into())
         );
         assert!(Checkpoint::from_bytes(b"garbage").is_err());
+    }
+
+    #[test]
+    fn equal_checkpoints_are_equal_bytes_and_any_changed_byte_is_caught() {
+        let build = |order: &[(&str, &str)]| {
+            let mut c = Checkpoint::new();
+            for (k, v) in order {
+                c.set_metadata(k, v);
+            }
+            c.put_f32("w", &[2], &[0.5, -1.0]).unwrap();
+            c.put_u64("step", &[1], &[42]).unwrap();
+            c.to_bytes().unwrap()
+        };
+        let a = build(&[("algo", "sac"), ("env", "Pendulum-v1"), ("z", "1")]);
+        let b = build(&[("z", "1"), ("env", "Pendulum-v1"), ("algo", "sac")]);
+        assert_eq!(a, b);
+        // The safetensors crate itself reads the hand-written layout.
+        let st = safetensors::SafeTensors::deserialize(&a).unwrap();
+        assert_eq!(st.tensor("w").unwrap().shape(), &[2]);
+        let back = Checkpoint::from_bytes(&a).unwrap();
+        assert_eq!(
+            back.metadata(CHECKSUM_KEY),
+            None,
+            "the checksum is not user metadata"
+        );
+        assert_eq!(back.to_bytes().unwrap(), a);
+        // Flip every bit of the data section, one at a time: the checksum catches each.
+        let header_len = u64::from_le_bytes(a[..8].try_into().unwrap()) as usize;
+        for i in 8 + header_len..a.len() {
+            for bit in 0..8 {
+                let mut bad = a.clone();
+                bad[i] ^= 1 << bit;
+                let err = Checkpoint::from_bytes(&bad).unwrap_err().to_string();
+                assert!(
+                    err.contains("checksum mismatch"),
+                    "byte {i} bit {bit}: {err}"
+                );
+            }
+        }
+        // An edited metadata value that still parses is caught too.
+        let at = a.windows(11).position(|w| w == b"Pendulum-v1").unwrap();
+        let mut edited = a.clone();
+        edited[at + 9] = b'2';
+        let err = Checkpoint::from_bytes(&edited).unwrap_err().to_string();
+        assert!(err.contains("checksum mismatch"), "{err}");
+    }
+
+    #[test]
+    fn a_failed_save_leaves_no_temporary_file_and_keeps_the_previous_one() {
+        let dir = std::env::temp_dir().join(format!("tandem-nn-atomic-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut c = Checkpoint::new();
+        c.put_f32("w", &[1], &[1.0]).unwrap();
+        // A directory in the way: the rename fails after the temporary file was written.
+        let blocked = dir.join("ckpt.safetensors");
+        std::fs::create_dir_all(blocked.join("inner")).unwrap();
+        assert!(c.save(&blocked).is_err());
+        let mut names: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["ckpt.safetensors"]);
+        assert!(blocked.join("inner").is_dir());
+        // Saving over an existing checkpoint replaces it whole.
+        let path = dir.join("good.safetensors");
+        c.save(&path).unwrap();
+        c.put_f32("w", &[1], &[2.0]).unwrap();
+        c.save(&path).unwrap();
+        assert_eq!(Checkpoint::load(&path).unwrap(), c);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

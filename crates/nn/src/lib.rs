@@ -12,7 +12,9 @@
 //!   [`gaussian_nll`]).
 //! * [`RunningNormalizer`]: running mean/variance (f64, Chan merge) for inputs and targets;
 //!   defined in `tandem-core` (shared with `tandem-envs`' observation wrapper), checkpointed here.
-//! * Checkpoints ([`Checkpoint`], [`Checkpointable`]) in the safetensors format, bit-exact.
+//! * Checkpoints ([`Checkpoint`], [`Checkpointable`]) in the safetensors format, bit-exact,
+//!   deterministic bytes with a CRC-32 (`crc32fast`: the checksum crate the Rust ecosystem
+//!   uses, SIMD-accelerated), written atomically ([`write_atomic`]).
 //! * [`candle_ext`]: seeded candle parameters ([`candle_ext::ParamSet`]: linear, conv,
 //!   transposed conv) stepped by the same optimizers, and [`candle_ext::configure_cpu_threads`].
 //! * [`SharedWorkspace`]: a network workspace behind a mutex, for inference through `&self`
@@ -102,7 +104,7 @@ mod simd;
 /// Runs two closures, potentially in parallel (rayon's `join`), returning both results.
 pub use rayon::join;
 
-pub use checkpoint::{Checkpoint, Checkpointable};
+pub use checkpoint::{write_atomic, Checkpoint, Checkpointable, CHECKSUM_KEY};
 pub use error::{check_finite, NnError, Result};
 pub use heads::{
     fill_standard_normal, log1m_tanh_sq, softplus, Categorical, GaussianHead, GaussianOutput,
