@@ -1,13 +1,18 @@
 //! Smoke tests of p0's pipeline (seconds): exact true-sample accounting, the data the difference
 //! model is fitted on, determinism, and the `tandem reproduce p0-pendulum --quick` outputs.
 
+use std::cell::Cell;
+use std::collections::BTreeMap;
 use tandem::agents::NoiseConfig;
 use tandem::dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 use tandem::envs::{make, SampleCounter};
+
+use tandem::nn::Checkpoint;
 use tandem::pipelines::p0::{
     agent_spaces, collect, ddpg_agent, p0_loop, pendulum_problem, run_seed, Method, P0Config,
     RunRecord,
 };
+use tandem::pipelines::{Checkpoints, Ephemeral, PipelineError, Result};
 
 /// A configuration small enough for a test: tiny networks and budgets.
 fn tiny() -> P0Config {
@@ -28,6 +33,10 @@ fn tiny() -> P0Config {
 }
 
 fn run(cfg: &P0Config, seed: u64) -> Vec<RunRecord> {
+    run_with(cfg, seed, &mut Ephemeral).unwrap()
+}
+
+fn run_with(cfg: &P0Config, seed: u64, store: &mut dyn Checkpoints) -> Result<Vec<RunRecord>> {
     let problem = pendulum_problem();
     run_seed(
         &problem,
@@ -35,9 +44,66 @@ fn run(cfg: &P0Config, seed: u64) -> Vec<RunRecord> {
         &Method::ALL,
         seed,
         &|m, s| ddpg_agent(cfg, &problem.task, m, s),
+        store,
         &mut |_| {},
     )
-    .unwrap()
+}
+
+/// Checkpoints kept in memory (as bytes, so they go through the file format), asking to stop
+/// at the `stop_at`-th poll (one poll per step).
+#[derive(Default)]
+struct Memory {
+    files: BTreeMap<String, Vec<u8>>,
+    polls: Cell<u64>,
+    stop_at: Option<u64>,
+    saves: usize,
+}
+
+impl Checkpoints for Memory {
+    fn load(&mut self, key: &str) -> Result<Option<Checkpoint>> {
+        let bytes = self.files.get(key);
+        Ok(bytes.map(|b| Checkpoint::from_bytes(b)).transpose()?)
+    }
+    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> Result<()> {
+        self.saves += 1;
+        self.files.insert(key.to_string(), ckpt.to_bytes()?);
+        Ok(())
+    }
+    fn stop_requested(&self) -> bool {
+        self.polls.set(self.polls.get() + 1);
+        self.stop_at.is_some_and(|n| self.polls.get() >= n)
+    }
+}
+
+fn without_timing(mut r: Vec<RunRecord>) -> Vec<RunRecord> {
+    r.iter_mut().for_each(|r| r.wall_seconds = 0.0);
+    r
+}
+
+/// Stopped in pre-training, in each method's first iteration and in the difference model's
+/// second round, then resumed (as many times as it takes) from the checkpoints: every record
+/// equals the uninterrupted run's, and equal runs save equal bytes.
+#[test]
+fn a_seed_stopped_anywhere_resumes_from_its_checkpoints_to_the_same_records() {
+    let cfg = tiny();
+    let mut whole = Memory::default();
+    let reference = without_timing(run_with(&cfg, 4, &mut whole).unwrap());
+    assert_eq!(without_timing(run(&cfg, 4)), reference);
+    // Pre-training 300 steps; cold 700 and warm 700 true samples; difference 2 x (250 + 200).
+    for stop_at in [150, 650, 1500, 2300] {
+        let mut store = Memory {
+            stop_at: Some(stop_at),
+            ..Memory::default()
+        };
+        let e = run_with(&cfg, 4, &mut store).unwrap_err();
+        assert!(matches!(e, PipelineError::Stopped), "{e}");
+        store.stop_at = None;
+        let resumed = without_timing(run_with(&cfg, 4, &mut store).unwrap());
+        assert_eq!(resumed, reference, "stopped at poll {stop_at}");
+        for (key, bytes) in &whole.files {
+            assert!(store.files.get(key) == Some(bytes), "{key} differs");
+        }
+    }
 }
 
 #[test]
@@ -151,4 +217,103 @@ fn reproduce_quick_writes_table_ii_and_fig_5() {
     let svg = std::fs::read_to_string(out.join("fig5.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("difference"));
     std::fs::remove_dir_all(&out).ok();
+}
+
+/// `tandem reproduce p0-pendulum` killed (SIGKILL) once it has checkpoints, resumed, stopped by
+/// SIGINT, resumed again: the tables, figure and every run's curve and record equal an
+/// uninterrupted run's (wall times aside), and no checkpoint is left behind.
+#[cfg(unix)]
+#[test]
+fn reproduce_killed_and_interrupted_resumes_to_the_uninterrupted_outputs() {
+    use std::path::Path;
+    use std::process::{Command, Stdio};
+    use std::time::{Duration, Instant};
+
+    let root = std::env::temp_dir().join(format!("tandem-p0-resume-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    std::fs::create_dir_all(&root).unwrap();
+    let cfg = root.join("longer.toml");
+    std::fs::write(
+        &cfg,
+        "baseline_max_samples = 4000\nreal_budget = 2000\nmodel_steps = 1500\n",
+    )
+    .unwrap();
+    let reproduce = |extra: &[&str]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_tandem"));
+        c.args(["reproduce", "p0-pendulum", "--quiet", "--jobs", "2"])
+            .args(extra)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped());
+        c
+    };
+    let fresh = |out: &Path| {
+        let mut c = reproduce(&["--quick", "--seeds", "1", "--config"]);
+        c.arg(&cfg).arg("--out").arg(out);
+        c
+    };
+    let resume = |out: &Path| {
+        let o = reproduce(&["--resume", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    // Waits until the run has saved `n` checkpoint files or finished records.
+    let wait_for_files = |out: &Path, child: &mut std::process::Child, n: usize| {
+        let start = Instant::now();
+        let count = || {
+            let state = std::fs::read_dir(out.join("state/seed0")).map_or(0, |d| d.count());
+            let done = std::fs::read_dir(out.join("runs")).map_or(0, |d| d.count());
+            state + done
+        };
+        while count() < n {
+            assert!(child.try_wait().unwrap().is_none(), "finished too early");
+            assert!(start.elapsed() < Duration::from_secs(120));
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    };
+
+    let whole = root.join("whole");
+    let o = fresh(&whole).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let cut = root.join("cut");
+    let mut child = fresh(&cut).spawn().unwrap();
+    wait_for_files(&cut, &mut child, 1);
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let mut child = reproduce(&["--resume", cut.to_str().unwrap()])
+        .spawn()
+        .unwrap();
+    wait_for_files(&cut, &mut child, 3);
+    let ok = Command::new("kill")
+        .args(["-s", "INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert!(err.contains("--resume"), "{err}");
+    let config = std::fs::read_to_string(cut.join("config.json")).unwrap();
+    assert!(config.contains("\"status\": \"interrupted\""), "{config}");
+    resume(&cut);
+
+    for f in ["table.json", "fig5.svg"] {
+        let same = std::fs::read(whole.join(f)).unwrap() == std::fs::read(cut.join(f)).unwrap();
+        assert!(same, "{f} differs");
+    }
+    for m in ["cold", "warm", "difference"] {
+        let sub = format!("runs/{m}__seed0");
+        let curve = |d: &Path| std::fs::read_to_string(d.join(&sub).join("curve.csv")).unwrap();
+        assert_eq!(curve(&whole), curve(&cut), "{m}");
+        let record = |d: &Path| {
+            let text = std::fs::read_to_string(d.join(&sub).join("record.json")).unwrap();
+            let mut r: RunRecord = serde_json::from_str(&text).unwrap();
+            r.wall_seconds = 0.0;
+            r
+        };
+        assert_eq!(record(&whole), record(&cut), "{m}");
+    }
+    assert!(!cut.join("state").exists() && !cut.join(".tandem.lock").exists());
+    let _ = std::fs::remove_dir_all(&root);
 }

@@ -2,7 +2,8 @@
 //! methods (cold start, warm start, difference model) over seeds on the DC-motor pendulum and
 //! writes, in the output directory:
 //!
-//! - `config.json`: the [`P0Config`] used, seeds, and wall time;
+//! - `config.json`: the [`P0Config`] used, seeds, status (`running`, `interrupted`, `complete`)
+//!   and wall time;
 //! - `runs/<method>__seed<k>/record.json` and `curve.csv`: each run's learning curve (return of
 //!   the deterministic policy on the true system against true training samples);
 //! - `table.md`, `table.json`: p0's Table II (return at the fixed budget; true samples to the
@@ -10,6 +11,14 @@
 //!   with p0's words ([`markdown`]);
 //! - `fig5.svg`: p0's Fig. 5 (mean return on the true system against true samples, ± standard
 //!   error across seeds).
+//!
+//! While it runs, `state/seed<k>/` holds each unfinished run's checkpoint (after every
+//! evaluation; the pre-trained agent too), and each run writes its `record.json` as soon as it
+//! finishes. SIGINT or SIGTERM stops the jobs at once (each loses at most the steps since its
+//! last evaluation), marks `config.json` `interrupted` and exits with 130 or 143;
+//! `--resume DIR` continues from the checkpoints (also after a kill), refusing other settings,
+//! and ends with the files an uninterrupted run writes (wall times aside); `state/` is removed at
+//! the end.
 //!
 //! Evaluation episodes run on a separate copy of the true system and are not counted as training
 //! samples. An `--out` that already holds a reproduction is an error unless `--overwrite` (no seed
@@ -23,15 +32,18 @@ use std::time::Instant;
 
 use clap::{Args, Subcommand};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+use tandem::interrupt::{Stop, EXIT_SIGINT};
 use tandem::pipelines::p0::{
     ddpg_agent, pendulum_problem, run_seed, Method, P0Config, RunRecord, Tick,
 };
+use tandem::pipelines::{Checkpoints, PipelineError, Result as PipelineResult};
 use tandem::report::{
     ensure_finite, mean_stderr, to_json_pretty, Comparison, Curve, Figure, MarkdownText,
     MethodFigures, Reference, ReturnAtBudget, SamplesToTarget, Table,
 };
 use tandem::run::{csv, Existing, Layout, RunDir};
+use tandem_nn::Checkpoint;
 
 use super::{CliError, Result};
 
@@ -46,9 +58,9 @@ pub enum ReproduceCommand {
 /// Arguments of `tandem reproduce p0-pendulum`.
 #[derive(Debug, Args)]
 pub struct P0Args {
-    /// Number of seeds (0, 1, ..., N-1).
-    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..))]
-    pub seeds: u64,
+    /// Number of seeds (0, 1, ..., N-1) [default: 5].
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub seeds: Option<u64>,
     /// Small smoke configuration (small networks, short budgets; numbers are meaningless).
     #[arg(long)]
     pub quick: bool,
@@ -67,8 +79,14 @@ pub struct P0Args {
     pub quiet: bool,
     /// Replace the reproduction in an existing `--out` directory (its seed runs, tables and
     /// figure); without it, an existing reproduction there is an error.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "resume")]
     pub overwrite: bool,
+    /// Continue the reproduction in DIR (interrupted or killed) from its checkpoints, with the
+    /// settings its `config.json` records; finished runs are kept, unfinished ones resume from
+    /// their last evaluation. `--seeds`, `--quick` and `--config` may be given and must then
+    /// agree with the recorded ones.
+    #[arg(long, value_name = "DIR", conflicts_with = "out")]
+    pub resume: Option<PathBuf>,
 }
 
 /// Runs a reproduction.
@@ -155,8 +173,15 @@ fn merge(base: &mut toml::Value, over: toml::Value) {
 
 /// The files and folders `tandem reproduce` writes (what `--overwrite` removes).
 pub const LAYOUT: Layout = Layout {
-    owned: &["config.json", "runs", "table.json", "table.md", "fig5.svg"],
-    resumable: false,
+    owned: &[
+        "config.json",
+        "runs",
+        "state",
+        "table.json",
+        "table.md",
+        "fig5.svg",
+    ],
+    resumable: true,
 };
 
 /// p0's methods as the table names them, in row order.
@@ -319,41 +344,199 @@ pub fn fig5(records: &[RunRecord]) -> Figure {
     }
 }
 
-/// What `config.json` records.
-#[derive(Debug, Serialize)]
-struct RunConfig<'a> {
-    config: &'a P0Config,
+/// What `config.json` records: the settings (what `--resume` continues with) and how the run
+/// stands.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct RunConfig {
+    config: P0Config,
     seeds: u64,
-    jobs: u64,
     quick: bool,
-    wall_seconds: f64,
-    note: &'static str,
+    jobs: u64,
+    /// `running`, `interrupted` or `complete`.
+    status: String,
+    /// Wall time of the last (or only) process, seconds; absent while running.
+    wall_seconds: Option<f64>,
+    note: String,
 }
 
-/// One job's seed and its records (or its error).
-type JobResult = (u64, std::result::Result<Vec<RunRecord>, String>);
+impl RunConfig {
+    fn write(&self, dir: &RunDir) -> Result<()> {
+        let text =
+            to_json_pretty(self).map_err(|e| CliError::Other(format!("config.json: {e}")))?;
+        dir.write("config.json", &text)
+            .map(drop)
+            .map_err(|source| CliError::Io {
+                path: dir.path().join("config.json"),
+                source,
+            })
+    }
+}
+
+/// The settings of a new reproduction from the command line.
+fn fresh(args: &P0Args) -> Result<RunConfig> {
+    let cfg = read_config(args.quick, args.config.as_deref())?;
+    cfg.validate().map_err(other)?;
+    Ok(RunConfig {
+        config: cfg,
+        seeds: args.seeds.unwrap_or(5),
+        quick: args.quick,
+        jobs: args.jobs,
+        status: "running".into(),
+        wall_seconds: None,
+        note: "evaluation episodes on the true system are not counted as training samples".into(),
+    })
+}
+
+/// The settings recorded in `dir/config.json`, checked against the command line.
+fn recorded(args: &P0Args, dir: &Path) -> Result<RunConfig> {
+    let what = format!("--resume {}", dir.display());
+    let path = dir.join("config.json");
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        CliError::input(
+            &what,
+            format!(
+                "{} cannot be read ({e}): not a `tandem reproduce p0-pendulum` directory",
+                path.display()
+            ),
+        )
+    })?;
+    let mut rc: RunConfig = serde_json::from_str(&text)
+        .map_err(|e| CliError::input(path.display().to_string(), e.to_string()))?;
+    let mut conflicts = Vec::new();
+    if let Some(n) = args.seeds.filter(|n| *n != rc.seeds) {
+        conflicts.push(format!("--seeds {n} (the run has {})", rc.seeds));
+    }
+    if args.quick && !rc.quick {
+        conflicts.push("--quick (the run is not quick)".into());
+    }
+    if args.config.is_some() || args.quick {
+        let given = read_config(rc.quick, args.config.as_deref())?;
+        if given != rc.config {
+            conflicts.push("--config (its settings differ from the run's config.json)".into());
+        }
+    }
+    if !conflicts.is_empty() {
+        return Err(CliError::input(
+            what,
+            format!(
+                "conflicts with the run being resumed: {}; a resumed run keeps its settings",
+                conflicts.join(", ")
+            ),
+        ));
+    }
+    rc.jobs = args.jobs;
+    Ok(rc)
+}
+
+/// One seed's checkpoints as files `state/seed<k>/<key>.safetensors` of the run directory,
+/// stopping on SIGINT/SIGTERM.
+struct SeedState {
+    dir: PathBuf,
+    stop: Stop,
+}
+
+impl SeedState {
+    fn path(&self, key: &str) -> PathBuf {
+        self.dir.join(format!("{key}.safetensors"))
+    }
+
+    /// Removes `key`'s checkpoint (its run is finished and recorded).
+    fn discard(&self, key: &str) -> Result<()> {
+        match std::fs::remove_file(self.path(key)) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(CliError::Io {
+                path: self.path(key),
+                source: e,
+            }),
+            _ => Ok(()),
+        }
+    }
+}
+
+impl Checkpoints for SeedState {
+    fn load(&mut self, key: &str) -> PipelineResult<Option<Checkpoint>> {
+        let path = self.path(key);
+        if !path.exists() {
+            return Ok(None);
+        }
+        Checkpoint::load(&path)
+            .map(Some)
+            .map_err(|e| PipelineError::Checkpoint(format!("{}: {e}", path.display())))
+    }
+
+    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> PipelineResult<()> {
+        std::fs::create_dir_all(&self.dir)
+            .map_err(|e| PipelineError::Checkpoint(format!("{}: {e}", self.dir.display())))?;
+        Ok(ckpt.save(self.path(key))?)
+    }
+
+    fn stop_requested(&self) -> bool {
+        self.stop.requested()
+    }
+}
+
+/// `runs/<method>__seed<k>/`: where a finished run's record and curve go.
+fn run_dir(dir: &RunDir, method: Method, seed: u64) -> PathBuf {
+    dir.path()
+        .join("runs")
+        .join(format!("{}__seed{seed}", method.name()))
+}
+
+/// Writes a finished run's `record.json` and `curve.csv` (the record last: its presence says
+/// the run is done).
+fn write_record(dir: &RunDir, r: &RunRecord) -> Result<()> {
+    let sub = run_dir(dir, r.method, r.seed);
+    let io = |source| CliError::Io {
+        path: sub.clone(),
+        source,
+    };
+    std::fs::create_dir_all(&sub).map_err(io)?;
+    let rows: Vec<Vec<f64>> = r
+        .curve
+        .iter()
+        .map(|p| vec![p.true_samples as f64, p.eval_return])
+        .collect();
+    let curve = csv(&["true_samples", "eval_return"], &rows);
+    tandem_nn::write_atomic(&sub.join("curve.csv"), curve.as_bytes()).map_err(io)?;
+    let text = to_json_pretty(r)
+        .map_err(|e| CliError::Other(format!("{}: {e}", sub.join("record.json").display())))?;
+    tandem_nn::write_atomic(&sub.join("record.json"), text.as_bytes()).map_err(io)
+}
+
+/// A finished run's record, if it is there.
+fn read_record(dir: &RunDir, method: Method, seed: u64) -> Result<Option<RunRecord>> {
+    let path = run_dir(dir, method, seed).join("record.json");
+    match std::fs::read_to_string(&path) {
+        Ok(text) => serde_json::from_str(&text)
+            .map(Some)
+            .map_err(|e| CliError::input(path.display().to_string(), e.to_string())),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(source) => Err(CliError::Io { path, source }),
+    }
+}
 
 fn p0_pendulum(args: &P0Args) -> Result<()> {
     tandem_nn::set_gemm_threads(1);
-    let cfg = read_config(args.quick, args.config.as_deref())?;
-    cfg.validate().map_err(other)?;
-    let existing = if args.overwrite {
-        Existing::Overwrite
-    } else {
-        Existing::Refuse
+    let stop = Stop::on_signals().map_err(|e| CliError::Other(format!("signal handlers: {e}")))?;
+    let mut rc = match &args.resume {
+        Some(dir) => recorded(args, dir)?,
+        None => fresh(args)?,
     };
-    let dir =
-        RunDir::create(args.out.as_deref(), "p0-pendulum", LAYOUT, existing).map_err(other)?;
+    let cfg = rc.config.clone();
+    let (out, existing) = match (&args.resume, args.overwrite) {
+        (Some(d), _) => (Some(d.as_path()), Existing::Resume),
+        (None, true) => (args.out.as_deref(), Existing::Overwrite),
+        (None, false) => (args.out.as_deref(), Existing::Refuse),
+    };
+    let dir = RunDir::create(out, "p0-pendulum", LAYOUT, existing).map_err(other)?;
     if let Some(pid) = dir.stale_lock_taken_over() {
         eprintln!(
             "note: took over {} from process {pid}, which is no longer running",
             dir.path().display()
         );
     }
-    let io = |p: &Path| {
-        let p = p.to_path_buf();
-        move |source| CliError::Io { path: p, source }
-    };
+    rc.status = "running".into();
+    rc.wall_seconds = None;
+    rc.write(&dir)?;
     let start = Instant::now();
     let multi = MultiProgress::new();
     if args.quiet {
@@ -364,16 +547,16 @@ fn p0_pendulum(args: &P0Args) -> Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> ");
 
+    let seeds = rc.seeds;
     let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<JobResult>> = Mutex::new(Vec::new());
-    let problem_for = pendulum_problem;
+    let errors: Mutex<Vec<(u64, String)>> = Mutex::new(Vec::new());
     std::thread::scope(|scope| {
-        for _ in 0..args.jobs.min(2 * args.seeds) {
+        for _ in 0..args.jobs.min(2 * seeds) {
             scope.spawn(|| loop {
                 // Jobs: per seed, the cold start alone, and warm start with the difference method
                 // (they share one pre-training).
                 let k = next.fetch_add(1, Ordering::Relaxed) as u64;
-                if k >= 2 * args.seeds {
+                if k >= 2 * seeds || stop.requested() {
                     break;
                 }
                 let (seed, methods): (u64, &[Method]) = if k % 2 == 0 {
@@ -381,104 +564,68 @@ fn p0_pendulum(args: &P0Args) -> Result<()> {
                 } else {
                     (k / 2, &[Method::Cold])
                 };
-                let problem = problem_for();
-                let bar = |name: String, len: u64| {
-                    let b = multi.add(ProgressBar::new(len));
-                    b.set_style(style.clone());
-                    b.set_prefix(name);
-                    b
+                let mut store = SeedState {
+                    dir: dir.path().join("state").join(format!("seed{seed}")),
+                    stop: stop.clone(),
                 };
-                let pre = if methods.contains(&Method::Cold) {
-                    ProgressBar::hidden()
-                } else {
-                    bar(format!("seed {seed} pretrain"), cfg.pretrain_steps)
-                };
-                let mut bars: Vec<(Method, ProgressBar)> = Vec::new();
-                let r = run_seed(
-                    &problem,
-                    &cfg,
-                    methods,
-                    seed,
-                    &|m, s| ddpg_agent(&cfg, &problem.task, m, s),
-                    &mut |t| match t {
-                        Tick::Pretrain(k) => {
-                            if k % 100 == 0 || k == cfg.pretrain_steps {
-                                pre.set_position(k);
-                            }
-                        }
-                        Tick::True(m, n) => {
-                            if !bars.iter().any(|(bm, _)| *bm == m) {
-                                pre.finish();
-                                let len = if m == Method::Difference {
-                                    cfg.real_budget
-                                } else {
-                                    cfg.baseline_max_samples
-                                };
-                                bars.push((m, bar(format!("seed {seed} {}", m.name()), len)));
-                            }
-                            if n % 50 == 0 {
-                                if let Some((_, b)) = bars.iter().find(|(bm, _)| *bm == m) {
-                                    b.set_position(n);
-                                }
-                            }
-                        }
-                    },
-                );
-                for (_, b) in &bars {
-                    b.finish();
+                let r = run_job(&dir, &cfg, seed, methods, &mut store, &multi, &style);
+                if let Err(e) = r {
+                    if !matches!(e, JobError::Stopped) {
+                        errors
+                            .lock()
+                            .expect("no panics while holding the lock")
+                            .push((seed, e.to_string()));
+                    }
                 }
-                results
-                    .lock()
-                    .expect("no panics while holding the lock")
-                    .push((seed, r.map_err(|e| e.to_string())));
             });
         }
     });
     let wall = start.elapsed().as_secs_f64();
-    let mut results = results.into_inner().expect("threads joined");
-    results.sort_by_key(|(s, _)| *s);
-    let mut records = Vec::new();
-    for (seed, r) in results {
-        records.extend(r.map_err(|e| CliError::Other(format!("seed {seed}: {e}")))?);
+    let mut errors = errors.into_inner().expect("threads joined");
+    errors.sort();
+    if let Some((seed, e)) = errors.first() {
+        return Err(CliError::Other(format!("seed {seed}: {e}")));
     }
-    records.sort_by_key(|r| (r.seed, Method::ALL.iter().position(|m| *m == r.method)));
-
-    // Per-run output.
-    for r in &records {
-        let sub = dir
-            .path()
-            .join("runs")
-            .join(format!("{}__seed{}", r.method.name(), r.seed));
-        std::fs::create_dir_all(&sub).map_err(io(&sub))?;
-        let rows: Vec<Vec<f64>> = r
-            .curve
-            .iter()
-            .map(|p| vec![p.true_samples as f64, p.eval_return])
-            .collect();
-        std::fs::write(
-            sub.join("curve.csv"),
-            csv(&["true_samples", "eval_return"], &rows),
-        )
-        .map_err(io(&sub))?;
-        let text = to_json_pretty(r)
-            .map_err(|e| CliError::Other(format!("{}: {e}", sub.join("record.json").display())))?;
-        std::fs::write(sub.join("record.json"), text).map_err(io(&sub))?;
+    if stop.requested() {
+        rc.status = "interrupted".into();
+        rc.wall_seconds = Some(wall);
+        rc.write(&dir)?;
+        return Err(CliError::Interrupted {
+            what: format!(
+                "finished runs and the others' last checkpoints are in {}; continue with \
+                 `tandem reproduce p0-pendulum --resume {}`",
+                dir.path().display(),
+                dir.path().display()
+            ),
+            code: stop.exit_code().unwrap_or(EXIT_SIGINT),
+        });
+    }
+    let mut records = Vec::new();
+    for seed in 0..seeds {
+        for &m in &Method::ALL {
+            let r = read_record(&dir, m, seed)?.ok_or_else(|| {
+                CliError::Other(format!("seed {seed}: the {} run left no record", m.name()))
+            })?;
+            records.push(r);
+        }
+    }
+    let state = dir.path().join("state");
+    if state.exists() {
+        std::fs::remove_dir_all(&state).map_err(|source| CliError::Io {
+            path: state.clone(),
+            source,
+        })?;
     }
     let table = table(&records, &cfg);
     let md = markdown(&table, &cfg, wall);
-    let w = |name: &str, text: &str| dir.write(name, text).map_err(io(dir.path()));
-    let run_config = RunConfig {
-        config: &cfg,
-        seeds: args.seeds,
-        jobs: args.jobs,
-        quick: args.quick,
-        wall_seconds: wall,
-        note: "evaluation episodes on the true system are not counted as training samples",
+    let w = |name: &str, text: &str| {
+        dir.write(name, text)
+            .map(drop)
+            .map_err(|source| CliError::Io {
+                path: dir.path().join(name),
+                source,
+            })
     };
-    w(
-        "config.json",
-        &to_json_pretty(&run_config).map_err(|e| CliError::Other(format!("config.json: {e}")))?,
-    )?;
     w(
         "table.json",
         &table
@@ -487,8 +634,105 @@ fn p0_pendulum(args: &P0Args) -> Result<()> {
     )?;
     w("table.md", &md)?;
     w("fig5.svg", &fig5(&records).svg())?;
+    rc.status = "complete".into();
+    rc.wall_seconds = Some(wall);
+    rc.write(&dir)?;
     println!("{md}");
     println!("wrote {}", dir.path().display());
+    Ok(())
+}
+
+/// Why a job ended early.
+#[derive(Debug, thiserror::Error)]
+enum JobError {
+    #[error("stopped")]
+    Stopped,
+    #[error("{0}")]
+    Failed(String),
+}
+
+impl From<PipelineError> for JobError {
+    fn from(e: PipelineError) -> Self {
+        match e {
+            PipelineError::Stopped => JobError::Stopped,
+            e => JobError::Failed(e.to_string()),
+        }
+    }
+}
+
+impl From<CliError> for JobError {
+    fn from(e: CliError) -> Self {
+        JobError::Failed(e.to_string())
+    }
+}
+
+/// One job: `methods` for `seed`, skipping those already recorded, each recorded as soon as it
+/// finishes; checkpoints in `store`.
+fn run_job(
+    dir: &RunDir,
+    cfg: &P0Config,
+    seed: u64,
+    methods: &[Method],
+    store: &mut SeedState,
+    multi: &MultiProgress,
+    style: &ProgressStyle,
+) -> std::result::Result<(), JobError> {
+    let problem = pendulum_problem();
+    let bar = |name: String, len: u64| {
+        let b = multi.add(ProgressBar::new(len));
+        b.set_style(style.clone());
+        b.set_prefix(name);
+        b
+    };
+    let mut pre: Option<ProgressBar> = None;
+    for &m in methods {
+        if read_record(dir, m, seed)?.is_some() {
+            store.discard(m.name())?;
+            continue;
+        }
+        let len = if m == Method::Difference {
+            cfg.real_budget
+        } else {
+            cfg.baseline_max_samples
+        };
+        let mut b: Option<ProgressBar> = None;
+        let r = run_seed(
+            &problem,
+            cfg,
+            &[m],
+            seed,
+            &|m, s| ddpg_agent(cfg, &problem.task, m, s),
+            store,
+            &mut |t| match t {
+                Tick::Pretrain(k) => {
+                    let p = pre.get_or_insert_with(|| {
+                        bar(format!("seed {seed} pretrain"), cfg.pretrain_steps)
+                    });
+                    if k % 100 == 0 || k == cfg.pretrain_steps {
+                        p.set_position(k);
+                    }
+                }
+                Tick::True(m, n) => {
+                    let b = b.get_or_insert_with(|| bar(format!("seed {seed} {}", m.name()), len));
+                    if n % 50 == 0 {
+                        b.set_position(n);
+                    }
+                }
+            },
+        );
+        if let Some(b) = &b {
+            b.finish();
+        }
+        let r = r?;
+        write_record(dir, &r[0])?;
+        store.discard(m.name())?;
+    }
+    if let Some(p) = &pre {
+        p.finish();
+    }
+    if methods.iter().all(|m| *m != Method::Cold) {
+        store.discard("pretrained")?;
+    }
     Ok(())
 }
 

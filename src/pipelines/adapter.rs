@@ -6,9 +6,10 @@
 
 use serde::{Deserialize, Serialize};
 use tandem_agents::{
-    Agent, AgentError, Batch, Metrics, Mode, Noise, NoiseConfig, OffPolicyAgent, Result,
+    Agent, AgentError, Batch, Metrics, Mode, Noise, NoiseConfig, OffPolicyAgent, Result, Resumable,
 };
 use tandem_core::{Action, Rng, Space};
+use tandem_nn::Checkpoint;
 
 /// One observation feature.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -126,6 +127,32 @@ impl<A> Adapted<A> {
     /// The wrapped agent.
     pub fn inner(&self) -> &A {
         &self.inner
+    }
+}
+
+/// The wrapped agent's state plus the wrapper's exploration noise and generator.
+impl<A: Resumable> Resumable for Adapted<A> {
+    fn save(&self, ckpt: &mut Checkpoint) -> Result<()> {
+        self.inner.save(ckpt)?;
+        ckpt.put_json("adapter.noise", &self.noise)?;
+        ckpt.put_json("adapter.rng", &self.rng)?;
+        Ok(())
+    }
+
+    fn load(&mut self, ckpt: &Checkpoint) -> Result<()> {
+        let noise: Noise = ckpt.get_json("adapter.noise")?;
+        let rng: Rng = ckpt.get_json("adapter.rng")?;
+        if noise.dim() != self.low.len() {
+            return Err(AgentError::Checkpoint(format!(
+                "the saved exploration noise has {} dimensions, this agent's actions {}",
+                noise.dim(),
+                self.low.len()
+            )));
+        }
+        self.inner.load(ckpt)?;
+        self.noise = noise;
+        self.rng = rng;
+        Ok(())
     }
 }
 

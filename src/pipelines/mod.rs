@@ -14,6 +14,7 @@ pub mod p0;
 use tandem_agents::AgentError;
 use tandem_envs::EnvError;
 use tandem_models::ModelError;
+use tandem_nn::{Checkpoint, NnError};
 
 /// Why a pipeline stopped.
 #[derive(Debug, thiserror::Error)]
@@ -30,7 +31,49 @@ pub enum PipelineError {
     /// A configuration value out of range.
     #[error("configuration: {0}")]
     Config(String),
+    /// A checkpoint could not be written or read, or belongs to another run.
+    #[error("checkpoint: {0}")]
+    Checkpoint(String),
+    /// [`Checkpoints::stop_requested`] said to stop; the last checkpoint saved resumes the run.
+    #[error("stopped on request")]
+    Stopped,
+}
+
+impl From<NnError> for PipelineError {
+    fn from(e: NnError) -> Self {
+        PipelineError::Checkpoint(e.to_string())
+    }
 }
 
 /// Result of the pipelines.
 pub type Result<T> = std::result::Result<T, PipelineError>;
+
+/// Where a long pipeline keeps its checkpoints, and how it learns that it should stop: the
+/// `tandem` program keeps them as files in the run directory and stops on SIGINT/SIGTERM;
+/// [`Ephemeral`] keeps nothing and never stops. A pipeline saves at each of its checkpoint
+/// points (e.g. every evaluation), resumes from what [`Checkpoints::load`] returns, and polls
+/// [`Checkpoints::stop_requested`] between steps; equal runs save equal bytes, and a resumed run
+/// gives exactly the numbers of an uninterrupted one.
+pub trait Checkpoints {
+    /// The latest checkpoint saved under `key`, if any.
+    fn load(&mut self, key: &str) -> Result<Option<Checkpoint>>;
+    /// Saves `ckpt` under `key`, replacing the previous one only once it is complete.
+    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> Result<()>;
+    /// Whether to stop now; the pipeline then returns [`PipelineError::Stopped`].
+    fn stop_requested(&self) -> bool {
+        false
+    }
+}
+
+/// Keeps no checkpoints and never stops: a run from start to end in one go.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Ephemeral;
+
+impl Checkpoints for Ephemeral {
+    fn load(&mut self, _key: &str) -> Result<Option<Checkpoint>> {
+        Ok(None)
+    }
+    fn save(&mut self, _key: &str, _ckpt: &Checkpoint) -> Result<()> {
+        Ok(())
+    }
+}

@@ -26,7 +26,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use tandem_agents::{
     evaluate, Agent, AgentError, Ddpg, DdpgConfig, EpisodeRunner, NoiseConfig, OffPolicyAgent,
-    OffPolicyLoop, OffPolicySchedule, StepOptions, Store,
+    OffPolicyLoop, OffPolicySchedule, Resumable, StepOptions, Store,
 };
 use tandem_core::{Rng, SeedStream, Space};
 use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
@@ -37,9 +37,11 @@ use tandem_models::{
     Transitions, TransitionsBuilder,
 };
 
+use tandem_nn::{Checkpoint, Checkpointable};
+
 use super::adapter::{feature_dim, Adapted, Feature};
 
-pub use super::{PipelineError, Result};
+pub use super::{Checkpoints, Ephemeral, PipelineError, Result};
 
 /// One of the three methods of p0's Table II.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -261,6 +263,27 @@ pub fn p0_loop<A: OffPolicyAgent>(
     Ok(OffPolicyLoop::new(agent, schedule, obs_space, act_space, rng)?.without_random_warmup())
 }
 
+/// `n` steps of the loop on `env` as `opts` says, calling `tick` after each and polling `stop`
+/// before each ([`PipelineError::Stopped`]).
+fn train_steps<A: OffPolicyAgent>(
+    lp: &mut OffPolicyLoop<A>,
+    env: &mut dyn Env,
+    runner: &mut EpisodeRunner,
+    n: u64,
+    opts: StepOptions,
+    stop: &dyn Checkpoints,
+    tick: &mut dyn FnMut(),
+) -> Result<()> {
+    for _ in 0..n {
+        if stop.stop_requested() {
+            return Err(PipelineError::Stopped);
+        }
+        lp.step(env, runner, opts)?;
+        tick();
+    }
+    Ok(())
+}
+
 /// Runs the agent with exploration on the (counted) true system for `n` steps, starting fresh
 /// episodes, and returns the transitions in the task's canonical state coordinates:
 /// `s = canon(x_t)`, `s' = s + (x_{t+1} − x_t)` from the environment's internal state, so that a
@@ -274,9 +297,25 @@ pub fn collect<A: OffPolicyAgent, T: Task>(
     seed: u64,
     tick: &mut dyn FnMut(),
 ) -> Result<Transitions> {
+    collect_or_stop(lp, env, task, n, seed, &Ephemeral, tick)
+}
+
+/// [`collect`], polling `stop` before each step.
+fn collect_or_stop<A: OffPolicyAgent, T: Task>(
+    lp: &mut OffPolicyLoop<A>,
+    env: &mut dyn Env,
+    task: &T,
+    n: u64,
+    seed: u64,
+    stop: &dyn Checkpoints,
+    tick: &mut dyn FnMut(),
+) -> Result<Transitions> {
     let mut b = TransitionsBuilder::new(task.state_dim(), env.action_space().flat_dim());
     let mut runner = EpisodeRunner::new(seed, "ep");
     for _ in 0..n {
+        if stop.stop_requested() {
+            return Err(PipelineError::Stopped);
+        }
         let rec = lp.step(env, &mut runner, StepOptions::collect())?;
         let (x, x1) = rec.states.as_ref().expect("collect records states");
         let u = task.control(&rec.action);
@@ -307,15 +346,27 @@ where
     P: Plant,
     T: Task,
 {
+    pretrain_or_stop(lp, idealized, task, steps, seed, &Ephemeral, tick)
+}
+
+fn pretrain_or_stop<A, P, T>(
+    lp: &mut OffPolicyLoop<A>,
+    idealized: P,
+    task: T,
+    steps: u64,
+    seed: u64,
+    stop: &dyn Checkpoints,
+    tick: &mut dyn FnMut(),
+) -> Result<()>
+where
+    A: OffPolicyAgent,
+    P: Plant,
+    T: Task,
+{
     let mut env = ModelEnv::new(PlantModel::new(idealized), task)?;
     let mut runner = EpisodeRunner::new(seed, "ep");
-    lp.train(
-        &mut env,
-        &mut runner,
-        steps,
-        StepOptions::model(),
-        &mut |_| tick(),
-    )?;
+    let opts = StepOptions::model();
+    train_steps(lp, &mut env, &mut runner, steps, opts, stop, tick)?;
     Ok(lp.clear(Store::Primary)?)
 }
 
@@ -328,77 +379,213 @@ fn append(all: &mut Option<Transitions>, new: Transitions) -> Result<()> {
     Ok(())
 }
 
+/// Where one method's run stands at a checkpoint, besides the agent, its loop, the difference
+/// model and the true samples (stored beside it).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct MethodProgress {
+    method: Method,
+    seed: u64,
+    true_samples: u64,
+    curve: Vec<CurvePoint>,
+    fit_losses: Vec<f64>,
+    simulated: u64,
+    updates0: u64,
+    /// Difference-model iterations done.
+    iterations: u64,
+    reached: bool,
+    /// The training episodes: on the true system (cold, warm) or the model environment
+    /// (difference), with that environment's state when an episode is in progress.
+    runner: EpisodeRunner,
+    env_state: Option<Vec<f64>>,
+}
+
+/// Saves the agent, its loop, the progress and (difference method) the model and the true
+/// samples under `key`.
+fn save_method<A, M>(
+    store: &mut dyn Checkpoints,
+    key: &str,
+    lp: &OffPolicyLoop<A>,
+    p: &MethodProgress,
+    model: Option<&M>,
+    all: Option<&Transitions>,
+) -> Result<()>
+where
+    A: OffPolicyAgent + Resumable,
+    M: Checkpointable,
+{
+    let mut ckpt = Checkpoint::new();
+    lp.agent.save(&mut ckpt)?;
+    lp.save("loop", &mut ckpt)?;
+    ckpt.put_json("p0.progress", p)?;
+    if let Some(m) = model {
+        m.save_to("p0.model", &mut ckpt)?;
+    }
+    if let Some(t) = all {
+        t.save_to("p0.true_samples", &mut ckpt)?;
+    }
+    store.save(key, &ckpt)
+}
+
+/// Restores what [`save_method`] saved into `lp`, `model` and `all`, checking that it is this
+/// method's and seed's.
+fn load_method<A, M>(
+    ckpt: &Checkpoint,
+    method: Method,
+    seed: u64,
+    lp: &mut OffPolicyLoop<A>,
+    model: Option<&mut M>,
+    all: &mut Option<Transitions>,
+) -> Result<MethodProgress>
+where
+    A: OffPolicyAgent + Resumable,
+    M: Checkpointable,
+{
+    let p: MethodProgress = ckpt.get_json("p0.progress")?;
+    if (p.method, p.seed) != (method, seed) {
+        return Err(PipelineError::Checkpoint(format!(
+            "the checkpoint is {} seed {}'s, not {} seed {seed}'s",
+            p.method.name(),
+            p.seed,
+            method.name()
+        )));
+    }
+    lp.agent.load(ckpt)?;
+    lp.load("loop", ckpt)?;
+    if let Some(m) = model {
+        m.load_from("p0.model", ckpt)?;
+    }
+    if ckpt.contains("p0.true_samples.rewards") {
+        let mut t = Transitions::default();
+        t.load_from("p0.true_samples", ckpt)?;
+        *all = Some(t);
+    }
+    Ok(p)
+}
+
 /// Runs one method from `start` (a fresh agent for [`Method::Cold`], the pre-trained one
 /// otherwise) and returns its record. `tick(true_samples)` is called after every true-system
-/// step, for progress bars.
+/// step, for progress bars. The run saves itself in `store` under the method's name after every
+/// evaluation, resumes from what is saved there, and stops (losing at most the steps since
+/// the last evaluation) when `store` asks.
 pub fn run_method<A, P, T, F>(
     method: Method,
     problem: &Problem<P, T, F>,
     cfg: &P0Config,
     mut start: OffPolicyLoop<A>,
     seed: u64,
+    store: &mut dyn Checkpoints,
     tick: &mut dyn FnMut(u64),
 ) -> Result<RunRecord>
 where
-    A: OffPolicyAgent,
+    A: OffPolicyAgent + Resumable,
     P: Plant + Clone,
     T: Task + Clone,
     F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
 {
     cfg.validate()?;
     let t0 = Instant::now();
+    let key = method.name();
     let seeds = SeedStream::new(seed);
-    let (mut env, count) = SampleCounter::new((problem.true_env)()?);
     let mut eval_env = (problem.true_env)()?;
-    let updates0 = start.counts().updates;
-    let mut curve = vec![CurvePoint {
-        true_samples: 0,
-        eval_return: mean_return(&mut start.agent, &mut eval_env, cfg.eval_episodes)?,
-    }];
-    let mut fit_losses = Vec::new();
-    let mut simulated = 0;
+    let mut model_env = match method {
+        Method::Difference => Some(ModelEnv::new(
+            ResidualModel::new(problem.idealized.clone(), cfg.residual.clone())?,
+            problem.task.clone(),
+        )?),
+        Method::Cold | Method::Warm => None,
+    };
+    let mut all: Option<Transitions> = None;
+    let saved = store.load(key)?;
+    let (mut env, count) = match &saved {
+        Some(ckpt) => {
+            let model = model_env.as_mut().map(|m| m.model_mut());
+            let p = load_method(ckpt, method, seed, &mut start, model, &mut all)?;
+            SampleCounter::starting_at((problem.true_env)()?, p.true_samples)
+        }
+        None => SampleCounter::new((problem.true_env)()?),
+    };
+    let mut p = match saved {
+        Some(ckpt) => ckpt.get_json::<MethodProgress>("p0.progress")?,
+        None => {
+            let curve = vec![CurvePoint {
+                true_samples: 0,
+                eval_return: mean_return(&mut start.agent, &mut eval_env, cfg.eval_episodes)?,
+            }];
+            start.clear(Store::Primary)?;
+            let episodes = match method {
+                Method::Difference => "model-episodes",
+                Method::Cold | Method::Warm => "true-episodes",
+            };
+            MethodProgress {
+                method,
+                seed,
+                true_samples: 0,
+                curve,
+                fit_losses: Vec::new(),
+                simulated: 0,
+                updates0: start.counts().updates,
+                iterations: 0,
+                reached: false,
+                runner: EpisodeRunner::new(seeds.derive(episodes), "ep"),
+                env_state: None,
+            }
+        }
+    };
+    // The environment the training episodes run on, put back into a saved episode.
+    let runner_env: &mut dyn Env = match &mut model_env {
+        Some(m) => m,
+        None => &mut env,
+    };
+    if let Some(state) = &p.env_state {
+        runner_env.set_state(state)?;
+    }
+    let checkpoint = |store: &mut dyn Checkpoints,
+                      p: &mut MethodProgress,
+                      start: &OffPolicyLoop<A>,
+                      env_state: Option<Vec<f64>>,
+                      model: Option<&ResidualModel<P>>,
+                      all: Option<&Transitions>| {
+        p.true_samples = count.get();
+        p.env_state = p.runner.in_episode().then_some(env_state).flatten();
+        save_method(store, key, start, p, model, all)
+    };
     match method {
         Method::Cold | Method::Warm => {
-            start.clear(Store::Primary)?;
-            let mut runner = EpisodeRunner::new(seeds.derive("true-episodes"), "ep");
-            let mut reached = false;
             while count.get() < cfg.baseline_max_samples {
                 let n = cfg
                     .eval_interval
                     .min(cfg.baseline_max_samples - count.get());
                 let c = count.clone();
                 let real = StepOptions::real();
-                start.train(&mut env, &mut runner, n, real, &mut |_| tick(c.get()))?;
+                let mut t = || tick(c.get());
+                train_steps(&mut start, &mut env, &mut p.runner, n, real, store, &mut t)?;
                 let r = mean_return(&mut start.agent, &mut eval_env, cfg.eval_episodes)?;
-                curve.push(CurvePoint {
+                p.curve.push(CurvePoint {
                     true_samples: count.get(),
                     eval_return: r,
                 });
-                reached |= r >= cfg.target_return;
+                p.reached |= r >= cfg.target_return;
                 let stop_early = cfg.baseline_stop_early && method == Method::Warm;
-                if stop_early && reached && count.get() >= cfg.real_budget {
+                if stop_early && p.reached && count.get() >= cfg.real_budget {
                     break;
                 }
+                let state = Some(env.state());
+                checkpoint(store, &mut p, &start, state, None, None)?;
             }
         }
         Method::Difference => {
-            let mut model_env = ModelEnv::new(
-                ResidualModel::new(problem.idealized.clone(), cfg.residual.clone())?,
-                problem.task.clone(),
-            )?;
-            start.clear(Store::Primary)?;
-            let mut all: Option<Transitions> = None;
-            let mut runner = EpisodeRunner::new(seeds.derive("model-episodes"), "ep");
-            let mut k = 0u64;
+            let model_env = model_env.as_mut().expect("built for the difference method");
             while count.get() + cfg.real_batch <= cfg.real_budget {
+                let k = p.iterations;
                 // 1. True samples with the previous policy plus exploration noise.
                 let c = count.clone();
-                let batch = collect(
+                let batch = collect_or_stop(
                     &mut start,
                     &mut env,
                     &problem.task,
                     cfg.real_batch,
                     seeds.derive(&format!("collect-{k}")),
+                    store,
                     &mut || tick(c.get()),
                 )?;
                 append(&mut all, batch)?;
@@ -407,36 +594,34 @@ where
                     seed: seeds.derive(&format!("fit-{k}")),
                     ..cfg.fit.clone()
                 };
-                let report: FitReport = model_env
-                    .model_mut()
-                    .fit(all.as_ref().expect("appended"), &fit)?;
-                fit_losses.push(report.holdout_loss.last().copied().unwrap_or(f64::NAN));
+                let data = all.as_ref().expect("appended");
+                let report: FitReport = model_env.model_mut().fit(data, &fit)?;
+                p.fit_losses
+                    .push(report.holdout_loss.last().copied().unwrap_or(f64::NAN));
                 // 3. DDPG on the idealized plant plus the difference model, bootstrapped.
                 let sim = StepOptions::model();
-                start.train(
-                    &mut model_env,
-                    &mut runner,
-                    cfg.model_steps,
-                    sim,
-                    &mut |_| {},
-                )?;
-                simulated += cfg.model_steps;
-                curve.push(CurvePoint {
+                let (n, runner) = (cfg.model_steps, &mut p.runner);
+                train_steps(&mut start, model_env, runner, n, sim, store, &mut || {})?;
+                p.simulated += cfg.model_steps;
+                p.curve.push(CurvePoint {
                     true_samples: count.get(),
                     eval_return: mean_return(&mut start.agent, &mut eval_env, cfg.eval_episodes)?,
                 });
-                k += 1;
+                p.iterations += 1;
+                let state = Some(model_env.state());
+                let model = Some(model_env.model());
+                checkpoint(store, &mut p, &start, state, model, all.as_ref())?;
             }
         }
     }
     Ok(RunRecord {
         method,
         seed,
-        curve,
+        curve: p.curve,
         true_samples: count.get(),
-        simulated_steps: simulated,
-        updates: start.counts().updates - updates0,
-        fit_holdout_loss: fit_losses,
+        simulated_steps: p.simulated,
+        updates: start.counts().updates - p.updates0,
+        fit_holdout_loss: p.fit_losses,
         wall_seconds: t0.elapsed().as_secs_f64(),
     })
 }
@@ -451,17 +636,20 @@ pub fn agent_spaces<T: Task>(task: &T) -> (Space, Space) {
 
 /// Runs `methods` for one seed. The agent is pre-trained once on the idealized plant (if a
 /// method needs it) and cloned for warm start and the difference method; cold start gets a fresh
-/// agent from `make_agent(Method::Cold, ..)`. `tick` reports progress.
+/// agent from `make_agent(Method::Cold, ..)`. `tick` reports progress. The pre-trained agent is
+/// saved in `store` (key `pretrained`) and each method saves itself there (see [`run_method`]),
+/// so a stopped or killed run resumes from the latest checkpoints.
 pub fn run_seed<A, P, T, F>(
     problem: &Problem<P, T, F>,
     cfg: &P0Config,
     methods: &[Method],
     seed: u64,
     make_agent: &dyn Fn(Method, u64) -> std::result::Result<A, AgentError>,
+    store: &mut dyn Checkpoints,
     tick: &mut dyn FnMut(Tick),
 ) -> Result<Vec<RunRecord>>
 where
-    A: OffPolicyAgent + Exploring + Clone,
+    A: OffPolicyAgent + Resumable + Exploring + Clone,
     P: Plant + Clone,
     T: Task + Clone,
     F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
@@ -473,37 +661,69 @@ where
         let agent = make_agent(m, seeds.derive("agent"))?;
         p0_loop(agent, &cfg.ddpg, &od, &ad, seeds.rng("minibatches"))
     };
-    let pretrained = if methods.iter().any(|m| *m != Method::Cold) {
-        let mut t = trainee(Method::Warm)?;
-        let mut k = 0u64;
-        pretrain(
-            &mut t,
-            problem.idealized.clone(),
-            problem.task.clone(),
-            cfg.pretrain_steps,
-            seeds.derive("idealized-episodes"),
-            &mut || {
-                k += 1;
-                tick(Tick::Pretrain(k));
-            },
-        )?;
-        // Fine-tuning explores with p0's σ = 0.12.
-        t.agent.set_noise(cfg.ddpg.noise)?;
-        Some(t)
-    } else {
-        None
-    };
+    let mut pretrained: Option<OffPolicyLoop<A>> = None;
     let mut out = Vec::new();
     for &m in methods {
-        let start = match (m, &pretrained) {
-            (Method::Cold, _) | (_, None) => trainee(Method::Cold)?,
-            (_, Some(p)) => p.clone(),
+        let start = if m == Method::Cold {
+            trainee(Method::Cold)?
+        } else if store.load(m.name())?.is_some() {
+            // Resumed from the method's own checkpoint: any loop of the right shape will do.
+            trainee(m)?
+        } else {
+            if pretrained.is_none() {
+                pretrained = Some(pretrained_loop(problem, cfg, seed, &trainee, store, tick)?);
+            }
+            pretrained.clone().expect("just made")
         };
-        out.push(run_method(m, problem, cfg, start, seed, &mut |n| {
+        out.push(run_method(m, problem, cfg, start, seed, store, &mut |n| {
             tick(Tick::True(m, n))
         })?);
     }
     Ok(out)
+}
+
+/// The agent pre-trained on the idealized plant, from `store` (key `pretrained`) or trained
+/// now and saved there.
+fn pretrained_loop<A, P, T, F>(
+    problem: &Problem<P, T, F>,
+    cfg: &P0Config,
+    seed: u64,
+    trainee: &dyn Fn(Method) -> Result<OffPolicyLoop<A>>,
+    store: &mut dyn Checkpoints,
+    tick: &mut dyn FnMut(Tick),
+) -> Result<OffPolicyLoop<A>>
+where
+    A: OffPolicyAgent + Resumable + Exploring,
+    P: Plant + Clone,
+    T: Task + Clone,
+{
+    let mut t = trainee(Method::Warm)?;
+    if let Some(ckpt) = store.load("pretrained")? {
+        t.agent.load(&ckpt)?;
+        t.load("loop", &ckpt)?;
+        tick(Tick::Pretrain(cfg.pretrain_steps));
+        return Ok(t);
+    }
+    let mut k = 0u64;
+    pretrain_or_stop(
+        &mut t,
+        problem.idealized.clone(),
+        problem.task.clone(),
+        cfg.pretrain_steps,
+        SeedStream::new(seed).derive("idealized-episodes"),
+        store,
+        &mut || {
+            k += 1;
+            tick(Tick::Pretrain(k));
+        },
+    )?;
+    // Fine-tuning explores with p0's σ = 0.12.
+    t.agent.set_noise(cfg.ddpg.noise)?;
+    let mut ckpt = Checkpoint::new();
+    t.agent.save(&mut ckpt)?;
+    t.save("loop", &mut ckpt)?;
+    store.save("pretrained", &ckpt)?;
+    Ok(t)
 }
 
 /// A constructor of the true system.

@@ -144,6 +144,38 @@ pub trait OffPolicyAgent: Agent {
     fn update(&mut self, batch: &Batch) -> Result<Metrics>;
 }
 
+/// An agent whose whole state (networks, optimizer moments, noise, generator) goes into a
+/// [`Checkpoint`](tandem_nn::Checkpoint) and comes back into an agent built with the same
+/// configuration, so that a run saved at any step resumes with exactly its numbers. Loading
+/// another algorithm's or architecture's state is an error.
+pub trait Resumable {
+    /// Stores the state in `ckpt`.
+    fn save(&self, ckpt: &mut tandem_nn::Checkpoint) -> Result<()>;
+    /// Restores what [`Resumable::save`] stored.
+    fn load(&mut self, ckpt: &tandem_nn::Checkpoint) -> Result<()>;
+}
+
+/// The agents' inherent `save`/`load` as [`Resumable`].
+macro_rules! resumable {
+    ($($t:ty),*) => {$(
+        impl Resumable for $t {
+            fn save(&self, ckpt: &mut tandem_nn::Checkpoint) -> Result<()> {
+                <$t>::save(self, ckpt)
+            }
+            fn load(&mut self, ckpt: &tandem_nn::Checkpoint) -> Result<()> {
+                <$t>::load(self, ckpt)
+            }
+        }
+    )*};
+}
+resumable!(
+    crate::Ddpg,
+    crate::Sac,
+    crate::Dqn,
+    crate::Reinforce,
+    crate::Learner
+);
+
 /// An agent that learns from complete episodes.
 pub trait EpisodicAgent: Agent {
     /// One policy-gradient step on `episodes`.

@@ -55,6 +55,7 @@ pub mod trainer;
 
 pub use agent::{
     Agent, Batch, BatchPolicy, Critic, Episode, EpisodicAgent, Metrics, Mode, OffPolicyAgent,
+    Resumable,
 };
 pub use config::{
     Baseline, DdpgConfig, DqnConfig, OffPolicySchedule, QNetwork, ReinforceConfig, SacConfig,

@@ -105,6 +105,11 @@ impl Noise {
         self.config
     }
 
+    /// The dimension (of the actions it perturbs).
+    pub fn dim(&self) -> usize {
+        self.state.len()
+    }
+
     /// Restarts the process at zero (each episode's start).
     pub fn reset(&mut self) {
         self.state.iter_mut().for_each(|x| *x = 0.0);

@@ -138,6 +138,14 @@ impl<E: Env> SampleCounter<E> {
         )
     }
 
+    /// Wraps `env` with the count starting at `samples`: a run resumed from a checkpoint
+    /// continues the count it had.
+    pub fn starting_at(env: E, samples: u64) -> (Self, SampleCount) {
+        let (wrapper, count) = Self::new(env);
+        count.0.store(samples, Ordering::Relaxed);
+        (wrapper, count)
+    }
+
     /// Another handle to the count.
     pub fn count(&self) -> SampleCount {
         self.count.clone()
@@ -472,6 +480,11 @@ mod tests {
         boxed.reset(None);
         boxed.step(&Action::Continuous(vec![1.0])).unwrap();
         assert_eq!(other.get(), 6);
+
+        let (mut resumed, count) = SampleCounter::starting_at(PendulumEnv::new(), 6);
+        resumed.reset(Some(1));
+        resumed.step(&Action::Continuous(vec![1.0])).unwrap();
+        assert_eq!(count.get(), 7);
     }
 
     #[test]

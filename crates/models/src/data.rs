@@ -63,7 +63,64 @@ pub(crate) fn check_input(
     Ok(b)
 }
 
+/// The arrays as named tensors (`f64`, `terminated` as bytes). Loading checks the shapes
+/// against each other and the values for finiteness (a non-empty set must pass
+/// [`Transitions::validate`]).
+impl tandem_nn::Checkpointable for Transitions {
+    fn save_to(&self, prefix: &str, ckpt: &mut tandem_nn::Checkpoint) -> tandem_nn::Result<()> {
+        for (name, a) in self.matrices() {
+            let flat: Vec<f64> = a.iter().copied().collect();
+            ckpt.put_f64(&format!("{prefix}.{name}"), &[a.nrows(), a.ncols()], &flat)?;
+        }
+        let n = self.rewards.len();
+        ckpt.put_f64(&format!("{prefix}.rewards"), &[n], &self.rewards.to_vec())?;
+        let done: Vec<u8> = self.terminated.iter().map(|&t| u8::from(t)).collect();
+        ckpt.put_bytes(&format!("{prefix}.terminated"), &done)
+    }
+
+    fn load_from(&mut self, prefix: &str, ckpt: &tandem_nn::Checkpoint) -> tandem_nn::Result<()> {
+        let matrix = |name: &str| -> tandem_nn::Result<Array2<f64>> {
+            let name = format!("{prefix}.{name}");
+            let shape = ckpt.shape(&name)?.to_vec();
+            let data = ckpt.get_f64(&name, None)?;
+            match shape[..] {
+                [r, c] => Ok(Array2::from_shape_vec((r, c), data).expect("shape checked on read")),
+                _ => Err(tandem_nn::NnError::Checkpoint(format!(
+                    "`{name}` has shape {shape:?}, a matrix was expected"
+                ))),
+            }
+        };
+        let t = Transitions {
+            states: matrix("states")?,
+            actions: matrix("actions")?,
+            prev_actions: matrix("prev_actions")?,
+            next_states: matrix("next_states")?,
+            rewards: Array1::from(ckpt.get_f64(&format!("{prefix}.rewards"), None)?),
+            terminated: ckpt
+                .get_bytes(&format!("{prefix}.terminated"))?
+                .iter()
+                .map(|&b| b != 0)
+                .collect(),
+        };
+        if !t.is_empty() {
+            t.validate(t.state_dim(), t.action_dim())
+                .map_err(|e| tandem_nn::NnError::Checkpoint(format!("`{prefix}`: {e}")))?;
+        }
+        *self = t;
+        Ok(())
+    }
+}
+
 impl Transitions {
+    fn matrices(&self) -> [(&'static str, &Array2<f64>); 4] {
+        [
+            ("states", &self.states),
+            ("actions", &self.actions),
+            ("prev_actions", &self.prev_actions),
+            ("next_states", &self.next_states),
+        ]
+    }
+
     /// Number of transitions (rows).
     pub fn len(&self) -> usize {
         self.states.nrows()

@@ -5,7 +5,7 @@ use ndarray::Array2;
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
 use tandem_dynamics::Plant;
-use tandem_nn::{Activation, Mlp, MlpConfig};
+use tandem_nn::{Activation, Checkpoint, Checkpointable, Mlp, MlpConfig, NnError};
 
 use crate::data::check_input;
 use crate::model::{
@@ -83,6 +83,41 @@ pub struct ResidualModel<P: Plant> {
     in_action: Standardizer,
     out_norm: Standardizer,
     fitted: bool,
+}
+
+/// The learned part (network, optimizer state, standardizations); the plant and the settings are
+/// the constructor's. Loading into a model of another architecture is an error naming the tensor.
+impl<P: Plant> Checkpointable for ResidualModel<P> {
+    fn save_to(&self, prefix: &str, ckpt: &mut Checkpoint) -> tandem_nn::Result<()> {
+        self.net.save_to(&format!("{prefix}.net"), ckpt)?;
+        self.opt.save_to(&format!("{prefix}.opt"), ckpt)?;
+        let norms = (&self.in_state, &self.in_action, &self.out_norm, self.fitted);
+        ckpt.put_json(&format!("{prefix}.norms"), &norms)
+    }
+
+    fn load_from(&mut self, prefix: &str, ckpt: &Checkpoint) -> tandem_nn::Result<()> {
+        let name = format!("{prefix}.norms");
+        let (in_state, in_action, out_norm, fitted): (
+            Standardizer,
+            Standardizer,
+            Standardizer,
+            bool,
+        ) = ckpt.get_json(&name)?;
+        let widths = (in_state.dim(), in_action.dim(), out_norm.dim());
+        let (s, a) = (self.plant.state_dim(), self.plant.action_dim());
+        if widths != (s, a, s) {
+            return Err(NnError::Checkpoint(format!(
+                "`{name}`: standardizations of widths {widths:?}, this model's are {:?}",
+                (s, a, s)
+            )));
+        }
+        let (mut net, mut opt) = (self.net.clone(), self.opt.clone());
+        net.load_from(&format!("{prefix}.net"), ckpt)?;
+        opt.load_from(&format!("{prefix}.opt"), ckpt)?;
+        (self.net, self.opt, self.fitted) = (net, opt, fitted);
+        (self.in_state, self.in_action, self.out_norm) = (in_state, in_action, out_norm);
+        Ok(())
+    }
 }
 
 impl<P: Plant> ResidualModel<P> {
@@ -317,6 +352,52 @@ mod tests {
             e_idl / e_res
         );
         assert!(e_res * 10.0 < e_idl, "idealized {e_idl}, residual {e_res}");
+    }
+
+    /// A model saved after one fit and loaded into a fresh one predicts the same and continues
+    /// (optimizer state included) to the same second fit; another architecture is refused.
+    #[test]
+    fn a_saved_model_resumes_fitting_exactly() {
+        let real = DcMotorPendulum::new(DcMotorPendulumParams::real());
+        let (d1, d2) = (pendulum_data(&real, 300, 21), pendulum_data(&real, 300, 22));
+        let cfg = ResidualModelConfig {
+            hidden: vec![16, 16],
+            ..Default::default()
+        };
+        let fit = FitConfig {
+            epochs: 3,
+            batch_size: 32,
+            ..FitConfig::default()
+        };
+        let mut a = ResidualModel::new(idealized(), cfg.clone()).unwrap();
+        a.fit(&d1, &fit).unwrap();
+        let mut ckpt = Checkpoint::new();
+        a.save_to("model", &mut ckpt).unwrap();
+        let ckpt = Checkpoint::from_bytes(&ckpt.to_bytes().unwrap()).unwrap();
+        let mut b = ResidualModel::new(
+            idealized(),
+            ResidualModelConfig {
+                seed: 99,
+                ..cfg.clone()
+            },
+        )
+        .unwrap();
+        b.load_from("model", &ckpt).unwrap();
+        assert!(b.is_fitted());
+        assert_eq!(rmse(&a, &d2), rmse(&b, &d2));
+        a.fit(&d2, &fit).unwrap();
+        b.fit(&d2, &fit).unwrap();
+        assert_eq!(a.network().params(), b.network().params());
+        let mut wider = ResidualModel::new(
+            idealized(),
+            ResidualModelConfig {
+                hidden: vec![32, 16],
+                ..cfg
+            },
+        )
+        .unwrap();
+        let e = wider.load_from("model", &ckpt).unwrap_err();
+        assert!(e.to_string().contains("model.net"), "{e}");
     }
 
     #[test]

@@ -65,6 +65,24 @@ pub(crate) enum Opt {
     Sgd(Sgd),
 }
 
+impl tandem_nn::Checkpointable for Opt {
+    fn save_to(&self, prefix: &str, ckpt: &mut tandem_nn::Checkpoint) -> tandem_nn::Result<()> {
+        match self {
+            Opt::Adam(o) => o.save_to(prefix, ckpt),
+            Opt::AdaGrad(o) => o.save_to(prefix, ckpt),
+            Opt::Sgd(o) => o.save_to(prefix, ckpt),
+        }
+    }
+
+    fn load_from(&mut self, prefix: &str, ckpt: &tandem_nn::Checkpoint) -> tandem_nn::Result<()> {
+        match self {
+            Opt::Adam(o) => o.load_from(prefix, ckpt),
+            Opt::AdaGrad(o) => o.load_from(prefix, ckpt),
+            Opt::Sgd(o) => o.load_from(prefix, ckpt),
+        }
+    }
+}
+
 impl Opt {
     pub(crate) fn step(&mut self, params: &mut [f32], grads: &[f32]) -> tandem_nn::Result<()> {
         match self {
