@@ -317,3 +317,90 @@ fn reproduce_killed_and_interrupted_resumes_to_the_uninterrupted_outputs() {
     assert!(!cut.join("state").exists() && !cut.join(".tandem.lock").exists());
     let _ = std::fs::remove_dir_all(&root);
 }
+
+/// Seeds run as separate processes (`--first-seed`) and merged give the table and figure of one
+/// process running them all; overlapping seeds, other settings and unfinished parts are refused.
+#[test]
+fn seeds_run_apart_and_merged_equal_one_run_of_all_seeds() {
+    use std::process::Command;
+    let root = std::env::temp_dir().join(format!("tandem-p0-merge-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let tandem = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_tandem"))
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let p = |name: &str| root.join(name).to_str().unwrap().to_string();
+    let quick = ["reproduce", "p0-pendulum", "--quick", "--quiet"];
+    for (out, extra) in [
+        ("all", &["--seeds", "2"][..]),
+        ("s0", &["--seeds", "1"][..]),
+        ("s1", &["--seeds", "1", "--first-seed", "1"][..]),
+        (
+            "s1-other",
+            &["--seeds", "1", "--first-seed", "1", "--jobs", "1"][..],
+        ),
+    ] {
+        let o = tandem(&[&quick[..], extra, &["--out", &p(out)]].concat());
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let o = tandem(&[
+        "reproduce",
+        "merge",
+        &p("s1"),
+        &p("s0"),
+        "--out",
+        &p("merged"),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in ["table.json", "fig5.svg", "runs/difference__seed1/curve.csv"] {
+        let a = std::fs::read(root.join("all").join(f)).unwrap();
+        assert!(
+            a == std::fs::read(root.join("merged").join(f)).unwrap(),
+            "{f}"
+        );
+    }
+    let fails = |args: &[&str], needle: &str| {
+        let o = tandem(args);
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(err.contains(needle), "{err}");
+    };
+    fails(
+        &[
+            "reproduce",
+            "merge",
+            &p("s1"),
+            &p("s1-other"),
+            "--out",
+            &p("m2"),
+        ],
+        "seed 1 is in two",
+    );
+    // Another configuration does not merge.
+    let cfg = root.join("other.toml");
+    std::fs::write(&cfg, "model_steps = 300\n").unwrap();
+    let o = tandem(
+        &[
+            &quick[..],
+            &["--seeds", "1", "--first-seed", "2", "--config"],
+            &[cfg.to_str().unwrap(), "--out", &p("s2")],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    fails(
+        &["reproduce", "merge", &p("s0"), &p("s2"), "--out", &p("m3")],
+        "settings differ",
+    );
+    // An unfinished part is refused.
+    let c = root.join("s0/config.json");
+    let text = std::fs::read_to_string(&c).unwrap();
+    std::fs::write(&c, text.replace("\"complete\"", "\"interrupted\"")).unwrap();
+    fails(
+        &["reproduce", "merge", &p("s0"), &p("s1"), "--out", &p("m4")],
+        "is interrupted",
+    );
+    let _ = std::fs::remove_dir_all(&root);
+}

@@ -53,14 +53,36 @@ pub enum ReproduceCommand {
     /// p0 (difference models) on the DC-motor pendulum: cold start, warm start and the
     /// difference-model method over seeds; Table II and Fig. 5.
     P0Pendulum(P0Args),
+    /// Combine reproductions of disjoint seeds (e.g. one process per seed, `--first-seed`) into
+    /// one table and figure; their settings must be equal.
+    Merge(MergeArgs),
+}
+
+/// Arguments of `tandem reproduce merge`.
+#[derive(Debug, Args)]
+pub struct MergeArgs {
+    /// The reproductions' directories (each complete).
+    #[arg(required = true)]
+    pub dirs: Vec<PathBuf>,
+    /// Output directory (default `runs/p0-pendulum-merged__<time>/`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Replace a merge already in `--out`.
+    #[arg(long)]
+    pub overwrite: bool,
 }
 
 /// Arguments of `tandem reproduce p0-pendulum`.
 #[derive(Debug, Args)]
 pub struct P0Args {
-    /// Number of seeds (0, 1, ..., N-1) [default: 5].
+    /// Number of seeds (S, S+1, ..., S+N-1 for `--first-seed S`) [default: 5].
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub seeds: Option<u64>,
+    /// The first seed [default: 0]: `--seeds 1 --first-seed 3` runs seed 3 alone, so that seeds
+    /// can run as separate processes (or cluster jobs) whose directories
+    /// `tandem reproduce merge` combines into one table.
+    #[arg(long)]
+    pub first_seed: Option<u64>,
     /// Small smoke configuration (small networks, short budgets; numbers are meaningless).
     #[arg(long)]
     pub quick: bool,
@@ -93,6 +115,7 @@ pub struct P0Args {
 pub fn run(cmd: ReproduceCommand) -> Result<()> {
     match cmd {
         ReproduceCommand::P0Pendulum(args) => p0_pendulum(&args),
+        ReproduceCommand::Merge(args) => merge_runs(&args),
     }
 }
 
@@ -350,6 +373,8 @@ pub fn fig5(records: &[RunRecord]) -> Figure {
 struct RunConfig {
     config: P0Config,
     seeds: u64,
+    #[serde(default)]
+    first_seed: u64,
     quick: bool,
     jobs: u64,
     /// `running`, `interrupted` or `complete`.
@@ -379,6 +404,7 @@ fn fresh(args: &P0Args) -> Result<RunConfig> {
     Ok(RunConfig {
         config: cfg,
         seeds: args.seeds.unwrap_or(5),
+        first_seed: args.first_seed.unwrap_or(0),
         quick: args.quick,
         jobs: args.jobs,
         status: "running".into(),
@@ -405,6 +431,9 @@ fn recorded(args: &P0Args, dir: &Path) -> Result<RunConfig> {
     let mut conflicts = Vec::new();
     if let Some(n) = args.seeds.filter(|n| *n != rc.seeds) {
         conflicts.push(format!("--seeds {n} (the run has {})", rc.seeds));
+    }
+    if let Some(s) = args.first_seed.filter(|s| *s != rc.first_seed) {
+        conflicts.push(format!("--first-seed {s} (the run has {})", rc.first_seed));
     }
     if args.quick && !rc.quick {
         conflicts.push("--quick (the run is not quick)".into());
@@ -502,9 +531,168 @@ fn write_record(dir: &RunDir, r: &RunRecord) -> Result<()> {
     tandem_nn::write_atomic(&sub.join("record.json"), text.as_bytes()).map_err(io)
 }
 
+/// Every method's record for `seeds` in the reproduction directory `dir`.
+fn read_records(dir: &Path, seeds: std::ops::Range<u64>) -> Result<Vec<RunRecord>> {
+    let mut records = Vec::new();
+    for seed in seeds {
+        for &m in &Method::ALL {
+            let r = read_record_at(dir, m, seed)?.ok_or_else(|| {
+                CliError::Other(format!(
+                    "{}: seed {seed}: the {} run left no record",
+                    dir.display(),
+                    m.name()
+                ))
+            })?;
+            records.push(r);
+        }
+    }
+    Ok(records)
+}
+
+/// `table.json`, `table.md` and `fig5.svg` of `records`; returns the markdown.
+fn write_report(dir: &RunDir, records: &[RunRecord], cfg: &P0Config, wall: f64) -> Result<String> {
+    let table = table(records, cfg);
+    let md = markdown(&table, cfg, wall);
+    let w = |name: &str, text: &str| {
+        dir.write(name, text)
+            .map(drop)
+            .map_err(|source| CliError::Io {
+                path: dir.path().join(name),
+                source,
+            })
+    };
+    w(
+        "table.json",
+        &table
+            .to_json()
+            .map_err(|e| CliError::Other(format!("table.json: {e}")))?,
+    )?;
+    w("table.md", &md)?;
+    w("fig5.svg", &fig5(records).svg())?;
+    Ok(md)
+}
+
+/// The files `tandem reproduce merge` writes.
+const MERGE_LAYOUT: Layout = Layout {
+    owned: &["config.json", "runs", "table.json", "table.md", "fig5.svg"],
+    resumable: false,
+};
+
+/// What a merge's `config.json` records.
+#[derive(Debug, Serialize)]
+struct MergeConfig<'a> {
+    config: &'a P0Config,
+    quick: bool,
+    seeds: Vec<u64>,
+    /// The merged directories, with their first seed, seed count and wall time.
+    parts: Vec<(String, u64, u64, Option<f64>)>,
+    /// Sum of the parts' wall times, seconds.
+    wall_seconds: f64,
+    status: &'static str,
+}
+
+fn merge_runs(args: &MergeArgs) -> Result<()> {
+    let mut parts: Vec<(PathBuf, RunConfig)> = Vec::new();
+    for d in &args.dirs {
+        let path = d.join("config.json");
+        let text = std::fs::read_to_string(&path).map_err(|source| CliError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let rc: RunConfig = serde_json::from_str(&text)
+            .map_err(|e| CliError::input(path.display().to_string(), e.to_string()))?;
+        if rc.status != "complete" {
+            return Err(CliError::input(
+                d.display().to_string(),
+                format!(
+                    "the reproduction is {}; finish it first (`tandem reproduce p0-pendulum \
+                     --resume {}`)",
+                    rc.status,
+                    d.display()
+                ),
+            ));
+        }
+        if let Some((first, f)) = parts.first() {
+            if (&f.config, f.quick) != (&rc.config, rc.quick) {
+                return Err(CliError::input(
+                    d.display().to_string(),
+                    format!(
+                        "its settings differ from {}'s: only runs of one configuration merge",
+                        first.display()
+                    ),
+                ));
+            }
+        }
+        parts.push((d.clone(), rc));
+    }
+    let mut records = Vec::new();
+    let mut seeds: Vec<u64> = Vec::new();
+    for (d, rc) in &parts {
+        let range = rc.first_seed..rc.first_seed + rc.seeds;
+        if let Some(s) = range.clone().find(|s| seeds.contains(s)) {
+            return Err(CliError::input(
+                d.display().to_string(),
+                format!("seed {s} is in two of the merged directories"),
+            ));
+        }
+        seeds.extend(range.clone());
+        records.extend(read_records(d, range)?);
+    }
+    seeds.sort_unstable();
+    records.sort_by_key(|r| (r.seed, Method::ALL.iter().position(|m| *m == r.method)));
+    let existing = if args.overwrite {
+        Existing::Overwrite
+    } else {
+        Existing::Refuse
+    };
+    let dir = RunDir::create(
+        args.out.as_deref(),
+        "p0-pendulum-merged",
+        MERGE_LAYOUT,
+        existing,
+    )
+    .map_err(other)?;
+    for r in &records {
+        write_record(&dir, r)?;
+    }
+    let cfg = &parts[0].1.config;
+    let wall: f64 = parts.iter().filter_map(|(_, rc)| rc.wall_seconds).sum();
+    let md = write_report(&dir, &records, cfg, wall)?;
+    let merged = MergeConfig {
+        config: cfg,
+        quick: parts[0].1.quick,
+        seeds,
+        parts: parts
+            .iter()
+            .map(|(d, rc)| {
+                let d = d.display().to_string();
+                (d, rc.first_seed, rc.seeds, rc.wall_seconds)
+            })
+            .collect(),
+        wall_seconds: wall,
+        status: "complete",
+    };
+    let text = to_json_pretty(&merged).map_err(|e| CliError::Other(format!("config.json: {e}")))?;
+    dir.write("config.json", &text)
+        .map_err(|source| CliError::Io {
+            path: dir.path().join("config.json"),
+            source,
+        })?;
+    println!("{md}");
+    println!("wrote {}", dir.path().display());
+    Ok(())
+}
+
 /// A finished run's record, if it is there.
 fn read_record(dir: &RunDir, method: Method, seed: u64) -> Result<Option<RunRecord>> {
-    let path = run_dir(dir, method, seed).join("record.json");
+    read_record_at(dir.path(), method, seed)
+}
+
+fn read_record_at(dir: &Path, method: Method, seed: u64) -> Result<Option<RunRecord>> {
+    let path = dir
+        .join("runs")
+        .join(format!("{}__seed{seed}", method.name()))
+        .join("record.json");
     match std::fs::read_to_string(&path) {
         Ok(text) => serde_json::from_str(&text)
             .map(Some)
@@ -547,7 +735,7 @@ fn p0_pendulum(args: &P0Args) -> Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> ");
 
-    let seeds = rc.seeds;
+    let (first, seeds) = (rc.first_seed, rc.seeds);
     let next = AtomicUsize::new(0);
     let errors: Mutex<Vec<(u64, String)>> = Mutex::new(Vec::new());
     std::thread::scope(|scope| {
@@ -560,9 +748,9 @@ fn p0_pendulum(args: &P0Args) -> Result<()> {
                     break;
                 }
                 let (seed, methods): (u64, &[Method]) = if k % 2 == 0 {
-                    (k / 2, &[Method::Warm, Method::Difference])
+                    (first + k / 2, &[Method::Warm, Method::Difference])
                 } else {
-                    (k / 2, &[Method::Cold])
+                    (first + k / 2, &[Method::Cold])
                 };
                 let mut store = SeedState {
                     dir: dir.path().join("state").join(format!("seed{seed}")),
@@ -600,15 +788,7 @@ fn p0_pendulum(args: &P0Args) -> Result<()> {
             code: stop.exit_code().unwrap_or(EXIT_SIGINT),
         });
     }
-    let mut records = Vec::new();
-    for seed in 0..seeds {
-        for &m in &Method::ALL {
-            let r = read_record(&dir, m, seed)?.ok_or_else(|| {
-                CliError::Other(format!("seed {seed}: the {} run left no record", m.name()))
-            })?;
-            records.push(r);
-        }
-    }
+    let records = read_records(dir.path(), first..first + seeds)?;
     let state = dir.path().join("state");
     if state.exists() {
         std::fs::remove_dir_all(&state).map_err(|source| CliError::Io {
