@@ -111,6 +111,13 @@ pub enum RunDirError {
     },
 }
 
+/// Whether `name` is a temporary file left by an interrupted atomic write
+/// ([`tandem_nn::write_atomic`] writes `.<name>.tmp` before renaming): part of the run, removed
+/// by `--overwrite`.
+fn is_partial_write(name: &str) -> bool {
+    name.starts_with('.') && name.ends_with(".tmp")
+}
+
 /// The lock file's name inside a run directory: it holds the writer's process id.
 pub const LOCK_FILE: &str = ".tandem.lock";
 
@@ -202,7 +209,7 @@ impl RunDir {
         }
         let foreign: Vec<String> = entries
             .iter()
-            .filter(|n| !layout.owned.contains(&n.as_str()))
+            .filter(|n| !layout.owned.contains(&n.as_str()) && !is_partial_write(n))
             .cloned()
             .collect();
         if !foreign.is_empty() {
@@ -541,6 +548,8 @@ mod tests {
         std::fs::create_dir_all(d.join("runs/cold__seed4")).unwrap();
         std::fs::write(d.join("runs/cold__seed4/curve.csv"), "x").unwrap();
         std::fs::write(d.join("table.json"), "{}").unwrap();
+        // A write that a second signal cut short.
+        std::fs::write(d.join(".table.json.tmp"), "{").unwrap();
         d
     }
 
@@ -549,7 +558,7 @@ mod tests {
         let d = earlier_run("modes");
         let e = RunDir::create(Some(&d), "x", LAYOUT, Existing::Refuse).unwrap_err();
         assert!(
-            matches!(&e, RunDirError::Exists { entries, .. } if entries == &["runs", "table.json"])
+            matches!(&e, RunDirError::Exists { entries, .. } if entries == &[".table.json.tmp", "runs", "table.json"])
         );
         assert!(!e.to_string().contains("--resume"), "{e}");
         assert!(d.join("runs/cold__seed4").exists() && !d.join(LOCK_FILE).exists());
@@ -564,7 +573,7 @@ mod tests {
         drop(dir);
         assert!(!d.join(LOCK_FILE).exists());
 
-        // Overwrite: the stale seed folders go with the table.
+        // Overwrite: the stale seed folders and the partial write go with the table.
         let dir = RunDir::create(Some(&d), "x", LAYOUT, Existing::Overwrite).unwrap();
         let left: Vec<_> = std::fs::read_dir(&d)
             .unwrap()
