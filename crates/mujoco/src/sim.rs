@@ -128,7 +128,7 @@ impl Scene {
         let limited = self.model.actuator_ctrllimited();
         for (i, r) in self.model.actuator_ctrlrange().iter().enumerate() {
             // MuJoCo's ctrllimited is "auto" by default: limited when a range is given.
-            if limited[i] != 0 && r[0] < r[1] {
+            if limited[i] && r[0] < r[1] {
                 low.push(r[0]);
                 high.push(r[1]);
             } else {
