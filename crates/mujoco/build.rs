@@ -1,6 +1,6 @@
-//! With the `mujoco` feature: adds the folder of the linked libmujoco (`MUJOCO_DYNAMIC_LINK_DIR`,
-//! set by the workspace's `.cargo/config.toml`) to the run path of this crate's tests, examples
-//! and benches, so they start with no `LD_LIBRARY_PATH`. Without the feature it does nothing.
+// With the `mujoco` feature: adds the folder of the linked libmujoco (`MUJOCO_DYNAMIC_LINK_DIR`,
+// set by the workspace's `.cargo/config.toml`) to the run path of this crate's tests, examples
+// and benches, so they start with no `LD_LIBRARY_PATH`. Without the feature it does nothing.
 fn main() {
     println!("cargo::rerun-if-env-changed=MUJOCO_DYNAMIC_LINK_DIR");
     if std::env::var_os("CARGO_FEATURE_MUJOCO").is_some() {

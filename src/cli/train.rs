@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use tandem::report::{ensure_finite, to_json_pretty, NonFinite};
 use tandem::run::{csv, svg_chart, Existing, Layout, RunDir, Series};
 use tandem_agents::{Algo, AlgoConfig, TrainSettings, Trainer};
-use tandem_envs::make;
+use tandem::make_env as make;
 
 use super::presets::{self, Preset};
 use super::{CliError, Result};

@@ -488,8 +488,8 @@ impl Env for MujocoEnv {
 /// use tandem_dynamics::Plant;
 /// use tandem_mujoco::{MujocoPlant, Scene};
 ///
-/// let scene = Scene::from_xml("scenes/pusher.xml").unwrap();
-/// let plant = MujocoPlant::new(scene, 5).unwrap();
+/// let scene = Scene::from_xml("crates/mujoco/tests/scenes/slider.xml").unwrap();
+/// let plant = MujocoPlant::new(scene, 1).unwrap();
 /// let x = DVector::zeros(plant.state_dim());
 /// let (a, b) = plant.linearize(&x, &DVector::zeros(plant.action_dim()));
 /// assert_eq!(a.ncols(), plant.state_dim());
