@@ -21,7 +21,7 @@ macro_rules! pairwise {
                 }
                 res
             } else if n <= BLOCK {
-                let mut r = [0.0 as $t; 8];
+                let mut r: [$t; 8] = [0.0; 8];
                 r.copy_from_slice(&a[..8]);
                 let full = n - n % 8;
                 for chunk in a[8..full].chunks_exact(8) {
