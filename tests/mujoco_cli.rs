@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
+#[cfg(feature = "mujoco")]
 use serde_json::Value;
 
 fn tandem(args: &[&str]) -> Output {
@@ -18,6 +19,7 @@ fn err_text(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+#[cfg(feature = "mujoco")]
 fn mujoco_dir(rel: &str) -> String {
     format!("{}/crates/mujoco/tests/{rel}", env!("CARGO_MANIFEST_DIR"))
 }
@@ -42,22 +44,43 @@ fn without_the_feature_mujoco_ids_and_files_say_how_to_enable_it() {
     let actions = write_temp("nofeature", "[[0, 0, 0, 0, 0, 0]]");
     let actions = actions.to_str().unwrap();
     for args in [
-        vec!["env", "replay", "--env", "HalfCheetah-v5", "--state", "[0]", "--actions", actions],
-        vec!["env", "replay", "--mjcf", "x.xml", "--state", "[0]", "--actions", actions],
+        vec![
+            "env",
+            "replay",
+            "--env",
+            "HalfCheetah-v5",
+            "--state",
+            "[0]",
+            "--actions",
+            actions,
+        ],
+        vec![
+            "env",
+            "replay",
+            "--mjcf",
+            "x.xml",
+            "--state",
+            "[0]",
+            "--actions",
+            actions,
+        ],
         vec!["rollout", "--env", "Hopper-v5", "--episodes", "1"],
     ] {
         let o = tandem(&args);
         assert!(!o.status.success());
         let err = err_text(&o);
-        assert!(err.contains("--features mujoco") && !err.contains("panicked"), "{err}");
+        assert!(
+            err.contains("--features mujoco") && !err.contains("panicked"),
+            "{err}"
+        );
     }
 }
 
 #[cfg(feature = "mujoco")]
 #[test]
 fn replay_reproduces_a_gymnasium_episode_with_its_info() {
-    let text = std::fs::read_to_string(mujoco_dir("fixtures/gymnasium-mujoco/Reacher-v5.json"))
-        .unwrap();
+    let text =
+        std::fs::read_to_string(mujoco_dir("fixtures/gymnasium-mujoco/Reacher-v5.json")).unwrap();
     let fx: Value = serde_json::from_str(&text).unwrap();
     let ep = &fx["episodes"][2];
     let mut state = ep["init_qpos"].as_array().unwrap().clone();
@@ -84,7 +107,10 @@ fn replay_reproduces_a_gymnasium_episode_with_its_info() {
         assert_eq!(out["states"][t], Value::Array(qq), "step {t}");
         assert_eq!(out["observations"][t], s["obs"], "step {t}");
         let r = out["rewards"][t].as_f64().unwrap();
-        assert!((r - s["reward"].as_f64().unwrap()).abs() < 1e-12, "step {t}");
+        assert!(
+            (r - s["reward"].as_f64().unwrap()).abs() < 1e-12,
+            "step {t}"
+        );
         let ctrl = out["info"][t]["reward_ctrl"].as_f64().unwrap();
         assert_eq!(ctrl, s["info"]["reward_ctrl"].as_f64().unwrap(), "step {t}");
     }
@@ -123,14 +149,28 @@ fn replay_runs_any_mjcf_file() {
     assert_eq!(out["rewards"], serde_json::json!([0.0, 0.0]));
 
     let missing = tandem(&[
-        "env", "replay", "--mjcf", "/nonexistent.xml", "--state", "[0, 0]", "--actions",
+        "env",
+        "replay",
+        "--mjcf",
+        "/nonexistent.xml",
+        "--state",
+        "[0, 0]",
+        "--actions",
         actions.to_str().unwrap(),
     ]);
     assert!(!missing.status.success());
     assert!(err_text(&missing).contains("/nonexistent.xml"));
     let both = tandem(&[
-        "env", "replay", "--env", "Hopper-v5", "--mjcf", &scene, "--state", "[0, 0]",
-        "--actions", actions.to_str().unwrap(),
+        "env",
+        "replay",
+        "--env",
+        "Hopper-v5",
+        "--mjcf",
+        &scene,
+        "--state",
+        "[0, 0]",
+        "--actions",
+        actions.to_str().unwrap(),
     ]);
     assert!(!both.status.success());
 }

@@ -191,8 +191,8 @@ fn replay_mjcf(
     what: &str,
 ) -> Result<Value> {
     use tandem::mujoco::{MujocoEnv, Scene};
-    let frame_skip = usize::try_from(frame_skip)
-        .map_err(|_| CliError::input("--frame-skip", "too large"))?;
+    let frame_skip =
+        usize::try_from(frame_skip).map_err(|_| CliError::input("--frame-skip", "too large"))?;
     let scene = Scene::from_xml(path).map_err(CliError::other)?;
     let mut env = MujocoEnv::scene(scene, frame_skip).map_err(CliError::other)?;
     replay_from(&mut env, state, actions, what)

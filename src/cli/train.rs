@@ -14,10 +14,10 @@ use std::time::Instant;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
+use tandem::make_env as make;
 use tandem::report::{ensure_finite, to_json_pretty, NonFinite};
 use tandem::run::{csv, svg_chart, Existing, Layout, RunDir, Series};
 use tandem_agents::{Algo, AlgoConfig, TrainSettings, Trainer};
-use tandem::make_env as make;
 
 use super::presets::{self, Preset};
 use super::{CliError, Result};

@@ -118,7 +118,10 @@ mod tests {
         let a = [0.1f32, 0.2, 0.3];
         let expected = (0.1f32 * 0.1f32 + 0.2f32 * 0.2f32) + 0.3f32 * 0.3f32;
         assert_eq!(np_sum_squares_f32(&a), expected);
-        assert_ne!(np_sum_squares_f32(&a) as f64, 0.1 * 0.1 + 0.2 * 0.2 + 0.3 * 0.3);
+        assert_ne!(
+            np_sum_squares_f32(&a) as f64,
+            0.1 * 0.1 + 0.2 * 0.2 + 0.3 * 0.3
+        );
         let long = vec![0.5f32; 40];
         assert_eq!(np_sum_squares_f32(&long), 10.0);
     }

@@ -42,11 +42,10 @@ pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
 #[cfg(feature = "mujoco")]
 fn make_task(kind: TaskKind) -> Result<Box<dyn Env>, EnvError> {
     let spec = kind.spec();
-    let env =
-        crate::MujocoEnv::task(kind, &assets_dir()).map_err(|e| EnvError::Unsupported {
-            env: spec.id.to_string(),
-            reason: format!("{e} (gymnasium's assets: run scripts/setup-mujoco.sh)"),
-        })?;
+    let env = crate::MujocoEnv::task(kind, &assets_dir()).map_err(|e| EnvError::Unsupported {
+        env: spec.id.to_string(),
+        reason: format!("{e} (gymnasium's assets: run scripts/setup-mujoco.sh)"),
+    })?;
     Ok(Box::new(tandem_envs::TimeLimit::new(
         env,
         spec.max_episode_steps,

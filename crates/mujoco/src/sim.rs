@@ -224,7 +224,13 @@ impl MujocoEnv {
     pub fn task(kind: TaskKind, assets: &Path) -> Result<Self, MujocoError> {
         let spec = kind.spec();
         let scene = Scene::from_xml(assets.join(spec.xml))?;
-        let found = (scene.nq(), scene.nv(), scene.nu(), scene.nbody(), scene.timestep());
+        let found = (
+            scene.nq(),
+            scene.nv(),
+            scene.nu(),
+            scene.nbody(),
+            scene.timestep(),
+        );
         let expected = (spec.nq, spec.nv, spec.nu, spec.nbody, spec.timestep);
         if found != expected {
             return Err(MujocoError::Model {

@@ -218,7 +218,8 @@ impl TaskKind {
                 action_bound: 2.0,
                 bodies: &["tips_arm", "object", "goal"],
                 terms: &["reward_dist", "reward_ctrl", "reward_near"],
-                description: "gymnasium Pusher-v5 on MuJoCo: push a cylinder to a goal with a 7-DoF arm",
+                description:
+                    "gymnasium Pusher-v5 on MuJoCo: push a cylinder to a goal with a 7-DoF arm",
             },
         }
     }
@@ -461,7 +462,11 @@ fn ant_contact_sum(cfrc_ext: &[[f64; 6]]) -> f64 {
     let mut sq = [0.0; 6 * 14];
     let n = 6 * cfrc_ext.len();
     if n > sq.len() {
-        let v: Vec<f64> = cfrc_ext.iter().flatten().map(|f| f.clamp(-1.0, 1.0).powi(2)).collect();
+        let v: Vec<f64> = cfrc_ext
+            .iter()
+            .flatten()
+            .map(|f| f.clamp(-1.0, 1.0).powi(2))
+            .collect();
         return np_sum_f64(&v);
     }
     for (s, f) in sq.iter_mut().zip(cfrc_ext.iter().flatten()) {
@@ -563,7 +568,11 @@ mod tests {
         let mut q = [0.0; 15];
         for (z, healthy) in [(0.2, true), (1.0, true), (0.19999, false), (1.00001, false)] {
             q[2] = z;
-            assert_eq!(TaskKind::Ant.is_healthy(&readout(&q, &qvel)), healthy, "{z}");
+            assert_eq!(
+                TaskKind::Ant.is_healthy(&readout(&q, &qvel)),
+                healthy,
+                "{z}"
+            );
         }
         q[2] = 0.5;
         q[7] = f64::NAN;

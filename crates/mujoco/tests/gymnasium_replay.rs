@@ -20,7 +20,11 @@ fn replay(kind: TaskKind) {
         let mut state = ep.init_qpos.clone();
         state.extend_from_slice(&ep.init_qvel);
         let obs = env.set_state(&state).unwrap();
-        assert_eq!(obs, ep.reset_obs, "{} seed {} reset observation", spec.id, ep.seed);
+        assert_eq!(
+            obs, ep.reset_obs,
+            "{} seed {} reset observation",
+            spec.id, ep.seed
+        );
         for (t, s) in ep.steps.iter().enumerate() {
             let at = format!("{} seed {} step {t}", spec.id, ep.seed);
             let step = env.step(&Action::Continuous(s.action.clone())).unwrap();
@@ -43,7 +47,10 @@ fn replay(kind: TaskKind) {
             assert_eq!(outcome.terms().count(), s.info.len(), "{at}: info keys");
             for (name, value) in &s.info {
                 let got = outcome.term(name).unwrap();
-                assert!((got - value).abs() <= 1e-12, "{at}: info {name} {got} vs {value}");
+                assert!(
+                    (got - value).abs() <= 1e-12,
+                    "{at}: info {name} {got} vs {value}"
+                );
             }
             steps += 1;
         }

@@ -42,7 +42,13 @@ fn ilqr_through_mujoco_matches_riccati() {
     });
     let ilqr = Ilqr::new(IlqrConfig::default()).unwrap();
     let sol = ilqr
-        .solve(&model, &objective, x0.as_slice(), None, &Array2::zeros((horizon, 1)))
+        .solve(
+            &model,
+            &objective,
+            x0.as_slice(),
+            None,
+            &Array2::zeros((horizon, 1)),
+        )
         .unwrap();
     // The plan stays inside ctrlrange [-4, 4], where MuJoCo's dynamics are exactly linear.
     assert!(sol.actions.iter().all(|u| u.abs() < 4.0));

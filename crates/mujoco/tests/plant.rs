@@ -33,7 +33,10 @@ fn slider_plant_steps_as_semi_implicit_euler() {
     assert!((plant.dt() - 0.03).abs() < 1e-15);
     let next = plant.step(&dvector![0.5, -1.0], &dvector![3.0]);
     let (x, v) = slider_exact(0.5, -1.0, 3.0, 3);
-    assert!((next[0] - x).abs() < 1e-12 && (next[1] - v).abs() < 1e-12, "{next}");
+    assert!(
+        (next[0] - x).abs() < 1e-12 && (next[1] - v).abs() < 1e-12,
+        "{next}"
+    );
     // MuJoCo clamps ctrl into ctrlrange [-4, 4].
     let clamped = plant.step(&dvector![0.0, 0.0], &dvector![10.0]);
     let (x, v) = slider_exact(0.0, 0.0, 4.0, 3);
@@ -107,7 +110,10 @@ fn any_mjcf_scene_is_an_environment() {
     let step = env.step(&Action::Continuous(vec![2.0])).unwrap();
     let (x, v) = slider_exact(0.0, 0.0, 2.0, 2);
     assert!((step.observation[0] - x).abs() < 1e-12 && (step.observation[1] - v).abs() < 1e-12);
-    assert_eq!((step.reward, step.terminated, step.truncated), (0.0, false, false));
+    assert_eq!(
+        (step.reward, step.terminated, step.truncated),
+        (0.0, false, false)
+    );
     assert_eq!(env.state(), step.observation);
     // Bad input is an error naming the problem.
     assert!(env.step(&Action::Continuous(vec![f64::NAN])).is_err());
@@ -121,17 +127,20 @@ fn bad_files_are_errors_not_panics() {
     let missing = Scene::from_xml("/nonexistent/scene.xml").unwrap_err();
     assert!(matches!(missing, MujocoError::Load { .. }), "{missing}");
     let dir = std::env::temp_dir().join(format!("tandem-mujoco-bad-{}.xml", std::process::id()));
-    std::fs::write(&dir, "<mujoco><worldbody><body><joint type='nonsense'/></body></worldbody></mujoco>")
-        .unwrap();
+    std::fs::write(
+        &dir,
+        "<mujoco><worldbody><body><joint type='nonsense'/></body></worldbody></mujoco>",
+    )
+    .unwrap();
     let err = Scene::from_xml(&dir).unwrap_err();
     std::fs::remove_file(&dir).ok();
     assert!(matches!(err, MujocoError::Load { .. }), "{err}");
     assert!(MujocoPlant::from_xml(slider_path(), 0).is_err());
     // A task over the wrong file is refused with the dimensions it expected.
-    let err = MujocoEnv::task(TaskKind::Ant, std::path::Path::new(&format!(
-        "{}/tests/scenes",
-        env!("CARGO_MANIFEST_DIR")
-    )))
+    let err = MujocoEnv::task(
+        TaskKind::Ant,
+        std::path::Path::new(&format!("{}/tests/scenes", env!("CARGO_MANIFEST_DIR"))),
+    )
     .unwrap_err();
     assert!(err.to_string().contains("ant.xml"), "{err}");
 }
