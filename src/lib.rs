@@ -13,15 +13,19 @@
 //! | [`models`] | `tandem-models` | `DynamicsModel` and the learned models |
 //! | [`planners`] | `tandem-planners` | MPC planners and TVLG trajectory optimizers |
 //! | [`agents`] | `tandem-agents` | DDPG, SAC, REINFORCE, DQN, replay |
+//! | [`mujoco`] | `tandem-mujoco` | gymnasium's MuJoCo v5 tasks and MJCF scenes (real MuJoCo with the feature `mujoco`) |
 //!
 //! [`run`] writes run directories; [`report`] renders reproduction tables and figures;
 //! [`interrupt`] turns SIGINT/SIGTERM into a stop request that long runs poll.
+//! [`make_env`] and [`registered_envs`] are the registry of every environment: `tandem-envs`'s and,
+//! with the feature `mujoco`, gymnasium's MuJoCo tasks.
 
 pub use tandem_agents as agents;
 pub use tandem_core as core;
 pub use tandem_dynamics as dynamics;
 pub use tandem_envs as envs;
 pub use tandem_models as models;
+pub use tandem_mujoco as mujoco;
 pub use tandem_nn as nn;
 pub use tandem_planners as planners;
 
@@ -29,3 +33,25 @@ pub mod interrupt;
 pub mod pipelines;
 pub mod report;
 pub mod run;
+
+/// The registered environment `id` with its time limit: `tandem-envs`'s own ([`envs::make`]),
+/// then gymnasium's MuJoCo tasks ([`mujoco::make`]; without the feature `mujoco` their ids give an
+/// error saying how to enable it).
+///
+/// ```
+/// assert_eq!(tandem::make_env("CartPole-v1").unwrap().max_episode_steps(), Some(500));
+/// assert!(tandem::make_env("Nope-v0").is_err());
+/// ```
+pub fn make_env(id: &str) -> Result<Box<dyn envs::Env>, envs::EnvError> {
+    match envs::make(id) {
+        Err(envs::EnvError::Unknown(_)) => mujoco::make(id),
+        made => made,
+    }
+}
+
+/// Every environment [`make_env`] can make, `tandem-envs`'s first.
+pub fn registered_envs() -> Vec<envs::EnvSpec> {
+    let mut specs = envs::registered();
+    specs.extend(mujoco::registered());
+    specs
+}

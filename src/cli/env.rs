@@ -12,6 +12,12 @@
 //! - `--actions`: path of a file holding a JSON array of actions (`-` reads stdin): integers for
 //!   a discrete action space, arrays of numbers for a box space (`[[0.5], [-1.0]]`).
 //!
+//! - MuJoCo (feature `mujoco`): for gymnasium's MuJoCo tasks (`HalfCheetah-v5`, ...) the state is
+//!   `qpos` followed by `qvel`, the output `states` are `qpos ++ qvel` after each step, and the
+//!   output has one more list, `info`: each step's reward terms as gymnasium's `info` dict.
+//!   `--mjcf FILE` (instead of `--env`) replays any MJCF scene: state `qpos ++ qvel`, actions are
+//!   `ctrl`, `--frame-skip N` MuJoCo steps per action (default 1), reward 0, no time limit.
+//!
 //! Every action is checked before the first step: wrong kinds, dimensions and non-finite values
 //! (`NaN`, `Infinity` as Python's `json` writes them) are errors naming the action's index.
 //! Every output is checked too: a finite start state can still overflow (CartPole from
@@ -23,7 +29,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Subcommand};
 use serde_json::{json, Value};
-use tandem_envs::{make, Action, Env, Space};
+use tandem_envs::{Action, Env, Space};
 
 use super::json::{self, kind};
 use super::{CliError, Result};
@@ -39,8 +45,15 @@ pub enum EnvCommand {
 #[derive(Debug, Args)]
 pub struct ReplayArgs {
     /// Registered environment id (see `tandem envs`).
+    #[arg(long, required_unless_present = "mjcf", conflicts_with = "mjcf")]
+    pub env: Option<String>,
+    /// An MJCF file to replay instead of a registered environment (needs the `mujoco` feature):
+    /// state `qpos ++ qvel`, actions are the actuators' `ctrl`, reward 0.
     #[arg(long)]
-    pub env: String,
+    pub mjcf: Option<PathBuf>,
+    /// MuJoCo steps per action of an `--mjcf` scene.
+    #[arg(long, default_value_t = 1, requires = "mjcf", value_parser = clap::value_parser!(u64).range(1..))]
+    pub frame_skip: u64,
     /// Start state: a JSON array (e.g. '[0.01, 0, -0.02, 0]') or the path of a file holding one.
     #[arg(long)]
     pub state: String,
@@ -138,16 +151,96 @@ pub fn parse_actions(value: &Value, space: &Space, env: &str, what: &str) -> Res
 
 /// Replays `args` and returns the trajectory object.
 pub fn replay(args: &ReplayArgs) -> Result<Value> {
-    let mut env = make(&args.env)?;
     let state = parse_state(&args.state)?;
     let what = format!("actions file {}", args.actions.display());
     let text = read_file(&args.actions)?;
+    if let Some(path) = &args.mjcf {
+        return replay_mjcf(path, args.frame_skip, &state, &text, &what);
+    }
+    let id = args.env.as_deref().unwrap_or_default();
+    if let Some(kind) = tandem::mujoco::TaskKind::from_id(id) {
+        return replay_mujoco_task(kind, &state, &text, &what);
+    }
+    let mut env = tandem::make_env(id)?;
     replay_from(&mut *env, &state, &text, &what)
+}
+
+#[cfg(feature = "mujoco")]
+fn replay_mujoco_task(
+    kind: tandem::mujoco::TaskKind,
+    state: &[f64],
+    actions: &str,
+    what: &str,
+) -> Result<Value> {
+    use tandem::mujoco::MujocoEnv;
+    let env = MujocoEnv::task(kind, &tandem::mujoco::assets_dir()).map_err(CliError::other)?;
+    let mut env = tandem_envs::TimeLimit::new(env, kind.spec().max_episode_steps);
+    replay_with(&mut env, state, actions, what, |env| {
+        env.inner()
+            .last_outcome()
+            .map(|o| Value::Object(o.terms().map(|(k, v)| (k.to_string(), json!(v))).collect()))
+    })
+}
+
+#[cfg(feature = "mujoco")]
+fn replay_mjcf(
+    path: &std::path::Path,
+    frame_skip: u64,
+    state: &[f64],
+    actions: &str,
+    what: &str,
+) -> Result<Value> {
+    use tandem::mujoco::{MujocoEnv, Scene};
+    let frame_skip =
+        usize::try_from(frame_skip).map_err(|_| CliError::input("--frame-skip", "too large"))?;
+    let scene = Scene::from_xml(path).map_err(CliError::other)?;
+    let mut env = MujocoEnv::scene(scene, frame_skip).map_err(CliError::other)?;
+    replay_from(&mut env, state, actions, what)
+}
+
+#[cfg(not(feature = "mujoco"))]
+fn replay_mujoco_task(
+    kind: tandem::mujoco::TaskKind,
+    _state: &[f64],
+    _actions: &str,
+    _what: &str,
+) -> Result<Value> {
+    Err(tandem::mujoco::make(kind.spec().id).err().map_or_else(
+        || CliError::other("MuJoCo is not available"),
+        CliError::from,
+    ))
+}
+
+#[cfg(not(feature = "mujoco"))]
+fn replay_mjcf(
+    _path: &std::path::Path,
+    _frame_skip: u64,
+    _state: &[f64],
+    _actions: &str,
+    _what: &str,
+) -> Result<Value> {
+    Err(CliError::input(
+        "--mjcf",
+        "MJCF scenes need a build with `--features mujoco` after scripts/setup-mujoco.sh \
+         (see docs/mujoco.md)",
+    ))
 }
 
 /// Replays the JSON `actions` (named `what` in errors) on `env` from `state`: the trajectory
 /// object, or an error for bad actions, a bad state, or an output that is not finite.
 pub fn replay_from(env: &mut dyn Env, state: &[f64], actions: &str, what: &str) -> Result<Value> {
+    replay_with(env, state, actions, what, |_| None)
+}
+
+/// [`replay_from`] with a per-step `info` object read from the environment after each step; the
+/// output gains an `info` list when `info` gives one.
+pub fn replay_with<E: Env + ?Sized>(
+    env: &mut E,
+    state: &[f64],
+    actions: &str,
+    what: &str,
+    mut info: impl FnMut(&E) -> Option<Value>,
+) -> Result<Value> {
     let actions = parse_actions(
         &json::parse(actions, what)?,
         env.action_space(),
@@ -157,6 +250,7 @@ pub fn replay_from(env: &mut dyn Env, state: &[f64], actions: &str, what: &str) 
     env.set_state(state)?;
     let (mut states, mut observations, mut rewards) = (Vec::new(), Vec::new(), Vec::new());
     let (mut terminated, mut truncated) = (Vec::new(), Vec::new());
+    let mut infos = Vec::new();
     for (t, a) in actions.iter().enumerate() {
         let step = env
             .step(a)
@@ -171,15 +265,20 @@ pub fn replay_from(env: &mut dyn Env, state: &[f64], actions: &str, what: &str) 
         rewards.push(step.reward);
         terminated.push(step.terminated);
         truncated.push(step.truncated);
+        infos.extend(info(env));
         if step.done() {
             break;
         }
     }
-    Ok(json!({
+    let mut out = json!({
         "states": states,
         "observations": observations,
         "rewards": rewards,
         "terminated": terminated,
         "truncated": truncated,
-    }))
+    });
+    if !infos.is_empty() {
+        out["info"] = Value::Array(infos);
+    }
+    Ok(out)
 }

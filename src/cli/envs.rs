@@ -1,6 +1,6 @@
 //! `tandem envs`: the registered environments.
 
-use tandem_envs::registered;
+use tandem::registered_envs as registered;
 
 /// Prints one block per registered environment: id, description, episode limit, spaces.
 pub fn run() -> super::Result<()> {

@@ -4,8 +4,9 @@
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::Rng as _;
+use tandem::make_env as make;
 use tandem_core::seeding::{Rng, SeedStream};
-use tandem_envs::{make, Action, Env, SampleCounter, Space};
+use tandem_envs::{Action, Env, SampleCounter, Space};
 
 use super::{CliError, Result};
 

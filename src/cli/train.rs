@@ -16,10 +16,10 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use tandem::interrupt::{Stop, EXIT_SIGINT};
+use tandem::make_env as make;
 use tandem::report::{ensure_finite, to_json_pretty, NonFinite};
 use tandem::run::{csv, svg_chart, Existing, Layout, RunDir, Series};
 use tandem_agents::{Algo, AlgoConfig, Pause, TrainSettings, Trainer};
-use tandem_envs::make;
 
 use super::presets::{self, Preset};
 use super::{CliError, Result};

@@ -1,0 +1,176 @@
+//! The `tandem` program on MuJoCo: `envs` lists gymnasium's MuJoCo tasks exactly when the build has
+//! the `mujoco` feature; `env replay` reproduces a recorded gymnasium episode (with `info`) and
+//! replays any MJCF file (`--mjcf`); without the feature both say how to enable it.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+#[cfg(feature = "mujoco")]
+use serde_json::Value;
+
+fn tandem(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tandem"))
+        .args(args)
+        .output()
+        .expect("the tandem binary runs")
+}
+
+fn err_text(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[cfg(feature = "mujoco")]
+fn mujoco_dir(rel: &str) -> String {
+    format!("{}/crates/mujoco/tests/{rel}", env!("CARGO_MANIFEST_DIR"))
+}
+
+fn write_temp(name: &str, contents: &str) -> PathBuf {
+    let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("mujoco-cli-{name}.json"));
+    std::fs::write(&path, contents).unwrap();
+    path
+}
+
+#[test]
+fn envs_lists_mujoco_tasks_with_the_feature_only() {
+    let o = tandem(&["envs"]);
+    assert!(o.status.success());
+    let listed = String::from_utf8_lossy(&o.stdout).contains("HalfCheetah-v5");
+    assert_eq!(listed, cfg!(feature = "mujoco"));
+}
+
+#[cfg(not(feature = "mujoco"))]
+#[test]
+fn without_the_feature_mujoco_ids_and_files_say_how_to_enable_it() {
+    let actions = write_temp("nofeature", "[[0, 0, 0, 0, 0, 0]]");
+    let actions = actions.to_str().unwrap();
+    for args in [
+        vec![
+            "env",
+            "replay",
+            "--env",
+            "HalfCheetah-v5",
+            "--state",
+            "[0]",
+            "--actions",
+            actions,
+        ],
+        vec![
+            "env",
+            "replay",
+            "--mjcf",
+            "x.xml",
+            "--state",
+            "[0]",
+            "--actions",
+            actions,
+        ],
+        vec!["rollout", "--env", "Hopper-v5", "--episodes", "1"],
+    ] {
+        let o = tandem(&args);
+        assert!(!o.status.success());
+        let err = err_text(&o);
+        assert!(
+            err.contains("--features mujoco") && !err.contains("panicked"),
+            "{err}"
+        );
+    }
+}
+
+#[cfg(feature = "mujoco")]
+#[test]
+fn replay_reproduces_a_gymnasium_episode_with_its_info() {
+    let text =
+        std::fs::read_to_string(mujoco_dir("fixtures/gymnasium-mujoco/Reacher-v5.json")).unwrap();
+    let fx: Value = serde_json::from_str(&text).unwrap();
+    let ep = &fx["episodes"][2];
+    let mut state = ep["init_qpos"].as_array().unwrap().clone();
+    state.extend(ep["init_qvel"].as_array().unwrap().iter().cloned());
+    let steps = ep["steps"].as_array().unwrap();
+    let actions: Vec<Value> = steps.iter().map(|s| s["action"].clone()).collect();
+    let path = write_temp("reacher", &Value::Array(actions).to_string());
+    let o = tandem(&[
+        "env",
+        "replay",
+        "--env",
+        "Reacher-v5",
+        "--state",
+        &Value::Array(state).to_string(),
+        "--actions",
+        path.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", err_text(&o));
+    let out: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(out["states"].as_array().unwrap().len(), 50);
+    for (t, s) in steps.iter().enumerate() {
+        let mut qq = s["qpos"].as_array().unwrap().clone();
+        qq.extend(s["qvel"].as_array().unwrap().iter().cloned());
+        assert_eq!(out["states"][t], Value::Array(qq), "step {t}");
+        assert_eq!(out["observations"][t], s["obs"], "step {t}");
+        let r = out["rewards"][t].as_f64().unwrap();
+        assert!(
+            (r - s["reward"].as_f64().unwrap()).abs() < 1e-12,
+            "step {t}"
+        );
+        let ctrl = out["info"][t]["reward_ctrl"].as_f64().unwrap();
+        assert_eq!(ctrl, s["info"]["reward_ctrl"].as_f64().unwrap(), "step {t}");
+    }
+    // Reacher's 50-step time limit truncates the last step, as gymnasium's did.
+    assert_eq!(out["truncated"][49], Value::Bool(true));
+}
+
+#[cfg(feature = "mujoco")]
+#[test]
+fn replay_runs_any_mjcf_file() {
+    let actions = write_temp("slider", "[[2.0], [2.0]]");
+    let scene = mujoco_dir("scenes/slider.xml");
+    let o = tandem(&[
+        "env",
+        "replay",
+        "--mjcf",
+        &scene,
+        "--frame-skip",
+        "2",
+        "--state",
+        "[0.0, 0.0]",
+        "--actions",
+        actions.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", err_text(&o));
+    let out: Value = serde_json::from_slice(&o.stdout).unwrap();
+    // Semi-implicit Euler by hand: h = 0.01, u / m = 1, four substeps.
+    let (mut x, mut v) = (0.0, 0.0);
+    for _ in 0..4 {
+        v += 0.01 * 1.0;
+        x += 0.01 * v;
+    }
+    let last = &out["states"][1];
+    assert!((last[0].as_f64().unwrap() - x).abs() < 1e-12);
+    assert!((last[1].as_f64().unwrap() - v).abs() < 1e-12);
+    assert_eq!(out["rewards"], serde_json::json!([0.0, 0.0]));
+
+    let missing = tandem(&[
+        "env",
+        "replay",
+        "--mjcf",
+        "/nonexistent.xml",
+        "--state",
+        "[0, 0]",
+        "--actions",
+        actions.to_str().unwrap(),
+    ]);
+    assert!(!missing.status.success());
+    assert!(err_text(&missing).contains("/nonexistent.xml"));
+    let both = tandem(&[
+        "env",
+        "replay",
+        "--env",
+        "Hopper-v5",
+        "--mjcf",
+        &scene,
+        "--state",
+        "[0, 0]",
+        "--actions",
+        actions.to_str().unwrap(),
+    ]);
+    assert!(!both.status.success());
+}
