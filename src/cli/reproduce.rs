@@ -53,6 +53,8 @@ pub enum ReproduceCommand {
     /// p0 (difference models) on the DC-motor pendulum: cold start, warm start and the
     /// difference-model method over seeds; Table II and Fig. 5.
     P0Pendulum(P0Args),
+    /// p2 (model-augmented REINFORCE) on CartPole-v1: REINFORCE alone and with the learned model.
+    P2Cartpole(super::reproduce_p2::P2Args),
 }
 
 /// Arguments of `tandem reproduce p0-pendulum`.
@@ -93,6 +95,7 @@ pub struct P0Args {
 pub fn run(cmd: ReproduceCommand) -> Result<()> {
     match cmd {
         ReproduceCommand::P0Pendulum(args) => p0_pendulum(&args),
+        ReproduceCommand::P2Cartpole(args) => super::reproduce_p2::p2_cartpole(&args),
     }
 }
 
