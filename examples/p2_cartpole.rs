@@ -15,7 +15,7 @@ use tandem::models::{Transitions, TransitionsBuilder};
 use tandem::pipelines::p2::play;
 
 const N: u64 = 100; // real episodes before the first imagined one
-const FIT_ROWS: usize = 2048; // each refit: one pass over this many real transitions drawn from all
+const FIT_ROWS: usize = 2048; // each refit: 5 passes over this many real transitions drawn from all
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let arg = |i: usize| std::env::args().nth(i).and_then(|s| s.parse::<u64>().ok());
@@ -28,7 +28,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let model = MlpModel::new(4, 1, MlpModelConfig::default())?; // (x, ẋ, θ, θ̇) and the force
     let mut dream = ModelEnv::with_judges(model, task.clone(), Judges::model())?;
     let fit = FitConfig {
-        epochs: 1,
+        epochs: 5,
         batch_size: 32,
         holdout_fraction: 0.0,
         seed,

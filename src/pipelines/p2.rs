@@ -85,7 +85,10 @@ pub struct P2Config {
     /// Each refit: `fit.epochs` passes over at most `fit_rows` real transitions drawn uniformly
     /// from all so far (0: all of them). Ours: bounds the cost of a refit as the data grow.
     pub fit_rows: usize,
-    /// Passes, minibatch size and held-out fraction of each refit (ours).
+    /// Passes, minibatch size and held-out fraction of each refit (ours: 5 passes of
+    /// minibatches of 32, no holdout; measured over CartPole seeds 0-9, 1, 3 and 5 passes gave
+    /// the model method 400, 375 and 360 mean real episodes to solve: the better the model, the
+    /// fewer real episodes).
     pub fit: FitConfig,
     /// Reward and termination of imagined transitions (p2: the model's own, terminal at a
     /// predicted probability of 0.5).
@@ -112,7 +115,7 @@ impl Default for P2Config {
             fit_every: 1,
             fit_rows: 2048,
             fit: FitConfig {
-                epochs: 1,
+                epochs: 5,
                 batch_size: 32,
                 holdout_fraction: 0.0,
                 seed: 0,
