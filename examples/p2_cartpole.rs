@@ -9,7 +9,7 @@
 use rand::Rng as _;
 use tandem::agents::{EpisodicAgent, Reinforce, ReinforceConfig};
 use tandem::core::SeedStream;
-use tandem::envs::{make, CartPoleTask, Task};
+use tandem::envs::{make, CartPoleTask, Env, Task};
 use tandem::models::{DynamicsModel, FitConfig, Judges, MlpModel, MlpModelConfig, ModelEnv};
 use tandem::models::{Transitions, TransitionsBuilder};
 use tandem::pipelines::p2::play;

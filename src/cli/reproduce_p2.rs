@@ -101,8 +101,9 @@ pub struct Ratio {
     pub model_free_mean_episodes: f64,
     /// The same with the model.
     pub with_model_mean_episodes: f64,
-    /// Some seed never solved it, so the ratio is a bound, not a value: `"upper"` (model-free
-    /// fell short), `"lower"` (with-model fell short), `"none"` (both did) or `null`.
+    /// Whether seeds that never solved it make the ratio a bound rather than a value: `"upper"`
+    /// (only model-free fell short), `"lower"` (only with-model did), `"unknown"` (both did),
+    /// `null` (every seed solved it: the ratio is exact).
     pub bound: Option<String>,
     /// How the means are taken.
     pub note: String,
@@ -152,7 +153,7 @@ pub fn table(records: &[RunRecord], cfg: &P2Config) -> P2Table {
         (false, false) => None,
         (true, false) => Some("upper"),
         (false, true) => Some("lower"),
-        (true, true) => Some("none"),
+        (true, true) => Some("unknown"),
     };
     P2Table {
         model_free,
@@ -221,7 +222,8 @@ pub fn markdown(t: &P2Table, cfg: &P2Config, wall: f64) -> String {
     let bound = match q.bound.as_deref() {
         Some("upper") => "at most ",
         Some("lower") => "at least ",
-        _ => "",
+        Some(_) => "unbounded either way, ",
+        None => "",
     };
     s.push_str(&format!(
         "\nWith the model over alone ({}): {bound}{} (paper 400 / 650 = 0.62).\n",
@@ -452,4 +454,73 @@ pub fn p2_cartpole(args: &P2Args) -> Result<()> {
     println!("{md}");
     println!("wrote {}", dir.path().display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(method: Method, seed: u64, episodes: usize, solved_at: Option<u64>) -> RunRecord {
+        RunRecord {
+            method,
+            seed,
+            real_returns: vec![100.0; episodes],
+            real_samples: 100 * episodes as u64,
+            imagined_episodes: if method == Method::WithModel { 50 } else { 0 },
+            imagined_steps: 0,
+            solved_at,
+            fit_losses: vec![],
+            wall_seconds: 0.0,
+        }
+    }
+
+    #[test]
+    fn the_table_counts_episodes_to_solve_and_bounds_the_ratio() {
+        let cfg = P2Config::default();
+        let recs = [
+            // Model-free: 600 and never within its 2000 episodes.
+            record(Method::ModelFree, 0, 600, Some(600)),
+            record(Method::ModelFree, 1, 2000, None),
+            // With the model: 300 and 500.
+            record(Method::WithModel, 0, 300, Some(300)),
+            record(Method::WithModel, 1, 500, Some(500)),
+        ];
+        let t = table(&recs, &cfg);
+        let mf = &t.model_free.episodes_to_solve;
+        assert_eq!(mf.per_seed, [Some(600), None]);
+        assert_eq!(
+            (mf.mean, mf.stderr, mf.reached),
+            (Some(600.0), Some(0.0), 1)
+        );
+        let wm = &t.with_model.episodes_to_solve;
+        // Mean 400, standard error = sd / √2 = 141.42... / 1.414... = 100.
+        assert_eq!(wm.mean, Some(400.0));
+        assert!((wm.stderr.unwrap() - 100.0).abs() < 1e-9);
+        assert_eq!(t.with_model.mean_imagined_episodes, 50.0);
+        assert_eq!(t.model_free.mean_real_samples, 130_000.0);
+        // (300 + 500) / 2 over (600 + 2000) / 2: an upper bound (model-free fell short).
+        let q = &t.with_model_over_model_free;
+        assert!((q.ratio.unwrap() - 400.0 / 1300.0).abs() < 1e-12);
+        assert_eq!(q.bound.as_deref(), Some("upper"));
+        let md = markdown(&t, &cfg, 1.0);
+        assert!(md.contains("at most 0.31"), "{md}");
+        assert!(md.contains("- REINFORCE alone: 600, never"), "{md}");
+        // The JSON has the keys the issue names, with null for the seed that never solved it.
+        let v: serde_json::Value = serde_json::from_str(&to_json_pretty(&t).unwrap()).unwrap();
+        assert_eq!(
+            v["model_free"]["episodes_to_solve"]["per_seed"][1],
+            serde_json::Value::Null
+        );
+        assert_eq!(v["with_model"]["episodes_to_solve"]["mean"], 400.0);
+    }
+
+    /// The committed results (`results/p2-cartpole/`) read back as a table.
+    #[test]
+    fn the_committed_table_reads_back() {
+        let text = include_str!("../../results/p2-cartpole/table.json");
+        let t: P2Table = serde_json::from_str(text).unwrap();
+        assert_eq!(t.model_free.episodes_to_solve.seeds, 10);
+        assert_eq!(t.with_model.episodes_to_solve.seeds, 10);
+        assert_eq!(to_json_pretty(&t).unwrap().trim_end(), text.trim_end());
+    }
 }
