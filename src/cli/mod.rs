@@ -5,6 +5,7 @@ pub mod envs;
 pub mod json;
 pub mod presets;
 pub mod reproduce;
+pub mod reproduce_p2;
 pub mod rollout;
 pub mod train;
 pub mod urdf;

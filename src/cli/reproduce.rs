@@ -53,8 +53,10 @@ pub enum ReproduceCommand {
     /// p0 (difference models) on the DC-motor pendulum: cold start, warm start and the
     /// difference-model method over seeds; Table II and Fig. 5.
     P0Pendulum(P0Args),
-    /// Combine reproductions of disjoint seeds (e.g. one process per seed, `--first-seed`) into
-    /// one table and figure; their settings must be equal.
+    /// p2 (model-augmented REINFORCE) on CartPole-v1: REINFORCE alone and with the learned model.
+    P2Cartpole(super::reproduce_p2::P2Args),
+    /// Combine p0-pendulum reproductions of disjoint seeds (e.g. one process per seed,
+    /// `--first-seed`) into one table and figure; their settings must be equal.
     Merge(MergeArgs),
 }
 
@@ -115,6 +117,7 @@ pub struct P0Args {
 pub fn run(cmd: ReproduceCommand) -> Result<()> {
     match cmd {
         ReproduceCommand::P0Pendulum(args) => p0_pendulum(&args),
+        ReproduceCommand::P2Cartpole(args) => super::reproduce_p2::p2_cartpole(&args),
         ReproduceCommand::Merge(args) => merge_runs(&args),
     }
 }

@@ -4,7 +4,9 @@
 use ndarray::{Array1, Array2};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
-use tandem_nn::{bce_with_logits, sigmoid, Activation, Mlp, MlpConfig};
+use tandem_nn::{
+    bce_with_logits, sigmoid, Activation, Checkpoint, Checkpointable, Mlp, MlpConfig, NnError,
+};
 
 use crate::data::check_input;
 use crate::model::{
@@ -151,6 +153,38 @@ impl MlpModel {
     /// The network (for checkpoints and inspection).
     pub fn network(&self) -> &Mlp {
         &self.net
+    }
+}
+
+/// The learned part (network, optimizer state, standardizations); the widths and settings are
+/// the constructor's. Loading into a model of other widths is an error naming the entry, and
+/// leaves the model unchanged.
+impl Checkpointable for MlpModel {
+    fn save_to(&self, prefix: &str, ckpt: &mut Checkpoint) -> tandem_nn::Result<()> {
+        self.net.save_to(&format!("{prefix}.net"), ckpt)?;
+        self.opt.save_to(&format!("{prefix}.opt"), ckpt)?;
+        let norms = (&self.in_state, &self.in_action, &self.out_norm);
+        ckpt.put_json(&format!("{prefix}.norms"), &norms)
+    }
+
+    fn load_from(&mut self, prefix: &str, ckpt: &Checkpoint) -> tandem_nn::Result<()> {
+        let name = format!("{prefix}.norms");
+        let (in_state, in_action, out_norm): (Standardizer, Standardizer, Standardizer) =
+            ckpt.get_json(&name)?;
+        let widths = (in_state.dim(), in_action.dim(), out_norm.dim());
+        let (s, a) = (self.state_dim, self.action_dim);
+        if widths != (s, a, s + 1) {
+            return Err(NnError::Checkpoint(format!(
+                "`{name}`: standardizations of widths {widths:?}, this model's are {:?}",
+                (s, a, s + 1)
+            )));
+        }
+        let (mut net, mut opt) = (self.net.clone(), self.opt.clone());
+        net.load_from(&format!("{prefix}.net"), ckpt)?;
+        opt.load_from(&format!("{prefix}.opt"), ckpt)?;
+        (self.net, self.opt) = (net, opt);
+        (self.in_state, self.in_action, self.out_norm) = (in_state, in_action, out_norm);
+        Ok(())
     }
 }
 
@@ -409,6 +443,36 @@ mod tests {
             "termination accuracy {acc}, majority {base}"
         );
         assert!(rerr < 0.05, "reward error {rerr}");
+    }
+
+    #[test]
+    fn a_checkpoint_restores_the_predictions_and_other_widths_are_refused() {
+        let data = cartpole_data(300, 8);
+        let fit = FitConfig {
+            epochs: 2,
+            batch_size: 32,
+            ..FitConfig::default()
+        };
+        let mut m = MlpModel::new(4, 1, small(2)).unwrap();
+        m.fit(&data, &fit).unwrap();
+        let mut ckpt = Checkpoint::new();
+        m.save_to("m", &mut ckpt).unwrap();
+        let input = ModelInput::new(data.states.view(), data.actions.view());
+        let predict = |m: &MlpModel| m.predict(&input, &mut rng_from_seed(0)).unwrap();
+        // A fresh model of another seed predicts otherwise until it loads the checkpoint.
+        let mut back = MlpModel::new(4, 1, small(3)).unwrap();
+        assert_ne!(predict(&back), predict(&m));
+        back.load_from("m", &ckpt).unwrap();
+        assert_eq!(predict(&back), predict(&m));
+        // Both continue training alike (optimizer state restored too).
+        m.fit(&data, &fit).unwrap();
+        back.fit(&data, &fit).unwrap();
+        assert_eq!(back.network().params(), m.network().params());
+        let mut other = MlpModel::new(3, 1, small(2)).unwrap();
+        let before = other.network().params().to_vec();
+        let e = other.load_from("m", &ckpt).unwrap_err().to_string();
+        assert!(e.contains("m.norms"), "{e}");
+        assert_eq!(other.network().params(), &before[..]);
     }
 
     #[test]

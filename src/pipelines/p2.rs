@@ -1,0 +1,497 @@
+//! Paper p2 (Manglik and Tripathi): a model-free agent trained on real episodes alternated with
+//! episodes imagined by a learned model of `(s', r, done)` (Sec. 3.1.2, Fig. 3).
+//!
+//! The loop of Fig. 3, generic over the episodic agent (any [`EpisodicAgent`]; REINFORCE in the
+//! paper), the [`Task`] and the real system (any [`Env`], counted by a [`SampleCounter`]):
+//!
+//! 1. the first [`P2Config::real_only_episodes`] episodes (p2: N = 100) are real only: the agent
+//!    updates after each, and the model ([`MlpModel`], p2 eq. 1) is refit on the real
+//!    transitions as they come ([`P2Config::fit_every`]);
+//! 2. after that, every [`P2Config::real_per_cycle`] real episodes are followed by
+//!    [`P2Config::imagined_per_cycle`] imagined ones: a [`ModelEnv`] whose reward and termination
+//!    are the model's own ([`Judges::model`]), each started from a start state of a real episode
+//!    (drawn uniformly from those seen so far).
+//!
+//! [`Method::ModelFree`] runs step 1 forever (no model at all): the baseline. Real episodes are
+//! counted exactly; imagined ones cost no real sample. A run stops when the mean return of the
+//! last [`P2Config::solved_window`] real episodes reaches [`P2Config::solved_return`] (p2 states
+//! no definition; for CartPole-v1 we take gymnasium's reward threshold, 475 over 100 episodes),
+//! or after [`P2Config::max_real_episodes`].
+//!
+//! Everything random derives from the run's seed: real episode `k` resets with the seed derived
+//! from `"real-episode-{k}"` in both methods (the two methods meet the same start states), the
+//! agent from `"agent"`, fit `j` from `"fit-{j}"`, the start of imagined episode `i` from
+//! `"imagined-{i}"`. A run saves itself under its method's name every
+//! [`P2Config::checkpoint_every`] real episodes (between episodes) and resumes from there with
+//! exactly the numbers of an uninterrupted run.
+
+use std::time::Instant;
+
+use rand::Rng as _;
+use serde::{Deserialize, Serialize};
+use tandem_agents::{Agent, Episode, EpisodicAgent, Mode, Reinforce, ReinforceConfig, Resumable};
+use tandem_core::SeedStream;
+use tandem_envs::{Env, EnvError, SampleCounter, Task};
+use tandem_models::{
+    DynamicsModel, FitConfig, Judges, MlpModel, MlpModelConfig, ModelEnv, Transitions,
+    TransitionsBuilder,
+};
+use tandem_nn::{Checkpoint, Checkpointable};
+
+pub use super::{Checkpoints, Ephemeral, PipelineError, Result};
+
+/// The two methods of p2's comparison (Fig. 6, the table of Sec. 4.2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Real episodes only.
+    ModelFree,
+    /// Real episodes alternated with episodes imagined by the learned model.
+    WithModel,
+}
+
+impl Method {
+    /// Both, model-free first.
+    pub const ALL: [Method; 2] = [Method::ModelFree, Method::WithModel];
+
+    /// `"model_free"` or `"with_model"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::ModelFree => "model_free",
+            Method::WithModel => "with_model",
+        }
+    }
+}
+
+/// Settings of a p2 run. `Default` follows p2 where it gives a figure (cited per field) and says
+/// where a figure is ours.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct P2Config {
+    /// The agent (p2 §3.1.2: one hidden layer of 8 units, softmax over the actions, an update
+    /// after each episode).
+    pub reinforce: ReinforceConfig,
+    /// The dynamics model (p2 §3.1: 2×256, SGD 0.01, eq. 1).
+    pub model: MlpModelConfig,
+    /// Real episodes before the first imagined one (p2: N = 100).
+    pub real_only_episodes: u64,
+    /// Real episodes per cycle after the first N (p2 alternates: 1).
+    pub real_per_cycle: u64,
+    /// Imagined episodes per cycle after the first N (p2 alternates: 1).
+    pub imagined_per_cycle: u64,
+    /// Refit the model after every this many real episodes (p2 trains it on each episode's
+    /// transitions: 1).
+    pub fit_every: u64,
+    /// Each refit: `fit.epochs` passes over at most `fit_rows` real transitions drawn uniformly
+    /// from all so far (0: all of them). Ours: bounds the cost of a refit as the data grow.
+    pub fit_rows: usize,
+    /// Passes, minibatch size and held-out fraction of each refit (ours: 5 passes of
+    /// minibatches of 32, no holdout; measured over CartPole seeds 0-9, 1, 3 and 5 passes gave
+    /// the model method 400, 375 and 360 mean real episodes to solve: the better the model, the
+    /// fewer real episodes).
+    pub fit: FitConfig,
+    /// Reward and termination of imagined transitions (p2: the model's own, terminal at a
+    /// predicted probability of 0.5).
+    pub judges: Judges,
+    /// The run ends after this many real episodes if not solved before.
+    pub max_real_episodes: u64,
+    /// "Solved": the mean return of the last `solved_window` real episodes reaches this (p2
+    /// gives no definition; gymnasium's CartPole-v1 threshold 475).
+    pub solved_return: f64,
+    /// The window of that mean (gymnasium's 100 consecutive episodes).
+    pub solved_window: usize,
+    /// Save a checkpoint every this many real episodes.
+    pub checkpoint_every: u64,
+}
+
+impl Default for P2Config {
+    fn default() -> Self {
+        Self {
+            reinforce: ReinforceConfig::default(),
+            model: MlpModelConfig::default(),
+            real_only_episodes: 100,
+            real_per_cycle: 1,
+            imagined_per_cycle: 1,
+            fit_every: 1,
+            fit_rows: 2048,
+            fit: FitConfig {
+                epochs: 5,
+                batch_size: 32,
+                holdout_fraction: 0.0,
+                seed: 0,
+            },
+            judges: Judges::model(),
+            max_real_episodes: 2000,
+            solved_return: 475.0,
+            solved_window: 100,
+            checkpoint_every: 50,
+        }
+    }
+}
+
+impl P2Config {
+    /// Checks the ranges the loop relies on.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: &str| Err(PipelineError::Config(m.to_string()));
+        if self.real_per_cycle == 0 || self.fit_every == 0 || self.checkpoint_every == 0 {
+            return bad("real_per_cycle, fit_every and checkpoint_every must be >= 1");
+        }
+        if self.max_real_episodes == 0 || self.solved_window == 0 {
+            return bad("max_real_episodes and solved_window must be >= 1");
+        }
+        if !self.solved_return.is_finite() {
+            return bad("solved_return must be finite");
+        }
+        if self.fit.epochs == 0 || self.fit.batch_size == 0 {
+            return bad("fit.epochs and fit.batch_size must be >= 1");
+        }
+        if !(0.0..1.0).contains(&self.fit.holdout_fraction) {
+            return bad("fit.holdout_fraction must lie in [0, 1)");
+        }
+        if !(self.judges.terminal_threshold > 0.0 && self.judges.terminal_threshold <= 1.0) {
+            return bad("judges.terminal_threshold must lie in (0, 1]");
+        }
+        self.reinforce.validate()?;
+        Ok(())
+    }
+}
+
+/// What a run reports.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunRecord {
+    /// The method.
+    pub method: Method,
+    /// The seed.
+    pub seed: u64,
+    /// The return of every real training episode, in order: the learning curve against real
+    /// episodes.
+    pub real_returns: Vec<f64>,
+    /// Real samples (steps of the real system), counted by the [`SampleCounter`].
+    pub real_samples: u64,
+    /// Imagined episodes the agent learned from.
+    pub imagined_episodes: u64,
+    /// Steps of those imagined episodes.
+    pub imagined_steps: u64,
+    /// Real episodes when the run was solved (the windowed mean reached the target), if it was.
+    pub solved_at: Option<u64>,
+    /// Last training loss of each model refit.
+    pub fit_losses: Vec<f64>,
+    /// Wall time of the run, seconds (of the last process, for a resumed run).
+    pub wall_seconds: f64,
+}
+
+/// The first episode count `k` (≥ `window`) at which the mean of `returns[k - window..k]`
+/// reaches `target`.
+pub fn solved_at(returns: &[f64], window: usize, target: f64) -> Option<u64> {
+    if window == 0 || returns.len() < window {
+        return None;
+    }
+    let mut sum: f64 = returns[..window].iter().sum();
+    for k in window..=returns.len() {
+        if k > window {
+            sum += returns[k - 1] - returns[k - 1 - window];
+        }
+        if sum / window as f64 >= target {
+            return Some(k as u64);
+        }
+    }
+    None
+}
+
+/// What the loop reports as it goes (progress bars; tests follow the schedule with it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Event {
+    /// Real episode `episode` (0-based) ended with return `ret`; `real_samples` so far.
+    Real {
+        /// Its index among the real episodes.
+        episode: u64,
+        /// Its undiscounted return.
+        ret: f64,
+        /// Real samples after it.
+        real_samples: u64,
+    },
+    /// An imagined episode ended after `steps` steps with return `ret`.
+    Imagined {
+        /// Its index among the imagined episodes.
+        episode: u64,
+        /// Its steps.
+        steps: u64,
+        /// Its return (the model's rewards).
+        ret: f64,
+    },
+}
+
+/// Plays one episode of `agent` (exploring) on `env` from observation `obs` (just after a reset
+/// or [`Env::set_state`]), until termination, truncation or the environment's step limit. With
+/// `record`, the transitions go there in the task's canonical coordinates (states read from
+/// `env.state()`), the model's training data.
+pub fn play<T: Task + ?Sized>(
+    env: &mut dyn Env,
+    agent: &mut dyn Agent,
+    mut obs: Vec<f64>,
+    mut record: Option<(&T, &mut TransitionsBuilder)>,
+) -> Result<Episode> {
+    let limit = env.max_episode_steps();
+    agent.reset_episode();
+    let mut ep = Episode::default();
+    loop {
+        let action = agent.act(&obs, Mode::Explore)?;
+        let before = record.as_ref().map(|_| env.state());
+        let st = env.step(&action)?;
+        let cut = limit.is_some_and(|m| ep.len() + 1 >= m);
+        let done = st.terminated || st.truncated || cut;
+        if let (Some((task, b)), Some(x)) = (record.as_mut(), before) {
+            let u = task.control(&action);
+            b.push_canonical(*task, &x, &u, &env.state(), st.reward, st.terminated, done)?;
+        }
+        ep.push(obs, action, st.reward);
+        if done {
+            ep.terminated = st.terminated;
+            return Ok(ep);
+        }
+        obs = st.observation;
+    }
+}
+
+/// Where a run stands between episodes, besides the agent, the model and the real transitions
+/// (stored beside it).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Progress {
+    method: Method,
+    seed: u64,
+    real_returns: Vec<f64>,
+    real_samples: u64,
+    imagined_episodes: u64,
+    imagined_steps: u64,
+    fit_losses: Vec<f64>,
+    /// Start states of the real episodes so far (where imagined episodes start).
+    starts: Vec<Vec<f64>>,
+    /// Episodes waiting for the next update (`reinforce.episodes_per_update > 1`).
+    pending: Vec<Episode>,
+}
+
+const PROGRESS: &str = "p2.progress";
+const MODEL: &str = "p2.model";
+const REAL: &str = "p2.real_transitions";
+
+/// Stores the whole state of a run under `method`'s name.
+fn save<A: Resumable>(
+    store: &mut dyn Checkpoints,
+    p: &Progress,
+    agent: &A,
+    model: Option<&MlpModel>,
+    real: Option<&Transitions>,
+) -> Result<()> {
+    let mut ckpt = Checkpoint::new();
+    agent.save(&mut ckpt)?;
+    ckpt.put_json(PROGRESS, p)?;
+    if let Some(m) = model {
+        m.save_to(MODEL, &mut ckpt)?;
+    }
+    if let Some(t) = real {
+        t.save_to(REAL, &mut ckpt)?;
+    }
+    store.save(p.method.name(), &ckpt)
+}
+
+/// Runs `method` for `seed` from a fresh `agent` (or from the checkpoint `store` holds under the
+/// method's name) and returns its record. `real_env` builds the real system (with its episode
+/// limit); `on_event` hears of every finished episode.
+#[allow(clippy::too_many_arguments)]
+pub fn run<A, T, F>(
+    method: Method,
+    cfg: &P2Config,
+    task: &T,
+    real_env: F,
+    mut agent: A,
+    seed: u64,
+    store: &mut dyn Checkpoints,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<RunRecord>
+where
+    A: EpisodicAgent + Resumable,
+    T: Task + Clone,
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    cfg.validate()?;
+    let t0 = Instant::now();
+    let seeds = SeedStream::new(seed);
+    let action_dim = task.control(&probe_action(task)).len();
+    let mut model_env = match method {
+        Method::WithModel => {
+            let model = MlpModel::new(task.state_dim(), action_dim, cfg.model.clone())?;
+            Some(ModelEnv::with_judges(model, task.clone(), cfg.judges)?)
+        }
+        Method::ModelFree => None,
+    };
+    let mut real: Option<Transitions> = None;
+    let mut p = match store.load(method.name())? {
+        Some(ckpt) => {
+            let p: Progress = ckpt.get_json(PROGRESS)?;
+            if (p.method, p.seed) != (method, seed) {
+                return Err(PipelineError::Checkpoint(format!(
+                    "the checkpoint is {} seed {}'s, not {} seed {seed}'s",
+                    p.method.name(),
+                    p.seed,
+                    method.name()
+                )));
+            }
+            agent.load(&ckpt)?;
+            if let Some(m) = model_env.as_mut() {
+                m.model_mut().load_from(MODEL, &ckpt)?;
+                if ckpt.contains(&format!("{REAL}.rewards")) {
+                    let mut t = Transitions::default();
+                    t.load_from(REAL, &ckpt)?;
+                    real = Some(t);
+                }
+            }
+            p
+        }
+        None => Progress {
+            method,
+            seed,
+            real_returns: Vec::new(),
+            real_samples: 0,
+            imagined_episodes: 0,
+            imagined_steps: 0,
+            fit_losses: Vec::new(),
+            starts: Vec::new(),
+            pending: Vec::new(),
+        },
+    };
+    let (mut env, count) = SampleCounter::starting_at(real_env()?, p.real_samples);
+    let per_update = cfg.reinforce.episodes_per_update;
+    let learn = |agent: &mut A, pending: &mut Vec<Episode>, ep: Episode| -> Result<()> {
+        pending.push(ep);
+        if pending.len() >= per_update {
+            agent.update(pending)?;
+            pending.clear();
+        }
+        Ok(())
+    };
+    let solved = |r: &[f64]| solved_at(r, cfg.solved_window, cfg.solved_return);
+    while (p.real_returns.len() as u64) < cfg.max_real_episodes && solved(&p.real_returns).is_none()
+    {
+        if store.stop_requested() {
+            return Err(PipelineError::Stopped);
+        }
+        // One real episode.
+        let k = p.real_returns.len() as u64;
+        let obs = env.reset(Some(seeds.derive(&format!("real-episode-{k}"))));
+        p.starts.push(env.state());
+        let mut b = TransitionsBuilder::new(task.state_dim(), action_dim);
+        let rec = model_env.is_some().then_some((task, &mut b));
+        let ep = play(&mut env, &mut agent, obs, rec)?;
+        p.real_returns.push(ep.total_reward());
+        p.real_samples = count.get();
+        on_event(Event::Real {
+            episode: k,
+            ret: ep.total_reward(),
+            real_samples: count.get(),
+        });
+        learn(&mut agent, &mut p.pending, ep)?;
+        let done_real = k + 1;
+        if let Some(menv) = model_env.as_mut() {
+            let new = b.build();
+            match real.as_mut() {
+                Some(all) => all.extend(&new)?,
+                None => real = Some(new),
+            }
+            // The model on (a draw of) all real transitions so far.
+            if done_real % cfg.fit_every == 0 {
+                let all = real.as_ref().expect("just extended");
+                let j = done_real / cfg.fit_every;
+                let mut rng = seeds.rng(&format!("fit-{j}"));
+                let data = if cfg.fit_rows > 0 && all.len() > cfg.fit_rows {
+                    let idx: Vec<usize> = (0..cfg.fit_rows)
+                        .map(|_| rng.random_range(0..all.len()))
+                        .collect();
+                    all.select(&idx)
+                } else {
+                    all.clone()
+                };
+                let fit = FitConfig {
+                    seed: seeds.derive(&format!("fit-{j}")),
+                    ..cfg.fit.clone()
+                };
+                let report = menv.model_mut().fit(&data, &fit)?;
+                p.fit_losses
+                    .push(report.train_loss.last().copied().unwrap_or(f64::NAN));
+            }
+            // Imagined episodes, once the first N real ones are done, after each cycle.
+            let after_n = done_real.checked_sub(cfg.real_only_episodes);
+            if after_n.is_some_and(|n| n > 0 && n % cfg.real_per_cycle == 0) {
+                for _ in 0..cfg.imagined_per_cycle {
+                    let i = p.imagined_episodes;
+                    let mut rng = seeds.rng(&format!("imagined-{i}"));
+                    let start = &p.starts[rng.random_range(0..p.starts.len())];
+                    let obs = menv.set_state(start)?;
+                    let ep = play::<T>(menv, &mut agent, obs, None)?;
+                    p.imagined_episodes += 1;
+                    p.imagined_steps += ep.len() as u64;
+                    on_event(Event::Imagined {
+                        episode: i,
+                        steps: ep.len() as u64,
+                        ret: ep.total_reward(),
+                    });
+                    learn(&mut agent, &mut p.pending, ep)?;
+                }
+            }
+        }
+        if done_real % cfg.checkpoint_every == 0 {
+            let model = model_env.as_ref().map(|m| m.model());
+            save(store, &p, &agent, model, real.as_ref())?;
+        }
+    }
+    Ok(RunRecord {
+        method,
+        seed,
+        solved_at: solved(&p.real_returns),
+        real_returns: p.real_returns,
+        real_samples: count.get(),
+        imagined_episodes: p.imagined_episodes,
+        imagined_steps: p.imagined_steps,
+        fit_losses: p.fit_losses,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// An action of `task`'s action space (to learn the width of its plant input).
+fn probe_action<T: Task + ?Sized>(task: &T) -> tandem_core::Action {
+    match task.action_space() {
+        tandem_core::Space::Discrete { .. } => tandem_core::Action::Discrete(0),
+        tandem_core::Space::Box { low, .. } => {
+            tandem_core::Action::Continuous(vec![0.0; low.len()])
+        }
+    }
+}
+
+/// p2's REINFORCE agent for `task` (`cfg.reinforce`), seeded from the run's seed: the same
+/// initial policy for both methods.
+pub fn reinforce_agent<T: Task>(
+    cfg: &P2Config,
+    task: &T,
+    seed: u64,
+) -> std::result::Result<Reinforce, tandem_agents::AgentError> {
+    Reinforce::new(
+        cfg.reinforce.clone(),
+        task.observation_space(),
+        task.action_space(),
+        SeedStream::new(seed).derive("agent"),
+    )
+}
+
+/// p2's CartPole experiment for one method and seed: REINFORCE on gymnasium's `CartPole-v1`
+/// (500-step limit), with [`run`]'s checkpoints and events.
+pub fn cartpole(
+    method: Method,
+    cfg: &P2Config,
+    seed: u64,
+    store: &mut dyn Checkpoints,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<RunRecord> {
+    let task = tandem_envs::CartPoleTask::default();
+    let agent = reinforce_agent(cfg, &task, seed)?;
+    let make = || tandem_envs::make(tandem_envs::CartPoleEnv::ID);
+    run(method, cfg, &task, make, agent, seed, store, on_event)
+}

@@ -1,0 +1,83 @@
+//! `tandem reproduce p2-cartpole --quick` end to end: the files it writes, their shape, and an
+//! existing reproduction refused without `--overwrite`.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use serde_json::Value;
+
+#[test]
+fn quick_reproduction_writes_the_table_the_figure_and_the_runs() {
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("p2-cartpole-quick");
+    let _ = std::fs::remove_dir_all(&out);
+    let o = out.to_str().unwrap();
+    let run = |extra: &[&str]| {
+        let base = [
+            "reproduce",
+            "p2-cartpole",
+            "--quick",
+            "--quiet",
+            "--seeds",
+            "2",
+        ];
+        Command::new(env!("CARGO_BIN_EXE_tandem"))
+            .args(base.iter().chain(["--out", o].iter()).chain(extra))
+            .output()
+            .expect("the tandem binary runs")
+    };
+    let first = run(&[]);
+    let err = String::from_utf8_lossy(&first.stderr);
+    assert!(first.status.success(), "{err}");
+    let table: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("table.json")).unwrap()).unwrap();
+    for m in ["model_free", "with_model"] {
+        let e = &table[m]["episodes_to_solve"];
+        assert_eq!(e["per_seed"].as_array().unwrap().len(), 2, "{m}: {e}");
+        assert!(e.get("mean").is_some() && e.get("stderr").is_some(), "{e}");
+        for seed in 0..2 {
+            let dir = out.join("runs").join(format!("{m}__seed{seed}"));
+            let rec: Value =
+                serde_json::from_str(&std::fs::read_to_string(dir.join("record.json")).unwrap())
+                    .unwrap();
+            // --quick: 20 real episodes unless solved earlier (window 10, return 475).
+            let n = rec["real_returns"].as_array().unwrap().len();
+            assert!((10..=20).contains(&n), "{m} seed {seed}: {n} episodes");
+            let csv = std::fs::read_to_string(dir.join("curve.csv")).unwrap();
+            assert_eq!(csv.lines().count(), n + 1, "{csv}");
+        }
+    }
+    assert!(
+        table["with_model"]["mean_imagined_episodes"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    assert_eq!(table["model_free"]["mean_imagined_episodes"], 0.0);
+    assert!(
+        table["with_model_over_model_free"]["ratio"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    let md = std::fs::read_to_string(out.join("table.md")).unwrap();
+    assert!(md.contains("REINFORCE with the model"), "{md}");
+    let svg = std::fs::read_to_string(out.join("fig6.svg")).unwrap();
+    assert!(
+        svg.starts_with("<svg") && svg.contains("with_model"),
+        "{svg}"
+    );
+    let config: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["status"], "complete");
+
+    // Again into the same directory: refused, then replaced with --overwrite.
+    let again = run(&[]);
+    assert!(!again.status.success());
+    assert!(!String::from_utf8_lossy(&again.stderr).contains("panicked"));
+    let over = run(&["--overwrite"]);
+    assert!(
+        over.status.success(),
+        "{}",
+        String::from_utf8_lossy(&over.stderr)
+    );
+}
