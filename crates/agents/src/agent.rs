@@ -359,19 +359,19 @@ pub(crate) fn infer_rows(
     Ok((x, out))
 }
 
-/// [`Agent::act`] as the one-row case of a batch path: checks `obs`, runs `batch(agent, row,
-/// rng)` with the agent's own generator (`rng_of`) and keeps the generator's advance.
-pub(crate) fn act_one_row<A: BatchPolicy, T>(
+/// [`Agent::act`] as the one-row case of [`BatchPolicy::act_rows`]: checks `obs`, draws from the
+/// agent's own generator (`rng_of`) and keeps the generator's advance.
+pub(crate) fn act_one_row<A: BatchPolicy>(
     agent: &mut A,
     rng_of: fn(&mut A) -> &mut Rng,
     obs: &[f64],
-    batch: impl FnOnce(&A, ArrayView2<'_, f64>, &mut Rng) -> Result<T>,
-) -> Result<T> {
+    mode: Mode,
+) -> Result<Action> {
     check_obs(obs, agent.obs_dim())?;
     let mut rng = rng_of(agent).clone();
-    let out = batch(agent, one_row(obs), &mut rng)?;
+    let mut a = agent.act_rows(one_row(obs), mode, &mut rng)?;
     *rng_of(agent) = rng;
-    Ok(out)
+    Ok(a.swap_remove(0))
 }
 
 /// [`BatchPolicy`] for an agent over discrete actions, with fields `od` and `n_actions` and a

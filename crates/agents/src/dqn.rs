@@ -359,13 +359,7 @@ impl Agent for Dqn {
 
     /// The one-row case of [`Dqn::act_indices`], drawing from the agent's own generator.
     fn act(&mut self, obs: &[f64], mode: Mode) -> Result<Action> {
-        let k = act_one_row(
-            self,
-            |s| &mut s.rng,
-            obs,
-            |s, row, rng| s.act_indices(row, mode, rng),
-        )?;
-        Ok(Action::Discrete(k[0]))
+        act_one_row(self, |s| &mut s.rng, obs, mode)
     }
 
     /// Advances the ε schedule and copies the online network into the target every

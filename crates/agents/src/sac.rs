@@ -288,13 +288,7 @@ impl Agent for Sac {
 
     /// The one-row case of [`BatchPolicy::act_batch`], drawing from the agent's own generator.
     fn act(&mut self, obs: &[f64], mode: Mode) -> Result<Action> {
-        let a = act_one_row(
-            self,
-            |s| &mut s.rng,
-            obs,
-            |s, row, rng| s.act_batch(row, mode, rng),
-        )?;
-        Ok(Action::Continuous(a.row(0).to_vec()))
+        act_one_row(self, |s| &mut s.rng, obs, mode)
     }
 }
 
