@@ -213,49 +213,31 @@ impl ser::Serializer for &mut Checker {
     }
 }
 
-impl ser::SerializeSeq for &mut Checker {
-    type Ok = ();
-    type Error = NonFinite;
-    fn serialize_element<T: Serialize + ?Sized>(&mut self, v: &T) -> Result<(), NonFinite> {
-        self.element(v)
-    }
-    fn end(self) -> Result<(), NonFinite> {
-        self.close()
-    }
+/// The serializers of sequences and tuples: each element is checked under `[i]`; `end` closes the
+/// index (and, for a tuple variant, the variant's name that opening it pushed).
+macro_rules! element_serializers {
+    ($($serializer:ident::$method:ident, pops_variant: $pops:literal;)*) => {$(
+        impl ser::$serializer for &mut Checker {
+            type Ok = ();
+            type Error = NonFinite;
+            fn $method<T: Serialize + ?Sized>(&mut self, v: &T) -> Result<(), NonFinite> {
+                self.element(v)
+            }
+            fn end(self) -> Result<(), NonFinite> {
+                if $pops {
+                    self.path.pop();
+                }
+                self.close()
+            }
+        }
+    )*};
 }
 
-impl ser::SerializeTuple for &mut Checker {
-    type Ok = ();
-    type Error = NonFinite;
-    fn serialize_element<T: Serialize + ?Sized>(&mut self, v: &T) -> Result<(), NonFinite> {
-        self.element(v)
-    }
-    fn end(self) -> Result<(), NonFinite> {
-        self.close()
-    }
-}
-
-impl ser::SerializeTupleStruct for &mut Checker {
-    type Ok = ();
-    type Error = NonFinite;
-    fn serialize_field<T: Serialize + ?Sized>(&mut self, v: &T) -> Result<(), NonFinite> {
-        self.element(v)
-    }
-    fn end(self) -> Result<(), NonFinite> {
-        self.close()
-    }
-}
-
-impl ser::SerializeTupleVariant for &mut Checker {
-    type Ok = ();
-    type Error = NonFinite;
-    fn serialize_field<T: Serialize + ?Sized>(&mut self, v: &T) -> Result<(), NonFinite> {
-        self.element(v)
-    }
-    fn end(self) -> Result<(), NonFinite> {
-        self.path.pop();
-        self.close()
-    }
+element_serializers! {
+    SerializeSeq::serialize_element, pops_variant: false;
+    SerializeTuple::serialize_element, pops_variant: false;
+    SerializeTupleStruct::serialize_field, pops_variant: false;
+    SerializeTupleVariant::serialize_field, pops_variant: true;
 }
 
 impl ser::SerializeMap for &mut Checker {
@@ -276,35 +258,33 @@ impl ser::SerializeMap for &mut Checker {
     }
 }
 
-impl ser::SerializeStruct for &mut Checker {
-    type Ok = ();
-    type Error = NonFinite;
-    fn serialize_field<T: Serialize + ?Sized>(
-        &mut self,
-        key: &'static str,
-        v: &T,
-    ) -> Result<(), NonFinite> {
-        self.nested(key.to_string(), v)
-    }
-    fn end(self) -> Result<(), NonFinite> {
-        Ok(())
-    }
+/// The serializers of structs: each field is checked under its name; a struct variant's `end`
+/// pops the variant's name that opening it pushed.
+macro_rules! field_serializers {
+    ($($serializer:ident, pops_variant: $pops:literal;)*) => {$(
+        impl ser::$serializer for &mut Checker {
+            type Ok = ();
+            type Error = NonFinite;
+            fn serialize_field<T: Serialize + ?Sized>(
+                &mut self,
+                key: &'static str,
+                v: &T,
+            ) -> Result<(), NonFinite> {
+                self.nested(key.to_string(), v)
+            }
+            fn end(self) -> Result<(), NonFinite> {
+                if $pops {
+                    self.path.pop();
+                }
+                Ok(())
+            }
+        }
+    )*};
 }
 
-impl ser::SerializeStructVariant for &mut Checker {
-    type Ok = ();
-    type Error = NonFinite;
-    fn serialize_field<T: Serialize + ?Sized>(
-        &mut self,
-        key: &'static str,
-        v: &T,
-    ) -> Result<(), NonFinite> {
-        self.nested(key.to_string(), v)
-    }
-    fn end(self) -> Result<(), NonFinite> {
-        self.path.pop();
-        Ok(())
-    }
+field_serializers! {
+    SerializeStruct, pops_variant: false;
+    SerializeStructVariant, pops_variant: true;
 }
 
 /// `value` as pretty JSON, or an error naming its first non-finite number.
@@ -367,6 +347,27 @@ mod tests {
         assert_eq!(e.to_string(), "pair[1] is -inf, not a finite number");
         assert!(ensure_finite(&serde_json::json!({"k": [1, 2.5, null]})).is_ok());
         assert_eq!(ensure_finite(&f64::INFINITY).unwrap_err().path, "the value");
+        // Tuple structs, tuple and struct variants: each closes what it opened, so a later bad
+        // number is named without them.
+        #[derive(serde::Serialize)]
+        struct Pair(f64, f64);
+        #[derive(serde::Serialize)]
+        enum Shape {
+            Tuple(f64, f64),
+            Struct { w: f64 },
+        }
+        assert_eq!(ensure_finite(&Pair(1.0, f64::NAN)).unwrap_err().path, "[1]");
+        let tuple = Shape::Tuple(0.0, f64::INFINITY);
+        assert_eq!(ensure_finite(&tuple).unwrap_err().path, "Tuple[1]");
+        let fields = Shape::Struct { w: f64::NAN };
+        assert_eq!(ensure_finite(&fields).unwrap_err().path, "Struct.w");
+        let after = (
+            Shape::Tuple(1.0, 2.0),
+            Shape::Struct { w: 3.0 },
+            Pair(0.0, 0.0),
+            f64::NAN,
+        );
+        assert_eq!(ensure_finite(&after).unwrap_err().path, "[3]");
         // The text written for a good value is serde_json's.
         assert_eq!(
             to_json_pretty(&[1.5, 2.0]).unwrap(),

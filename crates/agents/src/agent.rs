@@ -379,6 +379,67 @@ pub(crate) fn obs_rows(obs: ArrayView2<'_, f64>, dim: usize) -> Result<Vec<f32>>
     Ok(obs.iter().map(|v| *v as f32).collect())
 }
 
+/// [`obs_rows`] of `obs`, then `infer(rows, B)`: the prologue of every batched acting and critic
+/// path. Returns the `f32` rows and the network's outputs.
+pub(crate) fn infer_rows(
+    obs: ArrayView2<'_, f64>,
+    dim: usize,
+    infer: impl FnOnce(&[f32], usize) -> Result<Vec<f32>>,
+) -> Result<(Vec<f32>, Vec<f32>)> {
+    let x = obs_rows(obs, dim)?;
+    let out = infer(&x, obs.nrows())?;
+    Ok((x, out))
+}
+
+/// [`Agent::act`] as the one-row case of [`BatchPolicy::act_rows`]: checks `obs`, draws from the
+/// agent's own generator (`rng_of`) and keeps the generator's advance.
+pub(crate) fn act_one_row<A: BatchPolicy>(
+    agent: &mut A,
+    rng_of: fn(&mut A) -> &mut Rng,
+    obs: &[f64],
+    mode: Mode,
+) -> Result<Action> {
+    check_obs(obs, agent.obs_dim())?;
+    let mut rng = rng_of(agent).clone();
+    let mut a = agent.act_rows(one_row(obs), mode, &mut rng)?;
+    *rng_of(agent) = rng;
+    Ok(a.swap_remove(0))
+}
+
+/// [`BatchPolicy`] for an agent over discrete actions, with fields `od` and `n_actions` and a
+/// method `act_indices(obs, mode, rng) -> Result<Vec<usize>>`: the indices as one column.
+macro_rules! discrete_batch_policy {
+    ($agent:ty) => {
+        impl $crate::agent::BatchPolicy for $agent {
+            fn obs_dim(&self) -> usize {
+                self.od
+            }
+
+            fn action_width(&self) -> usize {
+                1
+            }
+
+            fn discrete_actions(&self) -> Option<usize> {
+                Some(self.n_actions)
+            }
+
+            #[doc = concat!("[`", stringify!($agent), "::act_indices`] as a column of indices.")]
+            fn act_batch(
+                &self,
+                obs: ndarray::ArrayView2<'_, f64>,
+                mode: $crate::agent::Mode,
+                rng: &mut tandem_core::Rng,
+            ) -> $crate::error::Result<ndarray::Array2<f64>> {
+                let k = self.act_indices(obs, mode, rng)?;
+                Ok(ndarray::Array2::from_shape_fn((k.len(), 1), |(i, _)| {
+                    k[i] as f64
+                }))
+            }
+        }
+    };
+}
+pub(crate) use discrete_batch_policy;
+
 /// Checks that a batch of actions has `rows x width` entries, all finite.
 pub(crate) fn check_action_rows(
     actions: ArrayView2<'_, f64>,

@@ -143,6 +143,16 @@ impl Net {
             .with(|_, ws| Ok(self.mlp.forward(x, n, ws)?.to_vec()))
     }
 
+    /// Checks the rows of `obs` (`B x dim`) and runs them through `&self`: the `f32` rows and the
+    /// outputs ([`crate::agent::infer_rows`]).
+    pub(crate) fn infer_obs(
+        &self,
+        obs: ArrayView2<'_, f64>,
+        dim: usize,
+    ) -> Result<(Vec<f32>, Vec<f32>)> {
+        crate::agent::infer_rows(obs, dim, |x, n| self.infer(x, n))
+    }
+
     /// Applies the gradient in `self.grads` with Adam.
     pub(crate) fn step(&mut self) -> Result<()> {
         use tandem_nn::Optimizer as _;

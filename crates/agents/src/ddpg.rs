@@ -207,8 +207,7 @@ impl BatchPolicy for Ddpg {
         mode: Mode,
         rng: &mut Rng,
     ) -> Result<Array2<f64>> {
-        let x = obs_rows(obs, self.od)?;
-        let mut a = self.actor.infer(&x, obs.nrows())?;
+        let (_, mut a) = self.actor.infer_obs(obs, self.od)?;
         if mode == Mode::Explore {
             let sd = self.noise.config().stationary_std();
             for ai in a.iter_mut() {
@@ -238,8 +237,7 @@ impl Critic for Ddpg {
         _mode: Mode,
         _rng: &mut Rng,
     ) -> Result<Array1<f64>> {
-        let x = obs_rows(obs, self.od)?;
-        let mu = self.actor.infer(&x, obs.nrows())?;
+        let (x, mu) = self.actor.infer_obs(obs, self.od)?;
         self.q_rows(&x, &mu, obs.nrows())
     }
 }

@@ -9,9 +9,9 @@
 //! Both are trained by the same loss code: the agent computes `∂L/∂Q` of the Huber loss on
 //! `Q(s, a)` (`tandem-nn`'s [`huber`]) and the network back-propagates it.
 //!
-//! Batched acting through `&self` ([`BatchPolicy`], indices in [`Dqn::act_indices`]) is ε-greedy
-//! with the agent's current ε and the caller's generator; [`Dqn::q_table`] gives `Q(s, ·)` and
-//! [`Critic`] `Q(s, a)` and `V(s) = max_a Q(s, a)`.
+//! Batched acting through `&self` ([`crate::BatchPolicy`], indices in [`Dqn::act_indices`]) is
+//! ε-greedy with the agent's current ε and the caller's generator; [`Dqn::q_table`] gives
+//! `Q(s, ·)` and [`Critic`] `Q(s, a)` and `V(s) = max_a Q(s, a)`.
 
 use ndarray::{Array1, Array2, ArrayView2};
 use rand::Rng as _;
@@ -20,8 +20,8 @@ use tandem_nn::{clip_grad_norm, huber, Adam, AdamConfig, Checkpoint, Checkpointa
 use tandem_nn::{MlpWorkspace, Optimizer};
 
 use crate::agent::{
-    check_action_rows, check_obs, obs_rows, one_row, Agent, Batch, BatchPolicy, Critic, Metrics,
-    Mode, OffPolicyAgent,
+    act_one_row, check_action_rows, check_obs, discrete_batch_policy, infer_rows, obs_rows, Agent,
+    Batch, Critic, Metrics, Mode, OffPolicyAgent,
 };
 use crate::common::{check_header, discrete_n, fit, obs_dim, save_header, Net, Target};
 use crate::config::{DqnConfig, QNetwork};
@@ -281,8 +281,7 @@ impl Dqn {
 
     /// `Q(s, ·)` of the online network for the rows of `obs`: `B x n_actions`.
     pub fn q_table(&self, obs: ArrayView2<'_, f64>) -> Result<Array2<f64>> {
-        let x = obs_rows(obs, self.od)?;
-        let q = self.nets.infer(&x, obs.nrows())?;
+        let (_, q) = infer_rows(obs, self.od, |x, n| self.nets.infer(x, n))?;
         Ok(Array2::from_shape_fn(
             (obs.nrows(), self.n_actions),
             |(i, j)| f64::from(q[i * self.n_actions + j]),
@@ -360,11 +359,7 @@ impl Agent for Dqn {
 
     /// The one-row case of [`Dqn::act_indices`], drawing from the agent's own generator.
     fn act(&mut self, obs: &[f64], mode: Mode) -> Result<Action> {
-        check_obs(obs, self.od)?;
-        let mut rng = self.rng.clone();
-        let k = self.act_indices(one_row(obs), mode, &mut rng)?;
-        self.rng = rng;
-        Ok(Action::Discrete(k[0]))
+        act_one_row(self, |s| &mut s.rng, obs, mode)
     }
 
     /// Advances the ε schedule and copies the online network into the target every
@@ -377,30 +372,7 @@ impl Agent for Dqn {
     }
 }
 
-impl BatchPolicy for Dqn {
-    fn obs_dim(&self) -> usize {
-        self.od
-    }
-
-    fn action_width(&self) -> usize {
-        1
-    }
-
-    fn discrete_actions(&self) -> Option<usize> {
-        Some(self.n_actions)
-    }
-
-    /// [`Dqn::act_indices`] as a column of indices.
-    fn act_batch(
-        &self,
-        obs: ArrayView2<'_, f64>,
-        mode: Mode,
-        rng: &mut Rng,
-    ) -> Result<Array2<f64>> {
-        let k = self.act_indices(obs, mode, rng)?;
-        Ok(Array2::from_shape_fn((k.len(), 1), |(i, _)| k[i] as f64))
-    }
-}
+discrete_batch_policy!(Dqn);
 
 impl Critic for Dqn {
     /// `Q(s, a)` for actions given as indices (one column).

@@ -7,14 +7,15 @@
 //! Its gradient wrt the logits is `(softmax - onehot(a_t)) A_t / N`: `tandem-nn`'s
 //! [`Categorical`] head (log-softmax, sampling, argmax and this gradient with weights `-A_t / N`).
 //!
-//! Batched acting through `&self`: [`Reinforce::act_indices`] and [`BatchPolicy`].
+//! Batched acting through `&self`: [`Reinforce::act_indices`] and [`crate::BatchPolicy`].
 
-use ndarray::{Array2, ArrayView2};
+use ndarray::ArrayView2;
 use tandem_core::{Action, Rng, SeedStream, Space};
 use tandem_nn::{Categorical, Checkpoint, MlpConfig};
 
 use crate::agent::{
-    check_obs, obs_rows, one_row, Agent, BatchPolicy, Episode, EpisodicAgent, Metrics, Mode,
+    act_one_row, check_obs, discrete_batch_policy, one_row, Agent, Episode, EpisodicAgent, Metrics,
+    Mode,
 };
 use crate::common::{check_header, discrete_n, obs_dim, save_header, Net};
 use crate::config::{Baseline, ReinforceConfig};
@@ -83,8 +84,7 @@ impl Reinforce {
 
     /// Log-probabilities of every action for the rows of `obs` (`B x n_actions`, row-major).
     fn log_probs(&self, obs: ArrayView2<'_, f64>) -> Result<Vec<f32>> {
-        let x = obs_rows(obs, self.od)?;
-        let logits = self.policy.infer(&x, obs.nrows())?;
+        let (_, logits) = self.policy.infer_obs(obs, self.od)?;
         let mut lp = vec![0.0; logits.len()];
         self.head.log_softmax(&logits, obs.nrows(), &mut lp)?;
         Ok(lp)
@@ -148,38 +148,11 @@ impl Agent for Reinforce {
 
     /// The one-row case of [`Reinforce::act_indices`], drawing from the agent's own generator.
     fn act(&mut self, obs: &[f64], mode: Mode) -> Result<Action> {
-        check_obs(obs, self.od)?;
-        let mut rng = self.rng.clone();
-        let k = self.act_indices(one_row(obs), mode, &mut rng)?;
-        self.rng = rng;
-        Ok(Action::Discrete(k[0]))
+        act_one_row(self, |s| &mut s.rng, obs, mode)
     }
 }
 
-impl BatchPolicy for Reinforce {
-    fn obs_dim(&self) -> usize {
-        self.od
-    }
-
-    fn action_width(&self) -> usize {
-        1
-    }
-
-    fn discrete_actions(&self) -> Option<usize> {
-        Some(self.n_actions)
-    }
-
-    /// [`Reinforce::act_indices`] as a column of indices.
-    fn act_batch(
-        &self,
-        obs: ArrayView2<'_, f64>,
-        mode: Mode,
-        rng: &mut Rng,
-    ) -> Result<Array2<f64>> {
-        let k = self.act_indices(obs, mode, rng)?;
-        Ok(Array2::from_shape_fn((k.len(), 1), |(i, _)| k[i] as f64))
-    }
-}
+discrete_batch_policy!(Reinforce);
 
 impl EpisodicAgent for Reinforce {
     fn update(&mut self, episodes: &[Episode]) -> Result<Metrics> {

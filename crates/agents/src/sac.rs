@@ -25,8 +25,8 @@ use tandem_nn::{
 };
 
 use crate::agent::{
-    check_action_rows, check_obs, obs_rows, one_row, Agent, Batch, BatchPolicy, Critic, Metrics,
-    Mode, OffPolicyAgent,
+    act_one_row, check_action_rows, obs_rows, Agent, Batch, BatchPolicy, Critic, Metrics, Mode,
+    OffPolicyAgent,
 };
 use crate::common::{
     check_header, concat_rows, fit, obs_dim, save_header, ActionScale, Net, Target,
@@ -198,9 +198,8 @@ impl Sac {
         mode: Mode,
         rng: &mut Rng,
     ) -> Result<(Vec<f32>, TanhGaussianSample)> {
-        let x = obs_rows(obs, self.od)?;
+        let (x, out) = self.actor.infer_obs(obs, self.od)?;
         let n = obs.nrows();
-        let out = self.actor.infer(&x, n)?;
         let mut pi = TanhGaussianSample::default();
         match mode {
             Mode::Explore => self.head.sample(&out, n, rng, &mut pi)?,
@@ -238,9 +237,8 @@ impl BatchPolicy for Sac {
         mode: Mode,
         rng: &mut Rng,
     ) -> Result<Array2<f64>> {
-        let x = obs_rows(obs, self.od)?;
+        let (_, out) = self.actor.infer_obs(obs, self.od)?;
         let n = obs.nrows();
-        let out = self.actor.infer(&x, n)?;
         let mut a = vec![0.0; n * self.head.dim];
         match mode {
             Mode::Deterministic => self.head.mode(&out, n, &mut a)?,
@@ -290,11 +288,7 @@ impl Agent for Sac {
 
     /// The one-row case of [`BatchPolicy::act_batch`], drawing from the agent's own generator.
     fn act(&mut self, obs: &[f64], mode: Mode) -> Result<Action> {
-        check_obs(obs, self.od)?;
-        let mut rng = self.rng.clone();
-        let a = self.act_batch(one_row(obs), mode, &mut rng)?;
-        self.rng = rng;
-        Ok(Action::Continuous(a.row(0).to_vec()))
+        act_one_row(self, |s| &mut s.rng, obs, mode)
     }
 }
 

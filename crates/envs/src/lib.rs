@@ -34,7 +34,7 @@ pub use pendulum::{angle_normalize, pendulum_reward, PendulumEnv, PendulumTask};
 pub use pixel_maze::{PixelMazeEnv, PIXEL_MAZE_GRID, PIXEL_MAZE_OBSTACLES, PIXEL_MAZE_PIXELS};
 pub use registry::{make, make_unwrapped, registered, EnvSpec};
 pub use tandem_core::{Action, Space};
-pub use task::{clip_to, PlantEnv, Task};
+pub use task::{clip_to, control_dim, PlantEnv, Task, TaskEpisodes};
 pub use wrappers::{
     ClipAction, NormalizeObservation, ObservationHook, RescaleAction, RunningNormalizer,
     SampleCount, SampleCounter, TimeLimit, TransformObservation,

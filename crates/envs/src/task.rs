@@ -123,6 +123,65 @@ pub fn clip_to(space: &Space, a: &[f64]) -> Vec<f64> {
     }
 }
 
+/// What an environment over a [`Task`] keeps whatever advances its state (a [`Plant`] in
+/// [`PlantEnv`], a learned model in `tandem_models::ModelEnv`): the task, the generator its starts
+/// are drawn from with gymnasium's seeded reset, and the action check.
+#[derive(Debug, Clone)]
+pub struct TaskEpisodes<T> {
+    task: T,
+    rng: Rng,
+}
+
+impl<T: Task> TaskEpisodes<T> {
+    /// Episodes of `task`, drawn from a generator seeded with 0 until the first seeded reset.
+    pub fn new(task: T) -> Self {
+        Self {
+            task,
+            rng: rng_from_seed(0),
+        }
+    }
+
+    /// The task.
+    pub fn task(&self) -> &T {
+        &self.task
+    }
+
+    /// The generator starts are drawn from (a stochastic model draws from it too).
+    pub fn rng_mut(&mut self) -> &mut Rng {
+        &mut self.rng
+    }
+
+    /// The state a new episode starts from: `Some(seed)` reseeds the generator first, `None`
+    /// continues it ([`crate::Env::reset`]).
+    pub fn initial_state(&mut self, seed: Option<u64>) -> Vec<f64> {
+        if let Some(s) = seed {
+            self.rng = rng_from_seed(s);
+        }
+        self.task.initial_state(&mut self.rng)
+    }
+
+    /// The plant input of `action` ([`Task::control`]), or an error naming the environment when
+    /// the action is not in the task's action space.
+    pub fn control(&self, action: &Action) -> Result<Vec<f64>, EnvError> {
+        check_action(self.task.id(), self.task.action_space(), action)?;
+        Ok(self.task.control(action))
+    }
+
+    /// Checks a state's size and finiteness ([`crate::check_state`]).
+    pub fn check_state(&self, state: &[f64]) -> Result<(), EnvError> {
+        check_state(self.task.id(), state, self.task.state_dim())
+    }
+}
+
+/// The length of the plant input [`Task::control`] gives.
+pub fn control_dim<T: Task + ?Sized>(task: &T) -> usize {
+    let probe = match task.action_space() {
+        Space::Discrete { .. } => Action::Discrete(0),
+        Space::Box { low, .. } => Action::Continuous(vec![0.0; low.len()]),
+    };
+    task.control(&probe).len()
+}
+
 /// An environment stepping a [`Plant`] under a [`Task`], with gymnasium's semantics. It does not
 /// truncate by itself: [`crate::make`] (or the caller) adds a [`crate::TimeLimit`] of
 /// [`Task::max_episode_steps`].
@@ -132,19 +191,18 @@ pub fn clip_to(space: &Space, a: &[f64]) -> Vec<f64> {
 #[derive(Debug, Clone)]
 pub struct PlantEnv<P, T> {
     plant: P,
-    task: T,
+    episodes: TaskEpisodes<T>,
     state: Vec<f64>,
     next: Vec<f64>,
     phase: Phase,
-    rng: Rng,
 }
 
 impl<P: Plant, T: Task> PlantEnv<P, T> {
     /// The environment of `task` over `plant`; an error when their state or action dimensions
     /// disagree.
     pub fn from_parts(plant: P, task: T) -> Result<Self, EnvError> {
-        let probe = task.control(&probe_action(task.action_space()));
-        if plant.state_dim() != task.state_dim() || plant.action_dim() != probe.len() {
+        let m = control_dim(&task);
+        if plant.state_dim() != task.state_dim() || plant.action_dim() != m {
             return Err(EnvError::Unsupported {
                 env: task.id().to_string(),
                 reason: format!(
@@ -152,18 +210,17 @@ impl<P: Plant, T: Task> PlantEnv<P, T> {
                     plant.state_dim(),
                     plant.action_dim(),
                     task.state_dim(),
-                    probe.len()
+                    m
                 ),
             });
         }
         let n = task.state_dim();
         Ok(Self {
             plant,
-            task,
+            episodes: TaskEpisodes::new(task),
             state: vec![0.0; n],
             next: vec![0.0; n],
             phase: Phase::NotReset,
-            rng: rng_from_seed(0),
         })
     }
 
@@ -174,54 +231,42 @@ impl<P: Plant, T: Task> PlantEnv<P, T> {
 
     /// The task.
     pub fn task(&self) -> &T {
-        &self.task
-    }
-}
-
-/// An action of `space` to probe a task's control dimension with.
-pub(crate) fn probe_action(space: &Space) -> Action {
-    match space {
-        Space::Discrete { .. } => Action::Discrete(0),
-        Space::Box { low, .. } => Action::Continuous(vec![0.0; low.len()]),
+        self.episodes.task()
     }
 }
 
 impl<P: Plant, T: Task> Env for PlantEnv<P, T> {
     fn id(&self) -> &str {
-        self.task.id()
+        self.task().id()
     }
 
     fn observation_space(&self) -> &Space {
-        self.task.observation_space()
+        self.task().observation_space()
     }
 
     fn action_space(&self) -> &Space {
-        self.task.action_space()
+        self.task().action_space()
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
-        if let Some(s) = seed {
-            self.rng = rng_from_seed(s);
-        }
-        self.state = self.task.initial_state(&mut self.rng);
+        self.state = self.episodes.initial_state(seed);
         self.phase = Phase::Running;
-        self.task.observe(&self.state)
+        self.task().observe(&self.state)
     }
 
     fn step(&mut self, action: &Action) -> Result<Step, EnvError> {
-        let id = self.task.id();
-        self.phase.check(id)?;
-        check_action(id, self.task.action_space(), action)?;
-        let u = self.task.control(action);
+        self.phase.check(self.task().id())?;
+        let u = self.episodes.control(action)?;
+        let task = self.episodes.task();
         self.plant.step_into(&self.state, &u, &mut self.next);
-        let reward = self.task.reward(&self.state, &u, &self.next);
-        let terminated = self.task.terminated(&self.next);
+        let reward = task.reward(&self.state, &u, &self.next);
+        let terminated = task.terminated(&self.next);
         std::mem::swap(&mut self.state, &mut self.next);
         if terminated {
             self.phase = Phase::Ended;
         }
         Ok(Step {
-            observation: self.task.observe(&self.state),
+            observation: task.observe(&self.state),
             reward,
             terminated,
             truncated: false,
@@ -233,10 +278,10 @@ impl<P: Plant, T: Task> Env for PlantEnv<P, T> {
     }
 
     fn set_state(&mut self, state: &[f64]) -> Result<Vec<f64>, EnvError> {
-        check_state(self.task.id(), state, self.task.state_dim())?;
+        self.episodes.check_state(state)?;
         self.state.copy_from_slice(state);
         self.phase = Phase::Running;
-        Ok(self.task.observe(&self.state))
+        Ok(self.task().observe(&self.state))
     }
 }
 

@@ -19,9 +19,8 @@
 
 use ndarray::{Array1, Array2, ArrayView2};
 use serde::{Deserialize, Serialize};
-use tandem_core::seeding::rng_from_seed;
 use tandem_core::{Action, Rng, Space};
-use tandem_envs::{Env, EnvError, Step, Task};
+use tandem_envs::{Env, EnvError, Step, Task, TaskEpisodes};
 
 use crate::model::{DynamicsModel, ModelError, ModelInput, Prediction};
 
@@ -167,11 +166,7 @@ fn check_pair<M: DynamicsModel + ?Sized, T: Task + ?Sized>(
     model: &M,
     task: &T,
 ) -> Result<usize, ModelError> {
-    let probe = match task.action_space() {
-        Space::Discrete { .. } => Action::Discrete(0),
-        Space::Box { low, .. } => Action::Continuous(vec![0.0; low.len()]),
-    };
-    let m = task.control(&probe).len();
+    let m = tandem_envs::control_dim(task);
     for (what, want, got) in [
         ("task state", model.state_dim(), task.state_dim()),
         ("task control", model.action_dim(), m),
@@ -208,11 +203,10 @@ fn check_pair<M: DynamicsModel + ?Sized, T: Task + ?Sized>(
 #[derive(Debug, Clone)]
 pub struct ModelEnv<M, T> {
     model: M,
-    task: T,
+    episodes: TaskEpisodes<T>,
     judges: Judges,
     state: Vec<f64>,
     prev_u: Vec<f64>,
-    rng: Rng,
     elapsed: usize,
     running: bool,
 }
@@ -235,11 +229,10 @@ impl<M: DynamicsModel, T: Task> ModelEnv<M, T> {
         let n = task.state_dim();
         Ok(Self {
             model,
-            task,
+            episodes: TaskEpisodes::new(task),
             judges,
             state: vec![0.0; n],
             prev_u: vec![0.0; m],
-            rng: rng_from_seed(0),
             elapsed: 0,
             running: false,
         })
@@ -257,15 +250,16 @@ impl<M: DynamicsModel, T: Task> ModelEnv<M, T> {
 
     /// The task.
     pub fn task(&self) -> &T {
-        &self.task
+        self.episodes.task()
     }
 
     fn start(&mut self) -> Vec<f64> {
-        self.task.canonicalize(&mut self.state);
+        let task = self.episodes.task();
+        task.canonicalize(&mut self.state);
         self.prev_u.iter_mut().for_each(|u| *u = 0.0);
         self.elapsed = 0;
         self.running = true;
-        self.task.observe(&self.state)
+        task.observe(&self.state)
     }
 }
 
@@ -278,41 +272,30 @@ fn model_failure(env: &str) -> impl Fn(ModelError) -> EnvError + '_ {
 
 impl<M: DynamicsModel, T: Task> Env for ModelEnv<M, T> {
     fn id(&self) -> &str {
-        self.task.id()
+        self.task().id()
     }
 
     fn observation_space(&self) -> &Space {
-        self.task.observation_space()
+        self.task().observation_space()
     }
 
     fn action_space(&self) -> &Space {
-        self.task.action_space()
+        self.task().action_space()
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
-        if let Some(s) = seed {
-            self.rng = rng_from_seed(s);
-        }
-        self.state = self.task.initial_state(&mut self.rng);
+        self.state = self.episodes.initial_state(seed);
         self.start()
     }
 
     fn step(&mut self, action: &Action) -> Result<Step, EnvError> {
-        let id = self.task.id();
         if !self.running {
             return Err(EnvError::NeedsReset {
-                env: id.to_string(),
+                env: self.task().id().to_string(),
                 when: "before reset or after the episode ended",
             });
         }
-        self.task
-            .action_space()
-            .check(action)
-            .map_err(|source| EnvError::InvalidAction {
-                env: id.to_string(),
-                source,
-            })?;
-        let u = self.task.control(action);
+        let u = self.episodes.control(action)?;
         let row = |v: &[f64]| Array2::from_shape_vec((1, v.len()), v.to_vec());
         let (s, a, p) = (row(&self.state), row(&u), row(&self.prev_u));
         let (s, a, p) = (
@@ -321,10 +304,10 @@ impl<M: DynamicsModel, T: Task> Env for ModelEnv<M, T> {
             p.expect("one row"),
         );
         let input = ModelInput::new(s.view(), a.view()).with_prev_actions(p.view());
-        let pred = self
-            .model
-            .predict(&input, &mut self.rng)
-            .map_err(model_failure(id))?;
+        let pred = self.model.predict(&input, self.episodes.rng_mut());
+        let task = self.episodes.task();
+        let id = task.id();
+        let pred = pred.map_err(model_failure(id))?;
         let mut next: Vec<f64> = pred.next_states.row(0).to_vec();
         if let Some(i) = next.iter().position(|v| !v.is_finite()) {
             return Err(EnvError::InvalidState {
@@ -334,19 +317,16 @@ impl<M: DynamicsModel, T: Task> Env for ModelEnv<M, T> {
         }
         let (reward, terminated) = self
             .judges
-            .judge(&self.task, &pred, 0, (&self.state, &u, &next))
+            .judge(task, &pred, 0, (&self.state, &u, &next))
             .map_err(model_failure(id))?;
-        self.task.canonicalize(&mut next);
+        task.canonicalize(&mut next);
         self.state = next;
         self.prev_u = u;
         self.elapsed += 1;
-        let truncated = self
-            .task
-            .max_episode_steps()
-            .is_some_and(|m| self.elapsed >= m);
+        let truncated = task.max_episode_steps().is_some_and(|m| self.elapsed >= m);
         self.running = !(terminated || truncated);
         Ok(Step {
-            observation: self.task.observe(&self.state),
+            observation: task.observe(&self.state),
             reward,
             terminated,
             truncated,
@@ -358,13 +338,13 @@ impl<M: DynamicsModel, T: Task> Env for ModelEnv<M, T> {
     }
 
     fn set_state(&mut self, state: &[f64]) -> Result<Vec<f64>, EnvError> {
-        tandem_envs::check_state(self.task.id(), state, self.task.state_dim())?;
+        self.episodes.check_state(state)?;
         self.state = state.to_vec();
         Ok(self.start())
     }
 
     fn max_episode_steps(&self) -> Option<usize> {
-        self.task.max_episode_steps()
+        self.task().max_episode_steps()
     }
 }
 
@@ -604,6 +584,7 @@ mod tests {
     use super::*;
     use crate::{FitConfig, FitReport, PlantModel, Transitions};
     use ndarray::array;
+    use tandem_core::seeding::rng_from_seed;
     use tandem_dynamics::classic::{CartPole, DcMotorPendulum, DcMotorPendulumParams};
     use tandem_envs::{CartPoleEnv, CartPoleTask, DcMotorPendulumTask};
 

@@ -4,13 +4,15 @@
 //!   mbrl-lib's `GaussianMLP`), for probabilistic dynamics models.
 //! * [`TanhGaussian`]: SAC's squashed Gaussian policy (Haarnoja et al. 2018, appendix C):
 //!   reparametrized samples, the exact log-probability with the change-of-variables term in its
-//!   stable form `log(1 - tanh²u) = 2(log 2 - u - softplus(-2u))`, and the backward pass for the
+//!   stable form `log(1 - tanh²u) = 2(log 2 - u - softplus(-2u))` (sampling computes it together
+//!   with `tanh u` from one `expm1`: [`tanh_and_log1m_tanh_sq`]), and the backward pass for the
 //!   actor loss.
 //! * [`Categorical`]: softmax policies over discrete actions (REINFORCE on CartPole, p2).
 //!
 //! Layouts are row-major: a head reading `k` values per sample takes `batch × k` slices.
 
 use rand::Rng as _;
+use rand_distr::{Distribution as _, StandardNormal};
 use tandem_core::seeding::Rng;
 
 use crate::error::{check_finite, check_len, NnError, Result};
@@ -28,6 +30,23 @@ pub fn log1m_tanh_sq(u: f32) -> f32 {
     2.0 * (std::f32::consts::LN_2 - u - softplus(-2.0 * u))
 }
 
+/// `(tanh u, log(1 - tanh²u))` from one `expm1` and one `ln` (what sampling a [`TanhGaussian`]
+/// needs per component): with `m = e^{-2|u|} - 1`, `tanh|u| = -m / (2 + m)` and
+/// `log(1 - tanh²u) = -2|u| - 2 log(1 + m/2)`. `tanh` is accurate to a few ulps, the log-term to
+/// a few ulps of `max(|log(1 - tanh²u)|, 1)`, as [`log1m_tanh_sq`] (an absolute error of about
+/// `1e-7` near 0, where the term is `≈ -u²`: negligible in a log-density), for any `u` (no
+/// underflow for large `|u|`, where the naive `log(1 - tanh²u)` is `-inf` from `|u| ≈ 9` in
+/// `f32`). It costs less than `tanh` alone (which calls `expm1` too) plus a `ln`.
+#[inline]
+pub fn tanh_and_log1m_tanh_sq(u: f32) -> (f32, f32) {
+    let t = u.abs();
+    let m = (-2.0 * t).exp_m1();
+    let a = -m / (2.0 + m);
+    let l = -2.0 * (t + (1.0 + 0.5 * m).ln());
+    // Rounding can leave it just above 0 for tiny |u|; it never is (NaN stays NaN).
+    (a.copysign(u), if l > 0.0 { 0.0 } else { l })
+}
+
 const HALF_LN_2PI: f32 = 0.918_938_5;
 
 /// Fills `out` with standard-normal draws from `rng`, in order (the noise [`TanhGaussian::sample`]
@@ -35,7 +54,7 @@ const HALF_LN_2PI: f32 = 0.918_938_5;
 /// independently of how the work is scheduled).
 pub fn fill_standard_normal(rng: &mut Rng, out: &mut [f32]) {
     for e in out.iter_mut() {
-        *e = rng.sample(rand_distr::StandardNormal);
+        *e = StandardNormal.sample(rng);
     }
 }
 
@@ -203,6 +222,8 @@ pub struct TanhGaussianSample {
     pub log_std: Vec<f32>,
     /// Pre-squash values `u = μ + σ ε`, `batch × dim`.
     pub pre_tanh: Vec<f32>,
+    /// `σ ε` (`∂u/∂log σ`), kept for the backward pass.
+    std_eps: Vec<f32>,
     clamped: Vec<bool>,
 }
 
@@ -273,27 +294,36 @@ impl TanhGaussian {
         let n = batch * d;
         s.batch = batch;
         s.dim = d;
-        for v in [&mut s.action, &mut s.log_std, &mut s.pre_tanh] {
+        for v in [
+            &mut s.action,
+            &mut s.log_std,
+            &mut s.pre_tanh,
+            &mut s.std_eps,
+        ] {
             v.resize(n, 0.0);
         }
         s.clamped.resize(n, false);
+        s.log_prob.clear();
         s.log_prob.resize(batch, 0.0);
-        for r in 0..batch {
-            let row = &net_out[r * 2 * d..(r + 1) * 2 * d];
-            let mut lp = 0.0f32;
-            for j in 0..d {
-                let k = r * d + j;
-                let raw = row[d + j];
-                let ls = raw.clamp(self.log_std_min, self.log_std_max);
-                s.clamped[k] = raw != ls;
-                let e = s.eps[k];
-                let u = row[j] + ls.exp() * e;
-                s.log_std[k] = ls;
-                s.pre_tanh[k] = u;
-                s.action[k] = u.tanh();
-                lp += -0.5 * e * e - ls - HALF_LN_2PI - log1m_tanh_sq(u);
+        let (lo, hi) = (self.log_std_min, self.log_std_max);
+        let outs = (s.action.iter_mut().zip(&mut s.log_std))
+            .zip(s.std_eps.iter_mut().zip(&mut s.pre_tanh))
+            .zip(s.clamped.iter_mut().zip(&s.eps));
+        // Row r, component j of the flat index k = r·d + j.
+        let (mut r, mut j) = (0, 0);
+        for (((a, ls), (std_eps, u)), (clamped, &e)) in outs {
+            let raw = net_out[r * 2 * d + d + j];
+            *ls = raw.clamp(lo, hi);
+            *clamped = raw != *ls;
+            *std_eps = ls.exp() * e;
+            *u = net_out[r * 2 * d + j] + *std_eps;
+            let log_det;
+            (*a, log_det) = tanh_and_log1m_tanh_sq(*u);
+            s.log_prob[r] += -0.5 * e * e - *ls - HALF_LN_2PI - log_det;
+            j += 1;
+            if j == d {
+                (r, j) = (r + 1, 0);
             }
-            s.log_prob[r] = lp;
         }
         check_finite("tanh-gaussian log-prob", &s.log_prob)
     }
@@ -376,12 +406,11 @@ impl TanhGaussian {
                 let ga = d_action.map_or(0.0, |g| g[k]);
                 // dL/du through both paths (action and the log-det term).
                 let du = ga * (1.0 - a * a) + glp * 2.0 * a;
-                let sig_eps = s.log_std[k].exp() * s.eps[k];
                 d_net_out[r * 2 * d + j] = du;
                 d_net_out[r * 2 * d + d + j] = if s.clamped[k] {
                     0.0
                 } else {
-                    du * sig_eps - glp
+                    du * s.std_eps[k] - glp
                 };
             }
         }
@@ -525,6 +554,43 @@ mod tests {
         }
         // The naive form underflows to -inf in f32 at u = 12.
         assert!((1.0 - 12.0f32.tanh().powi(2)).ln().is_infinite());
+    }
+
+    #[test]
+    fn fused_tanh_and_log_det_match_f64_to_a_few_ulps() {
+        let ulp = |x: f64| f64::from(f32::EPSILON) * x.abs().max(f64::from(f32::MIN_POSITIVE));
+        for u in [
+            -40.0f32, -12.0, -9.0, -1.0, -1e-3, -1e-30, 0.0, 1e-7, 2e-4, 0.5, 0.9, 3.0, 12.0, 88.0,
+        ] {
+            let (a, l) = tanh_and_log1m_tanh_sq(u);
+            let want_a = f64::from(u).tanh();
+            let want_l = log1m_tanh_sq_f64(f64::from(u));
+            assert!(
+                (f64::from(a) - want_a).abs() <= 4.0 * ulp(want_a),
+                "u={u}: tanh {a} vs {want_a}"
+            );
+            // Near 0 the log-det (≈ -u²) is accurate to a few ulps of 1, as the separate form.
+            assert!(
+                (f64::from(l) - want_l).abs() <= 4.0 * ulp(want_l.abs().max(1.0)),
+                "u={u}: log det {l} vs {want_l}"
+            );
+            assert!(a.abs() <= 1.0 && l <= 0.0);
+            // The same value as the separate stable form, to rounding.
+            let sep = f64::from(log1m_tanh_sq(u));
+            assert!(
+                (f64::from(l) - sep).abs() <= 1e-5 * (1.0 + sep.abs()),
+                "u={u}"
+            );
+        }
+        assert_eq!(
+            tanh_and_log1m_tanh_sq(-0.0).0.to_bits(),
+            (-0.0f32).to_bits()
+        );
+        assert_eq!(
+            tanh_and_log1m_tanh_sq(f32::INFINITY),
+            (1.0, f32::NEG_INFINITY)
+        );
+        assert!(tanh_and_log1m_tanh_sq(f32::NAN).1.is_nan());
     }
 
     #[test]

@@ -107,8 +107,8 @@ pub use rayon::join;
 pub use checkpoint::{write_atomic, Checkpoint, Checkpointable, CHECKSUM_KEY};
 pub use error::{check_finite, NnError, Result};
 pub use heads::{
-    fill_standard_normal, log1m_tanh_sq, softplus, Categorical, GaussianHead, GaussianOutput,
-    TanhGaussian, TanhGaussianSample,
+    fill_standard_normal, log1m_tanh_sq, softplus, tanh_and_log1m_tanh_sq, Categorical,
+    GaussianHead, GaussianOutput, TanhGaussian, TanhGaussianSample,
 };
 pub use kernels::{gemm_threads, set_gemm_threads};
 pub use loss::{bce_with_logits, gaussian_nll, huber, mse};
