@@ -9,7 +9,8 @@
 //! NumPy 2 keeps Python-float weights weak), sums with NumPy's pairwise order
 //! ([`crate::numpy`]), and reads body positions (`xpos`) as MuJoCo leaves them after the last
 //! substep. Doing the same gives gymnasium's rewards bit for bit, except where gymnasium takes a
-//! Euclidean norm through BLAS (Reacher, Pusher, Ant's `distance_from_origin`: within 1e-15).
+//! Euclidean norm through BLAS (Reacher, Pusher, Ant's `distance_from_origin`: within 2.3e-16 on
+//! the recorded episodes).
 
 use rand::Rng as _;
 use rand_distr::{Distribution, StandardNormal};
