@@ -799,24 +799,7 @@ fn p0_pendulum(args: &P0Args) -> Result<()> {
             source,
         })?;
     }
-    let table = table(&records, &cfg);
-    let md = markdown(&table, &cfg, wall);
-    let w = |name: &str, text: &str| {
-        dir.write(name, text)
-            .map(drop)
-            .map_err(|source| CliError::Io {
-                path: dir.path().join(name),
-                source,
-            })
-    };
-    w(
-        "table.json",
-        &table
-            .to_json()
-            .map_err(|e| CliError::Other(format!("table.json: {e}")))?,
-    )?;
-    w("table.md", &md)?;
-    w("fig5.svg", &fig5(&records).svg())?;
+    let md = write_report(&dir, &records, &cfg, wall)?;
     rc.status = "complete".into();
     rc.wall_seconds = Some(wall);
     rc.write(&dir)?;

@@ -67,6 +67,17 @@ pub trait Checkpoints {
     }
 }
 
+/// Refuses a checkpoint saved by another run: `saved` and `this` are (method name, seed).
+pub fn ensure_same_run(saved: (&str, u64), this: (&str, u64)) -> Result<()> {
+    if saved == this {
+        return Ok(());
+    }
+    Err(PipelineError::Checkpoint(format!(
+        "the checkpoint is {} seed {}'s, not {} seed {}'s",
+        saved.0, saved.1, this.0, this.1
+    )))
+}
+
 /// Keeps no checkpoints and never stops: a run from start to end in one go.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Ephemeral;

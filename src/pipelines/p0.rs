@@ -441,14 +441,7 @@ where
     M: Checkpointable,
 {
     let p: MethodProgress = ckpt.get_json("p0.progress")?;
-    if (p.method, p.seed) != (method, seed) {
-        return Err(PipelineError::Checkpoint(format!(
-            "the checkpoint is {} seed {}'s, not {} seed {seed}'s",
-            p.method.name(),
-            p.seed,
-            method.name()
-        )));
-    }
+    super::ensure_same_run((p.method.name(), p.seed), (method.name(), seed))?;
     lp.agent.load(ckpt)?;
     lp.load("loop", ckpt)?;
     if let Some(m) = model {

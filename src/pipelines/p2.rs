@@ -328,14 +328,7 @@ where
     let mut p = match store.load(method.name())? {
         Some(ckpt) => {
             let p: Progress = ckpt.get_json(PROGRESS)?;
-            if (p.method, p.seed) != (method, seed) {
-                return Err(PipelineError::Checkpoint(format!(
-                    "the checkpoint is {} seed {}'s, not {} seed {seed}'s",
-                    p.method.name(),
-                    p.seed,
-                    method.name()
-                )));
-            }
+            super::ensure_same_run((p.method.name(), p.seed), (method.name(), seed))?;
             agent.load(&ckpt)?;
             if let Some(m) = model_env.as_mut() {
                 m.model_mut().load_from(MODEL, &ckpt)?;
