@@ -81,3 +81,81 @@ fn quick_reproduction_writes_the_table_the_figure_and_the_runs() {
         String::from_utf8_lossy(&over.stderr)
     );
 }
+
+/// `tandem reproduce p2-maze --quick`: DQN alone and with the pixel model, on seeds 3 and 4
+/// (`--first-seed`), and the pixel model's F1 experiment with its picture.
+#[test]
+fn quick_maze_reproduction_writes_the_f1_table_and_the_frames() {
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("p2-maze-quick");
+    let _ = std::fs::remove_dir_all(&out);
+    let o = out.to_str().unwrap();
+    let args = [
+        "reproduce",
+        "p2-maze",
+        "--quick",
+        "--quiet",
+        "--seeds",
+        "2",
+        "--first-seed",
+        "3",
+        "--out",
+        o,
+    ];
+    let r = Command::new(env!("CARGO_BIN_EXE_tandem"))
+        .args(args)
+        .output()
+        .expect("the tandem binary runs");
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let read = |f: &str| std::fs::read_to_string(out.join(f)).unwrap();
+    let table: Value = serde_json::from_str(&read("table.json")).unwrap();
+    for m in ["model_free", "with_model"] {
+        assert_eq!(table[m]["seeds"], serde_json::json!([3, 4]), "{m}");
+        for seed in [3, 4] {
+            let rec: Value = serde_json::from_str(
+                &std::fs::read_to_string(
+                    out.join("runs")
+                        .join(format!("{m}__seed{seed}"))
+                        .join("record.json"),
+                )
+                .unwrap(),
+            )
+            .unwrap();
+            let n = rec["real_returns"].as_array().unwrap().len();
+            assert!((10..=20).contains(&n), "{m} seed {seed}: {n} episodes");
+        }
+    }
+    // --quick: the model method imagines after its first 5 real episodes.
+    assert!(
+        table["with_model"]["mean_imagined_episodes"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    // The F1 table: after 2 and 5 training episodes (--quick), each channel a score in [0, 1].
+    let f1 = table["f1"].as_object().unwrap();
+    assert_eq!(
+        f1.keys().collect::<Vec<_>>(),
+        ["after_2", "after_5"],
+        "{f1:?}"
+    );
+    for row in f1.values() {
+        for ch in ["agent", "obstacles", "goal"] {
+            let v = row[ch].as_f64().unwrap();
+            assert!((0.0..=1.0).contains(&v), "{ch}: {v}");
+        }
+    }
+    let quality: Value = serde_json::from_str(&read("quality.json")).unwrap();
+    assert_eq!(quality.as_array().unwrap().len(), 1); // the F1 experiment on the first seed
+    assert_eq!(quality[0]["seed"], 3);
+    let md = read("table.md");
+    assert!(
+        md.contains("DQN with the model") && md.contains("| 5 |"),
+        "{md}"
+    );
+    let fig7 = read("fig7.svg");
+    assert!(
+        fig7.starts_with("<svg") && fig7.contains("after 5"),
+        "{fig7}"
+    );
+    assert!(read("fig8.svg").contains("with_model"));
+}

@@ -55,6 +55,9 @@ pub enum ReproduceCommand {
     P0Pendulum(P0Args),
     /// p2 (model-augmented REINFORCE) on CartPole-v1: REINFORCE alone and with the learned model.
     P2Cartpole(super::reproduce_p2::P2Args),
+    /// p2 (model-augmented DQN) on its pixel maze: DQN alone and with the pixel model, and the
+    /// pixel model's F1 after 10, 100 and 300 training episodes.
+    P2Maze(super::reproduce_p2::P2Args),
     /// Combine p0-pendulum reproductions of disjoint seeds (e.g. one process per seed,
     /// `--first-seed`) into one table and figure; their settings must be equal.
     Merge(MergeArgs),
@@ -117,7 +120,12 @@ pub struct P0Args {
 pub fn run(cmd: ReproduceCommand) -> Result<()> {
     match cmd {
         ReproduceCommand::P0Pendulum(args) => p0_pendulum(&args),
-        ReproduceCommand::P2Cartpole(args) => super::reproduce_p2::p2_cartpole(&args),
+        ReproduceCommand::P2Cartpole(args) => {
+            super::reproduce_p2::p2(super::reproduce_p2::Experiment::CartPole, &args)
+        }
+        ReproduceCommand::P2Maze(args) => {
+            super::reproduce_p2::p2(super::reproduce_p2::Experiment::Maze, &args)
+        }
         ReproduceCommand::Merge(args) => merge_runs(&args),
     }
 }

@@ -1,19 +1,28 @@
-//! `tandem reproduce p2-cartpole`: p2's CartPole experiment (Sec. 4.1, Fig. 6). REINFORCE alone
-//! (`model_free`) and REINFORCE with episodes imagined by the learned model (`with_model`), over
-//! seeds, on gymnasium's CartPole-v1; writes in the output directory:
+//! `tandem reproduce p2-cartpole` and `tandem reproduce p2-maze`: p2's two experiments, each the
+//! model-free agent alone (`model_free`) and with episodes imagined by the learned model
+//! (`with_model`), over seeds:
 //!
-//! - `config.json`: the [`P2Config`] used, seeds, status and wall time;
+//! - CartPole-v1 (Sec. 4.1, Fig. 6): REINFORCE, the MLP model of `(s', r, done)`;
+//! - the pixel maze `PixelMaze-v0` (Sec. 4.2, Fig. 7 and 8): DQN from 16×16 RGB frames, the pixel
+//!   model; plus the pixel model's own experiment, its F1 per channel on held-out transitions
+//!   after 10, 100 and 300 training episodes, and its predicted frames (Fig. 7).
+//!
+//! Each writes in the output directory:
+//!
+//! - `config.json`: the settings used, seeds, status and wall time;
 //! - `runs/<method>__seed<k>/record.json` and `curve.csv`: each run's return per real episode;
 //! - `table.md`, `table.json`: real episodes to solve per method (`episodes_to_solve`: mean and
 //!   standard error over the seeds that solved it, `per_seed` with `null` where a seed never
-//!   did) and the ratio of the means, with-model over model-free;
-//! - `fig6.svg`: p2's Fig. 6, the mean over seeds of the windowed training return against real
-//!   episodes.
+//!   did), the ratio of the means, with-model over model-free, and for the maze `f1`;
+//! - `fig6.svg` (CartPole) or `fig8.svg` (maze): the mean over seeds of the windowed training
+//!   return against real episodes; for the maze also `fig7.svg` (true and predicted frames) and
+//!   `quality.json` (the F1 experiment per seed).
 //!
-//! "Solved" is the mean return of the last 100 real episodes reaching 475 (p2 gives no
-//! definition; this is gymnasium's CartPole-v1 threshold). SIGINT or SIGTERM stops the jobs
-//! between episodes and exits with 130 or 143; this command keeps no checkpoints on disk (no
-//! `--resume`): a stopped reproduction is started again.
+//! "Solved" is the mean return of the last 100 real episodes reaching 475 on CartPole
+//! (gymnasium's threshold) and 20 on the maze (ours); p2 defines neither. SIGINT or SIGTERM
+//! stops the jobs between episodes and exits with 130 or 143; this command keeps no checkpoints
+//! on disk (no `--resume`): a stopped reproduction is started again. `--first-seed` lets
+//! processes split the seeds.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -25,6 +34,7 @@ use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use tandem::interrupt::{Stop, EXIT_SIGINT};
 use tandem::pipelines::p2::{cartpole, Event, Method, P2Config, RunRecord};
+use tandem::pipelines::p2_maze::{self, MazeConfig, Quality, QualityConfig};
 use tandem::pipelines::{Checkpoints, Result as PipelineResult};
 use tandem::report::{ensure_finite, to_json_pretty, Curve, Figure, SamplesToTarget};
 use tandem::run::{csv, Existing, Layout, RunDir};
@@ -32,16 +42,19 @@ use tandem_nn::Checkpoint;
 
 use super::{CliError, Result};
 
-/// Arguments of `tandem reproduce p2-cartpole`.
+/// Arguments of `tandem reproduce p2-cartpole` and `p2-maze`.
 #[derive(Debug, Args)]
 pub struct P2Args {
-    /// Number of seeds (0, 1, ..., N-1) [default: 10, as p2 averages over 10 runs].
+    /// Number of seeds (S, S+1, ..., S+N-1) [default: 10, as p2 averages over 10 runs].
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub seeds: Option<u64>,
+    /// The first seed S (processes can split the seeds).
+    #[arg(long, default_value_t = 0)]
+    pub first_seed: u64,
     /// Small smoke configuration (a small model, 20 real episodes; numbers are meaningless).
     #[arg(long)]
     pub quick: bool,
-    /// Output directory (default `runs/p2-cartpole__<time>/`).
+    /// Output directory (default `runs/<experiment>__<time>/`).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Parallel jobs, one thread each (one job per method and seed).
@@ -54,10 +67,241 @@ pub struct P2Args {
     /// reproduction there is an error.
     #[arg(long)]
     pub overwrite: bool,
-    /// TOML file of settings (`P2Config`; fields not given keep their defaults, unknown keys
-    /// are errors). Not with `--quick`.
+    /// TOML file of settings (`P2Config` for CartPole, `MazeConfig` for the maze; fields not
+    /// given keep their defaults, unknown keys are errors). Not with `--quick`.
     #[arg(long, conflicts_with = "quick")]
     pub config: Option<PathBuf>,
+}
+
+/// Which of p2's experiments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Experiment {
+    /// REINFORCE on CartPole-v1 (Sec. 4.1).
+    CartPole,
+    /// DQN on the pixel maze (Sec. 4.2).
+    Maze,
+}
+
+impl Experiment {
+    /// The command's name, the default output directory's prefix.
+    pub fn name(self) -> &'static str {
+        match self {
+            Experiment::CartPole => "p2-cartpole",
+            Experiment::Maze => "p2-maze",
+        }
+    }
+
+    fn env(self) -> &'static str {
+        match self {
+            Experiment::CartPole => "CartPole-v1",
+            Experiment::Maze => "PixelMaze-v0",
+        }
+    }
+
+    fn agent(self) -> &'static str {
+        match self {
+            Experiment::CartPole => "REINFORCE",
+            Experiment::Maze => "DQN",
+        }
+    }
+
+    /// p2's real episodes to solve: alone, with the model.
+    fn paper(self) -> (u64, u64) {
+        match self {
+            Experiment::CartPole => (650, 400),
+            Experiment::Maze => (700, 250),
+        }
+    }
+
+    /// The learning-curve figure: file and p2's number.
+    fn figure(self) -> (&'static str, u32) {
+        match self {
+            Experiment::CartPole => ("fig6.svg", 6),
+            Experiment::Maze => ("fig8.svg", 8),
+        }
+    }
+
+    /// The files and folders the command writes (what `--overwrite` removes).
+    pub fn layout(self) -> Layout {
+        match self {
+            Experiment::CartPole => LAYOUT,
+            Experiment::Maze => MAZE_LAYOUT,
+        }
+    }
+}
+
+/// The settings of either experiment (serialized as the inner config).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Settings {
+    /// CartPole's.
+    CartPole(P2Config),
+    /// The maze's, with the pixel model's F1 experiment.
+    Maze {
+        /// The runs.
+        runs: MazeConfig,
+        /// The F1 experiment.
+        quality: QualityConfig,
+    },
+}
+
+impl Settings {
+    fn defaults(exp: Experiment, quick: bool) -> Self {
+        match (exp, quick) {
+            (Experiment::CartPole, false) => Settings::CartPole(P2Config::default()),
+            (Experiment::CartPole, true) => Settings::CartPole(quick_config()),
+            (Experiment::Maze, false) => Settings::Maze {
+                runs: MazeConfig::default(),
+                quality: QualityConfig::default(),
+            },
+            (Experiment::Maze, true) => {
+                let (runs, quality) = quick_maze_config();
+                Settings::Maze { runs, quality }
+            }
+        }
+    }
+
+    fn from_toml(exp: Experiment, text: &str) -> std::result::Result<Self, String> {
+        match exp {
+            Experiment::CartPole => toml::from_str(text)
+                .map(Settings::CartPole)
+                .map_err(|e| e.to_string()),
+            Experiment::Maze => {
+                let runs: MazeConfig = toml::from_str(text).map_err(|e| e.to_string())?;
+                let quality = QualityConfig::default();
+                Ok(Settings::Maze { runs, quality })
+            }
+        }
+    }
+
+    fn validate(&self) -> PipelineResult<()> {
+        match self {
+            Settings::CartPole(c) => c.validate(),
+            Settings::Maze { runs, .. } => runs.validate(),
+        }
+    }
+
+    fn solved(&self) -> (f64, usize, u64) {
+        match self {
+            Settings::CartPole(c) => (c.solved_return, c.solved_window, c.max_real_episodes),
+            Settings::Maze { runs: c, .. } => {
+                (c.solved_return, c.solved_window, c.max_real_episodes)
+            }
+        }
+    }
+
+    fn solved_text(&self) -> String {
+        let (target, window, _) = self.solved();
+        match self {
+            Settings::CartPole(_) => format!(
+                "mean return of the last {window} real episodes >= {target} (p2 gives no \
+                 definition; gymnasium's CartPole-v1 reward threshold)"
+            ),
+            Settings::Maze { .. } => format!(
+                "mean training return of the last {window} real episodes >= {target} (p2 gives \
+                 no definition; ours: about half the best return, 36 to 49 by the start cell, \
+                 fixed before any run)"
+            ),
+        }
+    }
+
+    fn run(
+        &self,
+        method: Method,
+        seed: u64,
+        store: &mut dyn Checkpoints,
+        on_event: &mut dyn FnMut(Event),
+    ) -> PipelineResult<RunRecord> {
+        match self {
+            Settings::CartPole(c) => cartpole(method, c, seed, store, on_event),
+            Settings::Maze { runs, .. } => p2_maze::run(method, runs, seed, store, on_event),
+        }
+    }
+
+    /// The settings that matter, in words.
+    fn describe(&self) -> String {
+        match self {
+            Settings::CartPole(cfg) => format!(
+                "REINFORCE {:?} hidden, Adam {}, γ = {}, {:?} baseline, an update every {} \
+                 episode(s); model {:?} hidden, {:?}; the first {} episodes real only, then {} \
+                 imagined per {} real; model refit every {} real episode(s), {} epoch(s) over at \
+                 most {} real transitions drawn from all, minibatch {}; at most {} real episodes \
+                 per run, each run stops once solved (later points of the curves average the \
+                 seeds still running)",
+                cfg.reinforce.hidden,
+                cfg.reinforce.learning_rate,
+                cfg.reinforce.gamma,
+                cfg.reinforce.baseline,
+                cfg.reinforce.episodes_per_update,
+                cfg.model.hidden,
+                cfg.model.optimizer,
+                cfg.real_only_episodes,
+                cfg.imagined_per_cycle,
+                cfg.real_per_cycle,
+                cfg.fit_every,
+                cfg.fit.epochs,
+                cfg.fit_rows,
+                cfg.fit.batch_size,
+                cfg.max_real_episodes,
+            ),
+            Settings::Maze { runs: c, quality } => format!(
+                "DQN (conv Q-network {:?} channels, {:?} hidden; Adam {}, constant; γ = {}; \
+                 double DQN; replay {}; ε {} → {} over {} agent steps, imagined steps \
+                 included; an update every {} steps after {} warm-up steps; target copy every \
+                 {}); pixel model {:?} channels, {} features, {} factors, {:?}, threshold {}; \
+                 the first {} episodes real only, then {} imagined per {} real, imagined \
+                 transitions in the same replay buffer; model refit every {} real episode(s), \
+                 {} minibatches of {} drawn from all real transitions; at most {} real episodes \
+                 per run, each run stops once solved. F1 experiment: a with-model run of the \
+                 first seed that goes on past solved; copies of the model after {:?} real \
+                 episodes, each scored on the next {} real episodes",
+                c.dqn.conv.channels,
+                c.dqn.hidden,
+                c.dqn.learning_rate,
+                c.dqn.gamma,
+                c.dqn.buffer_size,
+                c.dqn.exploration_initial_eps,
+                c.dqn.exploration_final_eps,
+                c.dqn.exploration_steps,
+                c.dqn.train_freq,
+                c.dqn.learning_starts,
+                c.dqn.target_update_interval,
+                c.model.channels,
+                c.model.features,
+                c.model.factors,
+                c.model.optimizer,
+                c.model.threshold,
+                c.real_only_episodes,
+                c.imagined_per_cycle,
+                c.real_per_cycle,
+                c.fit_every,
+                c.fit.steps,
+                c.fit.batch_size,
+                c.max_real_episodes,
+                quality.checkpoints,
+                quality.heldout_episodes,
+            ),
+        }
+    }
+}
+
+/// The maze's `--quick` configuration: a tiny model, 20 real episodes, F1 after 2 and 5.
+pub fn quick_maze_config() -> (MazeConfig, QualityConfig) {
+    let mut c = MazeConfig::default();
+    c.model.channels = [4, 4, 4];
+    c.model.features = 16;
+    c.model.factors = 16;
+    c.fit.steps = 2;
+    c.real_only_episodes = 5;
+    c.max_real_episodes = 20;
+    c.solved_window = 10;
+    c.dqn.learning_starts = 100;
+    c.dqn.buffer_size = 2000;
+    let q = QualityConfig {
+        checkpoints: vec![2, 5],
+        heldout_episodes: 2,
+    };
+    (c, q)
 }
 
 /// The `--quick` configuration: the same loop with a small model and 20 real episodes.
@@ -74,6 +318,20 @@ pub fn quick_config() -> P2Config {
 /// The files and folders `tandem reproduce p2-cartpole` writes (what `--overwrite` removes).
 pub const LAYOUT: Layout = Layout {
     owned: &["config.json", "runs", "table.json", "table.md", "fig6.svg"],
+    resumable: false,
+};
+
+/// The files and folders `tandem reproduce p2-maze` writes.
+pub const MAZE_LAYOUT: Layout = Layout {
+    owned: &[
+        "config.json",
+        "runs",
+        "table.json",
+        "table.md",
+        "fig7.svg",
+        "fig8.svg",
+        "quality.json",
+    ],
     resumable: false,
 };
 
@@ -109,20 +367,65 @@ pub struct Ratio {
     pub note: String,
 }
 
-/// p2's CartPole table: the two methods and their ratio.
+/// F1 per channel of the pixel model.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct F1Row {
+    /// The agent (blue).
+    pub agent: f64,
+    /// The obstacles (red).
+    pub obstacles: f64,
+    /// The goal (green).
+    pub goal: f64,
+}
+
+/// p2's table: the two methods and their ratio (and for the maze the pixel model's F1).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct P2Table {
-    /// REINFORCE alone.
+    /// The agent alone.
     pub model_free: MethodRow,
-    /// REINFORCE with imagined episodes.
+    /// The agent with imagined episodes.
     pub with_model: MethodRow,
     /// With-model over model-free mean episodes to solve.
     pub with_model_over_model_free: Ratio,
     /// The definition of "solved".
     pub solved: String,
+    /// The maze's pixel model: F1 after `after_<n>` training episodes, mean over the seeds of
+    /// the F1 experiment.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub f1: Option<std::collections::BTreeMap<String, F1Row>>,
 }
 
-fn method_row(records: &[RunRecord], m: Method, cfg: &P2Config) -> (MethodRow, f64, bool) {
+/// The F1 table from the F1 experiment's seeds: means per number of training episodes.
+pub fn f1_table(qs: &[Quality]) -> Option<std::collections::BTreeMap<String, F1Row>> {
+    let first = qs.first()?;
+    let n = qs.len() as f64;
+    Some(
+        first
+            .points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let mean = |f: fn(&tandem::pipelines::p2_maze::QualityPoint) -> f64| {
+                    qs.iter()
+                        .filter_map(|q| q.points.get(i))
+                        .map(f)
+                        .sum::<f64>()
+                        / n
+                };
+                (
+                    format!("after_{}", p.episodes),
+                    F1Row {
+                        agent: mean(|p| p.agent),
+                        obstacles: mean(|p| p.obstacles),
+                        goal: mean(|p| p.goal),
+                    },
+                )
+            })
+            .collect(),
+    )
+}
+
+fn method_row(records: &[RunRecord], m: Method, target: f64) -> (MethodRow, f64, bool) {
     let runs: Vec<&RunRecord> = records.iter().filter(|r| r.method == m).collect();
     let per_seed: Vec<Option<u64>> = runs.iter().map(|r| r.solved_at).collect();
     let used: Vec<f64> = runs
@@ -136,7 +439,7 @@ fn method_row(records: &[RunRecord], m: Method, cfg: &P2Config) -> (MethodRow, f
         .unwrap_or(0);
     let n = runs.len().max(1) as f64;
     let row = MethodRow {
-        episodes_to_solve: SamplesToTarget::from_seeds(cfg.solved_return, per_seed, searched),
+        episodes_to_solve: SamplesToTarget::from_seeds(target, per_seed, searched),
         mean_real_samples: runs.iter().map(|r| r.real_samples as f64).sum::<f64>() / n,
         mean_imagined_episodes: runs.iter().map(|r| r.imagined_episodes as f64).sum::<f64>() / n,
         seeds: runs.iter().map(|r| r.seed).collect(),
@@ -145,10 +448,10 @@ fn method_row(records: &[RunRecord], m: Method, cfg: &P2Config) -> (MethodRow, f
     (row, used.iter().sum::<f64>() / n, short)
 }
 
-/// The table from the runs' records.
-pub fn table(records: &[RunRecord], cfg: &P2Config) -> P2Table {
-    let (model_free, mf, mf_short) = method_row(records, Method::ModelFree, cfg);
-    let (with_model, wm, wm_short) = method_row(records, Method::WithModel, cfg);
+/// The table from the runs' records, with "solved" at `target` (described by `solved`).
+pub fn table(records: &[RunRecord], target: f64, solved: String) -> P2Table {
+    let (model_free, mf, mf_short) = method_row(records, Method::ModelFree, target);
+    let (with_model, wm, wm_short) = method_row(records, Method::WithModel, target);
     let bound = match (mf_short, wm_short) {
         (false, false) => None,
         (true, false) => Some("upper"),
@@ -167,11 +470,8 @@ pub fn table(records: &[RunRecord], cfg: &P2Config) -> P2Table {
                    episodes it ran"
                 .into(),
         },
-        solved: format!(
-            "mean return of the last {} real episodes >= {} (p2 gives no definition; \
-             gymnasium's CartPole-v1 reward threshold)",
-            cfg.solved_window, cfg.solved_return
-        ),
+        solved,
+        f1: None,
     }
 }
 
@@ -187,18 +487,30 @@ fn cell(e: &SamplesToTarget) -> String {
     }
 }
 
+/// p2's F1 table (Sec. 4.2): agent, obstacles, goal after 10, 100 and 300 training episodes.
+const PAPER_F1: [(u64, [f64; 3]); 3] = [
+    (10, [0.83, 0.22, 0.97]),
+    (100, [0.92, 0.83, 0.99]),
+    (300, [0.98, 0.93, 1.0]),
+];
+
 /// The table as Markdown, with the settings that matter and the wall time.
-pub fn markdown(t: &P2Table, cfg: &P2Config, wall: f64) -> String {
+pub fn markdown(t: &P2Table, exp: Experiment, settings: &str, wall: f64) -> String {
+    let (paper_mf, paper_wm) = exp.paper();
+    let agent = exp.agent();
+    let alone = format!("{agent} alone");
+    let with = format!("{agent} with the model");
     let rows = [
-        ("REINFORCE alone", &t.model_free, 650),
-        ("REINFORCE with the model", &t.with_model, 400),
+        (alone.as_str(), &t.model_free, paper_mf),
+        (with.as_str(), &t.with_model, paper_wm),
     ];
     let n = t.model_free.seeds.len().max(t.with_model.seeds.len());
     let mut s = format!(
-        "# p2 CartPole-v1: real episodes to solve ({n} seeds)\n\nSolved: {}. Real episodes \
+        "# p2 {}: real episodes to solve ({n} seeds)\n\nSolved: {}. Real episodes \
          are counted exactly; imagined episodes cost none. Mean ± standard error over the \
          seeds that solved it.\n\n| Method | Real episodes to solve | Paper | Imagined \
          episodes (mean) |\n|---|---|---|---|\n",
+        exp.env(),
         t.solved
     );
     for (label, r, paper) in rows {
@@ -226,40 +538,40 @@ pub fn markdown(t: &P2Table, cfg: &P2Config, wall: f64) -> String {
         None => "",
     };
     s.push_str(&format!(
-        "\nWith the model over alone ({}): {bound}{} (paper 400 / 650 = 0.62).\n",
+        "\nWith the model over alone ({}): {bound}{} (paper {paper_wm} / {paper_mf} = {:.2}).\n",
         q.note,
         q.ratio.map_or("n/a".into(), |r| format!("{r:.2}")),
+        paper_wm as f64 / paper_mf as f64,
     ));
-    s.push_str(&format!(
-        "\nSettings: REINFORCE {:?} hidden, Adam {}, γ = {}, {:?} baseline, an update every {} \
-         episode(s); model {:?} hidden, {:?}; the first {} episodes real only, then {} imagined \
-         per {} real; model refit every {} real episode(s), {} epoch(s) over at most {} real \
-         transitions drawn from all, minibatch {}; at most {} real episodes per run, each run \
-         stops once solved (later points of the curves average the seeds still running). Wall \
-         time {wall:.0} s.\n",
-        cfg.reinforce.hidden,
-        cfg.reinforce.learning_rate,
-        cfg.reinforce.gamma,
-        cfg.reinforce.baseline,
-        cfg.reinforce.episodes_per_update,
-        cfg.model.hidden,
-        cfg.model.optimizer,
-        cfg.real_only_episodes,
-        cfg.imagined_per_cycle,
-        cfg.real_per_cycle,
-        cfg.fit_every,
-        cfg.fit.epochs,
-        cfg.fit_rows,
-        cfg.fit.batch_size,
-        cfg.max_real_episodes,
-    ));
+    if let Some(f1) = &t.f1 {
+        s.push_str(
+            "\nPixel model, F1 per channel on held-out real transitions (mean over the F1 \
+             experiment's seeds; p2's in brackets):\n\n| Training episodes | Agent | Obstacles \
+             | Goal |\n|---|---|---|---|\n",
+        );
+        for (key, r) in f1 {
+            let eps: u64 = key.trim_start_matches("after_").parse().unwrap_or(0);
+            let paper = PAPER_F1.iter().find(|(e, _)| *e == eps).map(|(_, v)| *v);
+            let c = |v: f64, i: usize| match paper {
+                Some(p) => format!("{v:.2} ({:.2})", p[i]),
+                None => format!("{v:.2}"),
+            };
+            s.push_str(&format!(
+                "| {eps} | {} | {} | {} |\n",
+                c(r.agent, 0),
+                c(r.obstacles, 1),
+                c(r.goal, 2)
+            ));
+        }
+    }
+    s.push_str(&format!("\nSettings: {settings}. Wall time {wall:.0} s.\n"));
     s
 }
 
-/// Fig. 6: the mean over seeds of the training return (mean of the last `solved_window` real
-/// episodes) against real episodes, every 10 episodes.
-pub fn fig6(records: &[RunRecord], cfg: &P2Config) -> Figure {
-    let w = cfg.solved_window;
+/// Fig. 6 (CartPole) or 8 (maze): the mean over seeds of the training return (mean of the last
+/// `window` real episodes) against real episodes, every 10 episodes.
+pub fn curves(records: &[RunRecord], exp: Experiment, window: usize) -> Figure {
+    let w = window;
     let curves = Method::ALL
         .iter()
         .map(|&m| {
@@ -280,7 +592,12 @@ pub fn fig6(records: &[RunRecord], cfg: &P2Config) -> Figure {
         })
         .collect();
     Figure {
-        title: "p2 Fig. 6: REINFORCE on CartPole-v1, alone and with the learned model".into(),
+        title: format!(
+            "p2 Fig. {}: {} on {}, alone and with the learned model",
+            exp.figure().1,
+            exp.agent(),
+            exp.env()
+        ),
         x_label: "real episodes".into(),
         y_label: format!("training return (mean of the last {w} real episodes)"),
         curves,
@@ -327,44 +644,135 @@ fn write_record(dir: &RunDir, r: &RunRecord) -> Result<()> {
     tandem_nn::write_atomic(&path, text.as_bytes()).map_err(io_err(path))
 }
 
+/// Fig. 7: for each point of the F1 experiment, the shown held-out transition's last input
+/// frame, its true next frame and the model's prediction (probabilities as colour intensity,
+/// pixels at or above the threshold outlined). Channels are drawn as colours (red obstacles,
+/// green goal, blue agent).
+pub fn fig7(q: &Quality, threshold: f64) -> String {
+    use std::fmt::Write as _;
+    const PX: usize = 8; // screen pixels per image pixel
+    let side = 16;
+    let img = side * PX;
+    let gap = 24;
+    let cols = 3;
+    let w = cols * img + (cols + 1) * gap + 110;
+    let h = q.points.len() * (img + gap) + 2 * gap + 20;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" font-family="sans-serif" font-size="12">"#
+    );
+    let _ = writeln!(
+        s,
+        r#"<text x="{gap}" y="16">p2 Fig. 7: the pixel model's next frame after N training episodes (seed {})</text>"#,
+        q.seed
+    );
+    for (c, label) in ["input (last frame)", "true next frame", "predicted"]
+        .iter()
+        .enumerate()
+    {
+        let x = 110 + gap + c * (img + gap);
+        let _ = writeln!(s, r#"<text x="{x}" y="{}">{label}</text>"#, 2 * gap + 4);
+    }
+    let draw = |s: &mut String, x0: usize, y0: usize, frame: &[f32], outline: bool| {
+        let _ = writeln!(
+            s,
+            r#"<rect x="{x0}" y="{y0}" width="{img}" height="{img}" fill="black"/>"#
+        );
+        for y in 0..side {
+            for x in 0..side {
+                let v = |c: usize| frame.get((y * side + x) * 3 + c).copied().unwrap_or(0.0);
+                let (r, g, b) = (v(0), v(1), v(2));
+                if r.max(g).max(b) <= 0.02 {
+                    continue;
+                }
+                let q8 = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+                let on = outline && f64::from(r.max(g).max(b)) >= threshold;
+                let _ = writeln!(
+                    s,
+                    r##"<rect x="{}" y="{}" width="{PX}" height="{PX}" fill="#{:02x}{:02x}{:02x}"{}/>"##,
+                    x0 + x * PX,
+                    y0 + y * PX,
+                    q8(r),
+                    q8(g),
+                    q8(b),
+                    if on {
+                        r#" stroke="white" stroke-width="0.5""#
+                    } else {
+                        ""
+                    }
+                );
+            }
+        }
+    };
+    for (i, p) in q.points.iter().enumerate() {
+        let y0 = 2 * gap + 14 + i * (img + gap);
+        let _ = writeln!(
+            s,
+            r#"<text x="{gap}" y="{}">after {}</text><text x="{gap}" y="{}">episodes</text>"#,
+            y0 + img / 2 - 6,
+            p.episodes,
+            y0 + img / 2 + 10
+        );
+        let x = |c: usize| 110 + gap + c * (img + gap);
+        draw(&mut s, x(0), y0, &p.shown_input, false);
+        draw(&mut s, x(1), y0, &p.shown_truth, false);
+        draw(&mut s, x(2), y0, &p.predicted, true);
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
 /// What `config.json` records.
 #[derive(Debug, Serialize)]
 struct RunConfig<'a> {
-    config: &'a P2Config,
+    config: &'a Settings,
     seeds: u64,
+    first_seed: u64,
     quick: bool,
     jobs: u64,
     status: &'a str,
     wall_seconds: Option<f64>,
 }
 
-/// Runs `tandem reproduce p2-cartpole`.
-pub fn p2_cartpole(args: &P2Args) -> Result<()> {
+/// One unit of work.
+#[derive(Debug, Clone, Copy)]
+enum Job {
+    /// A run of one method and seed.
+    Run(u64, Method),
+    /// The pixel model's F1 experiment for one seed.
+    Quality(u64),
+}
+
+/// Runs `tandem reproduce p2-cartpole` or `p2-maze`.
+pub fn p2(exp: Experiment, args: &P2Args) -> Result<()> {
     tandem_nn::set_gemm_threads(1);
     let stop = Stop::on_signals().map_err(|e| CliError::Other(format!("signal handlers: {e}")))?;
-    let cfg = match (&args.config, args.quick) {
-        (Some(path), _) => {
+    let settings = match &args.config {
+        Some(path) => {
             let what = format!("--config {}", path.display());
             let text = std::fs::read_to_string(path).map_err(io_err(path.clone()))?;
-            toml::from_str(&text).map_err(|e| CliError::input(&what, e.to_string()))?
+            Settings::from_toml(exp, &text).map_err(|e| CliError::input(&what, e))?
         }
-        (None, true) => quick_config(),
-        (None, false) => P2Config::default(),
+        None => Settings::defaults(exp, args.quick),
     };
-    cfg.validate().map_err(CliError::other)?;
-    ensure_finite(&cfg).map_err(CliError::other)?;
+    settings.validate().map_err(CliError::other)?;
+    ensure_finite(&settings).map_err(CliError::other)?;
     let seeds = args.seeds.unwrap_or(10);
+    let first = args.first_seed;
+    let seed_list: Vec<u64> = (first..first.saturating_add(seeds)).collect();
     let existing = if args.overwrite {
         Existing::Overwrite
     } else {
         Existing::Refuse
     };
-    let dir = RunDir::create(args.out.as_deref(), "p2-cartpole", LAYOUT, existing)
+    let dir = RunDir::create(args.out.as_deref(), exp.name(), exp.layout(), existing)
         .map_err(CliError::other)?;
     let write_config = |status: &str, wall: Option<f64>| -> Result<()> {
         let rc = RunConfig {
-            config: &cfg,
+            config: &settings,
             seeds,
+            first_seed: first,
             quick: args.quick,
             jobs: args.jobs,
             status,
@@ -385,35 +793,65 @@ pub fn p2_cartpole(args: &P2Args) -> Result<()> {
         ProgressStyle::with_template("{prefix:>22} [{bar:30}] {pos}/{len} {msg} ({elapsed})")
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> ");
+    // The F1 experiment (the maze's, on the first seed) first: its job is the longest.
+    let mut jobs: Vec<Job> = Vec::new();
+    if let Settings::Maze { .. } = settings {
+        jobs.push(Job::Quality(first));
+    }
+    for &seed in &seed_list {
+        jobs.extend(Method::ALL.iter().map(|&m| Job::Run(seed, m)));
+    }
+    let (_, _, max_episodes) = settings.solved();
     let next = AtomicUsize::new(0);
     let records: Mutex<Vec<RunRecord>> = Mutex::new(Vec::new());
+    let qualities: Mutex<Vec<Quality>> = Mutex::new(Vec::new());
     let errors: Mutex<Vec<(u64, String)>> = Mutex::new(Vec::new());
-    let jobs = 2 * seeds;
     std::thread::scope(|scope| {
-        for _ in 0..args.jobs.min(jobs) {
+        for _ in 0..(args.jobs as usize).min(jobs.len()) {
             scope.spawn(|| loop {
-                let k = next.fetch_add(1, Ordering::Relaxed) as u64;
-                if k >= jobs || stop.requested() {
+                let k = next.fetch_add(1, Ordering::Relaxed);
+                if k >= jobs.len() || stop.requested() {
                     break;
                 }
-                let (seed, m) = (k / 2, Method::ALL[(k % 2) as usize]);
-                let bar = multi.add(ProgressBar::new(cfg.max_real_episodes));
-                bar.set_style(style.clone());
-                bar.set_prefix(format!("seed {seed} {}", m.name()));
-                let mut store = StopOnSignal(stop.clone());
-                let r = cartpole(m, &cfg, seed, &mut store, &mut |e| {
-                    if let Event::Real { episode, ret, .. } = e {
-                        bar.set_position(episode + 1);
-                        bar.set_message(format!("return {ret:.0}"));
+                let (seed, r) = match jobs[k] {
+                    Job::Run(seed, m) => {
+                        let bar = multi.add(ProgressBar::new(max_episodes));
+                        bar.set_style(style.clone());
+                        bar.set_prefix(format!("seed {seed} {}", m.name()));
+                        let mut store = StopOnSignal(stop.clone());
+                        let r = settings.run(m, seed, &mut store, &mut |e| {
+                            if let Event::Real { episode, ret, .. } = e {
+                                bar.set_position(episode + 1);
+                                bar.set_message(format!("return {ret:.0}"));
+                            }
+                        });
+                        bar.finish();
+                        let r = r.map_err(|e| e.to_string()).and_then(|r| {
+                            write_record(&dir, &r).map_err(|e| e.to_string())?;
+                            records.lock().expect("no panics holding it").push(r);
+                            Ok(())
+                        });
+                        (seed, r)
                     }
-                });
-                bar.finish();
-                let r = r.map_err(|e| e.to_string()).and_then(|r| {
-                    write_record(&dir, &r).map_err(|e| e.to_string())?;
-                    Ok(r)
-                });
+                    Job::Quality(seed) => {
+                        let Settings::Maze { runs, quality } = &settings else {
+                            continue;
+                        };
+                        let bar = multi.add(ProgressBar::new_spinner());
+                        bar.set_prefix(format!("seed {seed} model F1"));
+                        bar.set_message(
+                            "a with-model run past solved, scoring copies of the model",
+                        );
+                        let store = StopOnSignal(stop.clone());
+                        let r = p2_maze::model_quality(runs, quality, seed, &store)
+                            .map(|q| qualities.lock().expect("no panics holding it").push(q))
+                            .map_err(|e| e.to_string());
+                        bar.finish();
+                        (seed, r)
+                    }
+                };
                 match r {
-                    Ok(r) => records.lock().expect("no panics holding it").push(r),
+                    Ok(()) => {}
                     Err(_) if stop.requested() => {}
                     Err(e) => errors.lock().expect("no panics holding it").push((seed, e)),
                 }
@@ -438,15 +876,26 @@ pub fn p2_cartpole(args: &P2Args) -> Result<()> {
     }
     let mut records = records.into_inner().expect("threads joined");
     records.sort_by_key(|r| (r.seed, r.method.name()));
-    let t = table(&records, &cfg);
+    let mut qualities = qualities.into_inner().expect("threads joined");
+    qualities.sort_by_key(|q| q.seed);
+    let (target, window, _) = settings.solved();
+    let mut t = table(&records, target, settings.solved_text());
+    t.f1 = f1_table(&qualities);
     ensure_finite(&t).map_err(CliError::other)?;
-    let md = markdown(&t, &cfg, wall);
+    let md = markdown(&t, exp, &settings.describe(), wall);
     let json = to_json_pretty(&t).map_err(|e| CliError::Other(format!("table.json: {e}")))?;
-    for (name, text) in [
+    let mut files = vec![
         ("table.json", json),
         ("table.md", md.clone()),
-        ("fig6.svg", fig6(&records, &cfg).svg()),
-    ] {
+        (exp.figure().0, curves(&records, exp, window).svg()),
+    ];
+    if let (Settings::Maze { runs, .. }, Some(q)) = (&settings, qualities.first()) {
+        files.push(("fig7.svg", fig7(q, runs.model.threshold)));
+        let text = to_json_pretty(&qualities)
+            .map_err(|e| CliError::Other(format!("quality.json: {e}")))?;
+        files.push(("quality.json", text));
+    }
+    for (name, text) in files {
         dir.write(name, &text)
             .map_err(io_err(dir.path().join(name)))?;
     }
@@ -477,6 +926,7 @@ mod tests {
     #[test]
     fn the_table_counts_episodes_to_solve_and_bounds_the_ratio() {
         let cfg = P2Config::default();
+        let solved = Settings::CartPole(cfg.clone()).solved_text();
         let recs = [
             // Model-free: 600 and never within its 2000 episodes.
             record(Method::ModelFree, 0, 600, Some(600)),
@@ -485,7 +935,7 @@ mod tests {
             record(Method::WithModel, 0, 300, Some(300)),
             record(Method::WithModel, 1, 500, Some(500)),
         ];
-        let t = table(&recs, &cfg);
+        let t = table(&recs, cfg.solved_return, solved);
         let mf = &t.model_free.episodes_to_solve;
         assert_eq!(mf.per_seed, [Some(600), None]);
         assert_eq!(
@@ -502,7 +952,7 @@ mod tests {
         let q = &t.with_model_over_model_free;
         assert!((q.ratio.unwrap() - 400.0 / 1300.0).abs() < 1e-12);
         assert_eq!(q.bound.as_deref(), Some("upper"));
-        let md = markdown(&t, &cfg, 1.0);
+        let md = markdown(&t, Experiment::CartPole, "s", 1.0);
         assert!(md.contains("at most 0.31"), "{md}");
         assert!(md.contains("- REINFORCE alone: 600, never"), "{md}");
         // The JSON has the keys the issue names, with null for the seed that never solved it.
@@ -512,6 +962,42 @@ mod tests {
             serde_json::Value::Null
         );
         assert_eq!(v["with_model"]["episodes_to_solve"]["mean"], 400.0);
+    }
+
+    fn point(episodes: u64, agent: f64) -> tandem::pipelines::p2_maze::QualityPoint {
+        let mut truth = vec![0.0f32; 768];
+        truth[(3 * 16 + 5) * 3 + 2] = 1.0; // one blue (agent) pixel at row 3, column 5
+        tandem::pipelines::p2_maze::QualityPoint {
+            episodes,
+            transitions: 10 * episodes,
+            heldout_transitions: 100,
+            agent,
+            obstacles: 0.5,
+            goal: 1.0,
+            shown_input: vec![0.0; 768],
+            shown_truth: truth,
+            predicted: vec![0.0; 768],
+        }
+    }
+
+    #[test]
+    fn the_f1_table_averages_the_seeds_and_fig7_draws_the_frames() {
+        let q = |seed, a10, a100| Quality {
+            seed,
+            points: vec![point(10, a10), point(100, a100)],
+            real_returns: vec![],
+            wall_seconds: 1.0,
+        };
+        let t = f1_table(&[q(0, 0.2, 0.8), q(1, 0.4, 1.0)]).unwrap();
+        assert_eq!(t.keys().collect::<Vec<_>>(), ["after_10", "after_100"]);
+        assert!((t["after_10"].agent - 0.3).abs() < 1e-12);
+        assert!((t["after_100"].agent - 0.9).abs() < 1e-12);
+        assert_eq!(t["after_100"].goal, 1.0);
+        assert!(f1_table(&[]).is_none());
+        let svg = fig7(&q(0, 0.2, 0.8), 0.2);
+        // The one lit pixel of the true frame, blue, at 8 screen pixels per image pixel.
+        assert_eq!(svg.matches("fill=\"#0000ff\"").count(), 2, "{svg}");
+        assert!(svg.contains("after 100") && svg.ends_with("</svg>\n"));
     }
 
     /// The committed results (`results/p2-cartpole/`) read back as a table.

@@ -80,7 +80,12 @@ use crate::model::ModelError;
 use crate::train::{nn_other, Opt, OptimizerConfig};
 
 /// Settings of a [`PixelModel`]. `Default` is p2's maze: 16×16 RGB frames, 4 of them, 5 actions,
-/// threshold 0.2 (p2); the layer widths and Adam are ours (p2 gives none).
+/// batch normalization, threshold 0.2 (p2); the layer widths and Adam's learning rate are ours
+/// (p2 gives none). Measured on the maze (F1 of agent / obstacles after 100 random-policy
+/// episodes, 16 minibatches of 32 after each): Adam 1e-3 without batch normalization 0.49 / 0.66,
+/// with it 0.63 / 0.73, at 3e-3 0.76 / 0.80, at 1e-2 0.82 / 0.82 (without it 1e-2 lost the
+/// obstacles: 0.01); channels `[16, 32, 32]` and 128 features learned slower at every rate
+/// tried.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PixelModelConfig {
@@ -105,6 +110,10 @@ pub struct PixelModelConfig {
     pub done_weight: f64,
     /// A pixel is predicted on when its probability reaches this (p2: 0.2).
     pub threshold: f64,
+    /// Batch normalization after every layer but the first and the outputs (p2 §3.2: "to
+    /// stabilize learning and ensure better gradient flows"): batch statistics in training,
+    /// running averages (momentum 0.1, PyTorch's) when predicting.
+    pub batch_norm: bool,
     /// Every pixel's predicted probability before training (the output biases' start; ours:
     /// about the fraction of pixels on in p2's maze).
     pub initial_pixel_probability: f64,
@@ -121,11 +130,12 @@ impl Default for PixelModelConfig {
             channels: [32, 64, 64],
             features: 256,
             factors: 256,
-            optimizer: OptimizerConfig::adam(1e-3),
+            optimizer: OptimizerConfig::adam(1e-2),
             reward_weight: 1.0,
             done_weight: 1.0,
             threshold: 0.2,
             initial_pixel_probability: 0.03,
+            batch_norm: true,
             seed: 0,
         }
     }
@@ -467,8 +477,28 @@ pub struct PixelModel {
     dec: [candle_nn::ConvTranspose2d; 3],
     reward_head: candle_nn::Linear,
     done_head: candle_nn::Linear,
+    /// The batch normalizations, in the order the graph applies them (empty without).
+    norms: Vec<Norm>,
     opt: Opt,
 }
+
+/// Number of batch normalizations: after enc1, enc2, fc_enc, w_dec, fc_dec, dec0, dec1.
+const NORMS: usize = 7;
+const BN_EPS: f64 = 1e-5;
+const BN_MOMENTUM: f32 = 0.1;
+
+/// One batch normalization: scale and shift (parameters) and running statistics.
+#[derive(Debug, Clone)]
+struct Norm {
+    gamma: Tensor,
+    beta: Tensor,
+    mean: Vec<f32>,
+    var: Vec<f32>,
+}
+
+/// The batch statistics one training pass used: per norm, mean, biased variance and the number
+/// of values per channel.
+type BatchStats = Vec<(Tensor, Tensor, usize)>;
 
 impl Clone for PixelModel {
     /// A deep copy (candle variables are shared handles).
@@ -477,7 +507,76 @@ impl Clone for PixelModel {
         c.ps.set_params_flat(self.ps.params_flat())
             .expect("same architecture, finite parameters");
         c.opt = self.opt.clone();
+        for (n, m) in c.norms.iter_mut().zip(&self.norms) {
+            n.mean.clone_from(&m.mean);
+            n.var.clone_from(&m.var);
+        }
         c
+    }
+}
+
+impl Norm {
+    fn new(ps: &mut ParamSet, i: usize, width: usize) -> Result<Self, ModelError> {
+        let dev = &Device::Cpu;
+        let ones = Tensor::ones(width, DType::F32, dev).map_err(cv)?;
+        let zeros = Tensor::zeros(width, DType::F32, dev).map_err(cv)?;
+        let g = ps.add(&format!("bn{i}.gamma"), &ones).map_err(nn_other)?;
+        let b = ps.add(&format!("bn{i}.beta"), &zeros).map_err(nn_other)?;
+        Ok(Self {
+            gamma: g.as_tensor().clone(),
+            beta: b.as_tensor().clone(),
+            mean: vec![0.0; width],
+            var: vec![1.0; width],
+        })
+    }
+
+    /// Normalizes `x` (`n × c` or `n × c × h × w`) per channel: with the batch's statistics
+    /// (pushed to `stats`) when training, else with the running ones.
+    fn forward(&self, x: &Tensor, stats: Option<&mut BatchStats>) -> candle_core::Result<Tensor> {
+        let c = self.mean.len();
+        let shape: Vec<usize> = if x.rank() == 4 {
+            vec![1, c, 1, 1]
+        } else {
+            vec![1, c]
+        };
+        let dev = x.device();
+        let (mean, var) = match stats {
+            Some(stats) => {
+                let (mean, var) = if x.rank() == 4 {
+                    let m = x.mean_keepdim((0, 2, 3))?;
+                    let v = x.broadcast_sub(&m)?.sqr()?.mean_keepdim((0, 2, 3))?;
+                    (m, v)
+                } else {
+                    let m = x.mean_keepdim(0)?;
+                    let v = x.broadcast_sub(&m)?.sqr()?.mean_keepdim(0)?;
+                    (m, v)
+                };
+                stats.push((mean.detach(), var.detach(), x.elem_count() / c));
+                (mean, var)
+            }
+            None => (
+                Tensor::from_slice(&self.mean, shape.as_slice(), dev)?,
+                Tensor::from_slice(&self.var, shape.as_slice(), dev)?,
+            ),
+        };
+        x.broadcast_sub(&mean)?
+            .broadcast_div(&var.affine(1.0, BN_EPS)?.sqrt()?)?
+            .broadcast_mul(&self.gamma.reshape(shape.as_slice())?)?
+            .broadcast_add(&self.beta.reshape(shape.as_slice())?)
+    }
+
+    /// Moves the running statistics towards a batch's (PyTorch: the unbiased variance).
+    fn update(&mut self, mean: &Tensor, var: &Tensor, count: usize) -> candle_core::Result<()> {
+        let m = mean.flatten_all()?.to_vec1::<f32>()?;
+        let v = var.flatten_all()?.to_vec1::<f32>()?;
+        let unbias = count as f32 / (count.max(2) - 1) as f32;
+        for (r, b) in self.mean.iter_mut().zip(m) {
+            *r = (1.0 - BN_MOMENTUM) * *r + BN_MOMENTUM * b;
+        }
+        for (r, b) in self.var.iter_mut().zip(v) {
+            *r = (1.0 - BN_MOMENTUM) * *r + BN_MOMENTUM * b * unbias;
+        }
+        Ok(())
     }
 }
 
@@ -495,6 +594,9 @@ fn cv(e: candle_core::Error) -> ModelError {
 fn he_init(ps: &mut ParamSet, p0: f64) -> Result<(), ModelError> {
     let logit = (p0 / (1.0 - p0)).ln();
     for (name, var) in ps.names().to_vec().iter().zip(ps.vars().to_vec()) {
+        if name.starts_with("bn") {
+            continue;
+        }
         let t = var.as_tensor();
         let hidden =
             !(name.starts_with("dec2") || name.starts_with("reward") || name.starts_with("done"));
@@ -583,6 +685,13 @@ impl PixelModel {
         ];
         let reward_head = ps.linear("reward", f, 1, rng).map_err(e)?;
         let done_head = ps.linear("done", f, 1, rng).map_err(e)?;
+        let mut norms = Vec::new();
+        if config.batch_norm {
+            for (i, width) in [c2, c3, f, f, c3, c2, c1].into_iter().enumerate() {
+                norms.push(Norm::new(&mut ps, i, width)?);
+            }
+        }
+        debug_assert!(norms.is_empty() || norms.len() == NORMS);
         he_init(&mut ps, config.initial_pixel_probability)?;
         let opt = config.optimizer.build(ps.num_params())?;
         Ok(Self {
@@ -597,6 +706,7 @@ impl PixelModel {
             dec,
             reward_head,
             done_head,
+            norms,
             opt,
         })
     }
@@ -650,36 +760,54 @@ impl PixelModel {
     }
 
     /// The graph: next-frame logits `n × C × H × W`, reward `n × 1`, termination logit `n × 1`.
-    fn graph(&self, stacks: &[f32], actions: &[usize]) -> candle_core::Result<[Tensor; 3]> {
+    /// With `stats` (training), batch normalization uses the batch's statistics and pushes them
+    /// there; without, the running ones.
+    fn graph(
+        &self,
+        stacks: &[f32],
+        actions: &[usize],
+        mut stats: Option<&mut BatchStats>,
+    ) -> candle_core::Result<[Tensor; 3]> {
         let n = actions.len();
         let [h, w, c] = self.config.image;
         let fr = self.config.frames;
         let dev = &Device::Cpu;
+        let mut k = 0;
+        // Batch normalization number `k`, if any, then ReLU.
+        let mut norm_relu = |x: Tensor| -> candle_core::Result<Tensor> {
+            let x = match self.norms.get(k) {
+                Some(nm) => nm.forward(&x, stats.as_deref_mut())?,
+                None => x,
+            };
+            k += 1;
+            x.relu()
+        };
         // n × frames × H × W × C → n × frames × C × H × W → n × (frames · C) × H × W.
         let mut x = Tensor::from_slice(stacks, (n, fr, h, w, c), dev)?
             .permute((0, 1, 4, 2, 3))?
             .reshape((n, fr * c, h, w))?;
-        for conv in &self.enc {
-            x = conv.forward(&x)?.relu()?;
+        for (i, conv) in self.enc.iter().enumerate() {
+            x = conv.forward(&x)?;
+            x = if i == 0 { x.relu()? } else { norm_relu(x)? };
         }
-        let h_enc = self.fc_enc.forward(&x.flatten_from(1)?)?.relu()?;
+        let h_enc = norm_relu(self.fc_enc.forward(&x.flatten_from(1)?)?)?;
         let mut onehot = vec![0f32; n * self.config.n_actions];
         for (i, &a) in actions.iter().enumerate() {
             onehot[i * self.config.n_actions + a] = 1.0;
         }
         let a = Tensor::from_slice(&onehot, (n, self.config.n_actions), dev)?;
         let joint = self.w_enc.forward(&h_enc)?.mul(&self.w_a.forward(&a)?)?;
-        let h_dec = self.w_dec.forward(&joint)?.relu()?;
+        let h_dec = norm_relu(self.w_dec.forward(&joint)?)?;
         let [_, _, c3] = self.config.channels;
         let mut y = self
             .fc_dec
             .forward(&h_dec)?
-            .relu()?
             .reshape((n, c3, h / 4, w / 4))?;
+        y = norm_relu(y)?;
         for (i, d) in self.dec.iter().enumerate() {
             y = d.forward(&y)?;
             if i + 1 < self.dec.len() {
-                y = y.relu()?;
+                y = norm_relu(y)?;
             }
         }
         let reward = self.reward_head.forward(&h_dec)?;
@@ -695,7 +823,7 @@ impl PixelModel {
         actions: &[usize],
     ) -> Result<PixelPrediction, ModelError> {
         self.check_inputs(stacks, actions)?;
-        let [y, r, d] = self.graph(stacks, actions).map_err(cv)?;
+        let [y, r, d] = self.graph(stacks, actions, None).map_err(cv)?;
         let read = |t: Tensor| -> candle_core::Result<Vec<f32>> {
             t.to_dtype(DType::F32)?.flatten_all()?.to_vec1::<f32>()
         };
@@ -712,11 +840,11 @@ impl PixelModel {
 
     /// The loss of a batch as a graph (mean over rows of: frame cross-entropy summed over pixels,
     /// `reward_weight` × squared reward error, `done_weight` × termination cross-entropy).
-    fn loss(&self, b: &PixelBatch) -> candle_core::Result<Tensor> {
+    fn loss(&self, b: &PixelBatch, stats: Option<&mut BatchStats>) -> candle_core::Result<Tensor> {
         let n = b.actions.len();
         let [h, w, c] = self.config.image;
         let dev = &Device::Cpu;
-        let [y, r, d] = self.graph(&b.stacks, &b.actions)?;
+        let [y, r, d] = self.graph(&b.stacks, &b.actions, stats)?;
         let target = Tensor::from_slice(&b.next, (n, h, w, c), dev)?.permute((0, 3, 1, 2))?;
         let frame = bce_with_logits(&y, &target)?.sum_all()?;
         let rt = Tensor::from_slice(&b.rewards, (n, 1), dev)?;
@@ -734,13 +862,14 @@ impl PixelModel {
         total.affine(1.0 / n as f64, 0.0)
     }
 
-    /// The loss of rows `idx` of `data` (no update).
+    /// The loss of rows `idx` of `data` (no update; batch normalization with the running
+    /// statistics).
     pub fn loss_on(&self, data: &PixelEpisodes, idx: &[usize]) -> Result<f64, ModelError> {
         self.check_data(data)?;
         let b = data.batch(idx, self.config.frames);
         self.check_inputs(&b.stacks, &b.actions)?;
         let l = self
-            .loss(&b)
+            .loss(&b, None)
             .and_then(|l| l.to_scalar::<f32>())
             .map_err(cv)?;
         Ok(f64::from(l))
@@ -760,9 +889,15 @@ impl PixelModel {
         Ok(())
     }
 
-    /// The gradient of the loss of `b` with respect to the flat parameters, and the loss.
-    fn gradient(&self, b: &PixelBatch, grads: &mut [f32]) -> Result<f64, ModelError> {
-        let l = self.loss(b).map_err(cv)?;
+    /// The gradient of the training loss of `b` with respect to the flat parameters, and the
+    /// loss; the batch statistics go to `stats`.
+    fn gradient(
+        &self,
+        b: &PixelBatch,
+        grads: &mut [f32],
+        stats: &mut BatchStats,
+    ) -> Result<f64, ModelError> {
+        let l = self.loss(b, Some(stats)).map_err(cv)?;
         let store = l.backward().map_err(cv)?;
         self.ps.grads_flat(&store, grads).map_err(nn_other)?;
         Ok(f64::from(l.to_scalar::<f32>().map_err(cv)?))
@@ -779,6 +914,7 @@ impl PixelModel {
             ));
         }
         let (before, opt_before) = (self.ps.params_flat().to_vec(), self.opt.clone());
+        let norms_before = self.norms.clone();
         let mut rng = rng_from_seed(fit.seed);
         let mut grads = vec![0f32; self.ps.num_params()];
         let mut sum = 0.0;
@@ -787,7 +923,8 @@ impl PixelModel {
                 .map(|_| rng.random_range(0..data.len()))
                 .collect();
             let b = data.batch(&idx, self.config.frames);
-            let l = self.gradient(&b, &mut grads)?;
+            let mut stats = BatchStats::new();
+            let l = self.gradient(&b, &mut grads, &mut stats)?;
             let stepped = if l.is_finite() && grads.iter().all(|g| g.is_finite()) {
                 let mut p = self.ps.params_flat().to_vec();
                 self.opt
@@ -802,7 +939,11 @@ impl PixelModel {
                     .set_params_flat(&before)
                     .expect("the parameters before the fit were finite");
                 self.opt = opt_before;
+                self.norms = norms_before;
                 return Err(ModelError::Diverged { epoch: 0, step });
+            }
+            for (nm, (mean, var, count)) in self.norms.iter_mut().zip(&stats) {
+                nm.update(mean, var, *count).map_err(cv)?;
             }
             sum += l;
         }
@@ -859,6 +1000,18 @@ fn bce_with_logits(x: &Tensor, t: &Tensor) -> candle_core::Result<Tensor> {
 impl Checkpointable for PixelModel {
     fn save_to(&self, prefix: &str, ckpt: &mut Checkpoint) -> tandem_nn::Result<()> {
         self.ps.save_to(&format!("{prefix}.params"), ckpt)?;
+        for (i, nm) in self.norms.iter().enumerate() {
+            ckpt.put_f32(
+                &format!("{prefix}.bn{i}.running_mean"),
+                &[nm.mean.len()],
+                &nm.mean,
+            )?;
+            ckpt.put_f32(
+                &format!("{prefix}.bn{i}.running_var"),
+                &[nm.var.len()],
+                &nm.var,
+            )?;
+        }
         self.opt.save_to(&format!("{prefix}.opt"), ckpt)
     }
 
@@ -867,8 +1020,15 @@ impl Checkpointable for PixelModel {
         ps.load_from(&format!("{prefix}.params"), ckpt)?;
         let mut opt = self.opt.clone();
         opt.load_from(&format!("{prefix}.opt"), ckpt)?;
+        let mut norms = self.norms.clone();
+        for (i, nm) in norms.iter_mut().enumerate() {
+            let w = [nm.mean.len()];
+            nm.mean = ckpt.get_f32(&format!("{prefix}.bn{i}.running_mean"), Some(&w))?;
+            nm.var = ckpt.get_f32(&format!("{prefix}.bn{i}.running_var"), Some(&w))?;
+        }
         self.ps.set_params_flat(ps.params_flat())?;
         self.opt = opt;
+        self.norms = norms;
         Ok(())
     }
 }
@@ -1168,10 +1328,13 @@ mod tests {
         let idx: Vec<usize> = (0..d.len().min(6)).collect();
         let b = d.batch(&idx, 2);
         let mut g = vec![0f32; m.num_params()];
-        m.gradient(&b, &mut g).unwrap();
+        m.gradient(&b, &mut g, &mut BatchStats::new()).unwrap();
         let p0 = m.params().to_vec();
-        let eps = 1e-2f32;
-        let loss = |m: &PixelModel| f64::from(m.loss(&b).unwrap().to_scalar::<f32>().unwrap());
+        let eps = 1e-3f32;
+        let loss = |m: &PixelModel| {
+            let l = m.loss(&b, Some(&mut BatchStats::new())).unwrap();
+            f64::from(l.to_scalar::<f32>().unwrap())
+        };
         let mut checked = 0;
         for i in 0..p0.len() {
             let mut p = p0.clone();

@@ -1,0 +1,541 @@
+//! Paper p2's maze experiment (Sec. 3.2 and 4.2): DQN on p2's crowd-navigation maze from pixels
+//! (`PixelMaze-v0`, 16×16 RGB), alone and with episodes imagined by the pixel model
+//! ([`PixelModel`]: four frames and the action in, the next frame, the reward and the termination
+//! out).
+//!
+//! The loop is Fig. 3's, as [`super::p2::run`] runs it for REINFORCE, here for an off-policy
+//! agent through the shared [`OffPolicyLoop`]:
+//!
+//! 1. every real episode is played by the loop (ε-greedy, the schedule's updates after each
+//!    step, transitions into the replay buffer); with the model, its frames are kept
+//!    ([`PixelEpisodes`]), its first frame joins the imagined episodes' start pool, and the model
+//!    is refit on minibatches drawn from all real transitions so far ([`MazeConfig::fit`]);
+//! 2. after the first [`MazeConfig::real_only_episodes`] (p2: N = 100), every
+//!    [`MazeConfig::real_per_cycle`] real episodes are followed by
+//!    [`MazeConfig::imagined_per_cycle`] imagined ones on a [`PixelModelEnv`] (its reward and
+//!    termination are the model's), played by the same loop: their transitions go into the same
+//!    replay buffer and the same schedule updates the agent after each imagined step. They
+//!    cost no real sample.
+//!
+//! "Solved" (p2 gives no definition): the mean return of the last [`MazeConfig::solved_window`]
+//! real (training) episodes reaches [`MazeConfig::solved_return`].
+//!
+//! [`model_quality`] is the pixel model's own experiment (p2's F1 table and Fig. 7): a
+//! with-model run that goes on past "solved", in which the model is copied after 10, 100 and 300
+//! real episodes and each copy scored on the transitions of the next 10 real episodes (held out:
+//! no copy has trained on them), F1 per channel, with its predicted frame for one of them.
+
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+use tandem_agents::{Dqn, DqnConfig, EpisodeRunner, OffPolicyLoop, StepOptions, StepRecord};
+use tandem_core::SeedStream;
+use tandem_envs::{Env, PixelMazeEnv, SampleCounter};
+use tandem_models::{PixelEpisodes, PixelFit, PixelModel, PixelModelConfig, PixelModelEnv};
+use tandem_nn::{Checkpoint, Checkpointable};
+
+use super::p2::{solved_at, Event, Method, RunRecord};
+use super::{Checkpoints, PipelineError, Result};
+
+/// Settings of a maze run. `Default` follows p2 where it gives a figure and says where a figure
+/// is ours.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MazeConfig {
+    /// The agent: the `dqn_pixelmaze` preset's DQN (p2 gives no DQN settings) with a constant
+    /// learning rate 5e-4 (the preset decays it to 0 over 40k agent steps, and imagined steps
+    /// advance the agent's clock too).
+    pub dqn: DqnConfig,
+    /// The pixel model (p2 §3.2; widths and Adam ours).
+    pub model: PixelModelConfig,
+    /// Real episodes before the first imagined one (p2: N = 100).
+    pub real_only_episodes: u64,
+    /// Real episodes per cycle after the first N (p2 alternates: 1).
+    pub real_per_cycle: u64,
+    /// Imagined episodes per cycle after the first N (p2 alternates: 1).
+    pub imagined_per_cycle: u64,
+    /// Refit the model after every this many real episodes (p2: each).
+    pub fit_every: u64,
+    /// Each refit: minibatches drawn from all real transitions so far (ours).
+    pub fit: PixelFit,
+    /// The run ends after this many real episodes if not solved before.
+    pub max_real_episodes: u64,
+    /// "Solved": the mean training return of the last `solved_window` real episodes reaches
+    /// this (ours: p2 gives none).
+    pub solved_return: f64,
+    /// The window of that mean.
+    pub solved_window: usize,
+    /// Save a checkpoint every this many real episodes.
+    pub checkpoint_every: u64,
+}
+
+impl Default for MazeConfig {
+    fn default() -> Self {
+        Self {
+            dqn: maze_dqn(),
+            model: PixelModelConfig::default(),
+            real_only_episodes: 100,
+            real_per_cycle: 1,
+            imagined_per_cycle: 1,
+            fit_every: 1,
+            fit: PixelFit {
+                steps: 16,
+                batch_size: 32,
+                seed: 0,
+            },
+            max_real_episodes: 1000,
+            solved_return: 20.0,
+            solved_window: 100,
+            checkpoint_every: 50,
+        }
+    }
+}
+
+/// The `dqn_pixelmaze` preset's DQN with a constant learning rate (see [`MazeConfig::dqn`]).
+pub fn maze_dqn() -> DqnConfig {
+    let text = include_str!("../../crates/agents/presets/dqn_pixelmaze.toml");
+    #[derive(Deserialize)]
+    struct Preset {
+        agent: DqnConfig,
+    }
+    let mut dqn = toml::from_str::<Preset>(text)
+        .map(|p| p.agent)
+        .unwrap_or_default();
+    dqn.learning_rate_final = Some(dqn.learning_rate);
+    dqn
+}
+
+impl MazeConfig {
+    /// Checks the ranges the loop relies on.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: &str| Err(PipelineError::Config(m.to_string()));
+        if self.real_per_cycle == 0 || self.fit_every == 0 || self.checkpoint_every == 0 {
+            return bad("real_per_cycle, fit_every and checkpoint_every must be >= 1");
+        }
+        if self.max_real_episodes == 0 || self.solved_window == 0 {
+            return bad("max_real_episodes and solved_window must be >= 1");
+        }
+        if !self.solved_return.is_finite() {
+            return bad("solved_return must be finite");
+        }
+        if self.fit.steps == 0 || self.fit.batch_size == 0 {
+            return bad("fit.steps and fit.batch_size must be >= 1");
+        }
+        let maze = PixelMazeEnv::new();
+        let shape = match maze.observation_space() {
+            tandem_core::Space::Box { shape, .. } => shape.clone(),
+            _ => vec![],
+        };
+        if self.model.image[..] != shape[..] || self.model.n_actions != 5 {
+            return bad("model.image must be the maze's [16, 16, 3] and model.n_actions 5");
+        }
+        self.model.validate()?;
+        self.dqn.validate()?;
+        Ok(())
+    }
+}
+
+/// The maze as the runs use it: `PixelMaze-v0` with its 50-step limit.
+fn maze() -> Result<Box<dyn Env>> {
+    Ok(tandem_envs::make(PixelMazeEnv::ID)?)
+}
+
+/// One real episode's frames, actions and rewards (the model's data).
+#[derive(Default)]
+struct EpisodeFrames {
+    frames: Vec<Vec<f64>>,
+    actions: Vec<usize>,
+    rewards: Vec<f64>,
+}
+
+impl EpisodeFrames {
+    fn push(&mut self, rec: &StepRecord) {
+        if self.frames.is_empty() {
+            self.frames.push(rec.obs.clone());
+        }
+        self.frames.push(rec.next_obs.clone());
+        self.actions.push(rec.action.as_discrete().unwrap_or(0));
+        self.rewards.push(rec.reward);
+    }
+}
+
+/// Plays one whole episode of `runner` on `env` through the loop; returns its return, steps,
+/// whether it terminated, and (with `keep`) its frames.
+fn episode(
+    lp: &mut OffPolicyLoop<Dqn>,
+    env: &mut dyn Env,
+    runner: &mut EpisodeRunner,
+    opts: StepOptions,
+    keep: bool,
+) -> Result<(f64, u64, bool, EpisodeFrames)> {
+    let mut frames = EpisodeFrames::default();
+    loop {
+        let rec = lp.step(env, runner, opts)?;
+        if keep {
+            frames.push(&rec);
+        }
+        if rec.done() {
+            return Ok((
+                rec.episode_return,
+                rec.episode_len as u64,
+                rec.terminated,
+                frames,
+            ));
+        }
+    }
+}
+
+/// Where a run stands between episodes, besides the loop, the model and its data.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Progress {
+    method: Method,
+    seed: u64,
+    real_returns: Vec<f64>,
+    real_samples: u64,
+    imagined_episodes: u64,
+    imagined_steps: u64,
+    fit_losses: Vec<f64>,
+    real_runner: EpisodeRunner,
+    imagined_runner: EpisodeRunner,
+    starts: Vec<Vec<f64>>,
+}
+
+const PROGRESS: &str = "p2maze.progress";
+const LOOP: &str = "p2maze.loop";
+const MODEL: &str = "p2maze.model";
+const DATA: &str = "p2maze.data";
+
+/// Runs `method` for `seed` on the maze (from the checkpoint `store` holds under the method's
+/// name, if any) and returns its record; `on_event` hears of every finished episode.
+pub fn run(
+    method: Method,
+    cfg: &MazeConfig,
+    seed: u64,
+    store: &mut dyn Checkpoints,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<RunRecord> {
+    run_probed(method, cfg, seed, store, on_event, &mut None).map(|(r, _)| r)
+}
+
+/// Polls another store's stop requests; loads and saves nothing (the F1 experiment's copies of
+/// the model are not in the checkpoints, so it always starts afresh).
+struct StopOnly<'a>(&'a dyn Checkpoints);
+
+impl Checkpoints for StopOnly<'_> {
+    fn load(&mut self, _key: &str) -> Result<Option<Checkpoint>> {
+        Ok(None)
+    }
+    fn save(&mut self, _key: &str, _ckpt: &Checkpoint) -> Result<()> {
+        Ok(())
+    }
+    fn stop_requested(&self) -> bool {
+        self.0.stop_requested()
+    }
+}
+
+/// [`run`], and with `probe` the F1 experiment's copies of the model and their scores.
+fn run_probed(
+    method: Method,
+    cfg: &MazeConfig,
+    seed: u64,
+    store: &mut dyn Checkpoints,
+    on_event: &mut dyn FnMut(Event),
+    probe: &mut Option<&QualityConfig>,
+) -> Result<(RunRecord, Vec<QualityPoint>)> {
+    cfg.validate()?;
+    let mut probes: Vec<Probe> = Vec::new();
+    let mut points = Vec::new();
+    let t0 = Instant::now();
+    let seeds = SeedStream::new(seed);
+    let real0 = maze()?;
+    let (obs_space, act_space) = (
+        real0.observation_space().clone(),
+        real0.action_space().clone(),
+    );
+    let agent = Dqn::new(
+        cfg.dqn.clone(),
+        &obs_space,
+        &act_space,
+        seeds.derive("agent"),
+    )?;
+    let mut lp = OffPolicyLoop::new(
+        agent,
+        cfg.dqn.schedule(),
+        &obs_space,
+        &act_space,
+        seeds.rng("minibatches"),
+    )?;
+    let mut imagination = match method {
+        Method::WithModel => {
+            let model = PixelModel::new(PixelModelConfig {
+                seed: seeds.derive("model"),
+                ..cfg.model.clone()
+            })?;
+            Some((
+                PixelModelEnv::new(model, vec![], real0.max_episode_steps())?,
+                PixelEpisodes::new(cfg.model.frame_len()),
+            ))
+        }
+        Method::ModelFree => None,
+    };
+    let mut p = match store.load(method.name())? {
+        Some(ckpt) => {
+            let p: Progress = ckpt.get_json(PROGRESS)?;
+            super::ensure_same_run((p.method.name(), p.seed), (method.name(), seed))?;
+            lp.agent.load(&ckpt)?;
+            lp.load(LOOP, &ckpt)?;
+            if let Some((menv, data)) = imagination.as_mut() {
+                menv.model_mut().load_from(MODEL, &ckpt)?;
+                data.load_from(DATA, &ckpt)?;
+                for s in &p.starts {
+                    menv.add_start(s.clone())?;
+                }
+            }
+            p
+        }
+        None => Progress {
+            method,
+            seed,
+            real_returns: Vec::new(),
+            real_samples: 0,
+            imagined_episodes: 0,
+            imagined_steps: 0,
+            fit_losses: Vec::new(),
+            real_runner: EpisodeRunner::new(seeds.derive("real"), "real-episode-"),
+            imagined_runner: EpisodeRunner::new(seeds.derive("imagined"), "imagined-episode-"),
+            starts: Vec::new(),
+        },
+    };
+    let (mut env, count) = SampleCounter::starting_at(maze()?, p.real_samples);
+    let solved = |r: &[f64]| solved_at(r, cfg.solved_window, cfg.solved_return);
+    while (p.real_returns.len() as u64) < cfg.max_real_episodes && solved(&p.real_returns).is_none()
+    {
+        if store.stop_requested() {
+            return Err(PipelineError::Stopped);
+        }
+        let k = p.real_returns.len() as u64;
+        let keep = imagination.is_some();
+        let (ret, _, terminated, frames) = episode(
+            &mut lp,
+            &mut env,
+            &mut p.real_runner,
+            StepOptions::real(),
+            keep,
+        )?;
+        p.real_returns.push(ret);
+        p.real_samples = count.get();
+        on_event(Event::Real {
+            episode: k,
+            ret,
+            real_samples: count.get(),
+        });
+        let done_real = k + 1;
+        if let Some((menv, data)) = imagination.as_mut() {
+            // The F1 experiment: this episode is held out for the copies taken before it.
+            for pr in &mut probes {
+                pr.heldout.push_episode(
+                    &frames.frames,
+                    &frames.actions,
+                    &frames.rewards,
+                    terminated,
+                )?;
+                pr.left -= 1;
+                if pr.left == 0 {
+                    points.push(score(pr)?);
+                }
+            }
+            probes.retain(|pr| pr.left > 0);
+            data.push_episode(&frames.frames, &frames.actions, &frames.rewards, terminated)?;
+            menv.add_start(frames.frames[0].clone())?;
+            p.starts.push(frames.frames[0].clone());
+            if done_real % cfg.fit_every == 0 {
+                let fit = PixelFit {
+                    seed: seeds.derive(&format!("fit-{}", done_real / cfg.fit_every)),
+                    ..cfg.fit.clone()
+                };
+                p.fit_losses.push(menv.model_mut().fit(data, &fit)?);
+            }
+            if let Some(q) = probe
+                .as_ref()
+                .filter(|q| q.checkpoints.contains(&done_real))
+            {
+                probes.push(Probe {
+                    episodes: done_real,
+                    transitions: data.len() as u64,
+                    model: menv.model().clone(),
+                    heldout: PixelEpisodes::new(data.frame_len()),
+                    left: q.heldout_episodes,
+                });
+            }
+            let after_n = done_real.checked_sub(cfg.real_only_episodes);
+            if after_n.is_some_and(|n| n > 0 && n % cfg.real_per_cycle == 0) {
+                for _ in 0..cfg.imagined_per_cycle {
+                    let i = p.imagined_episodes;
+                    let (ret, steps, _, _) = episode(
+                        &mut lp,
+                        menv,
+                        &mut p.imagined_runner,
+                        StepOptions::model(),
+                        false,
+                    )?;
+                    p.imagined_episodes += 1;
+                    p.imagined_steps += steps;
+                    on_event(Event::Imagined {
+                        episode: i,
+                        steps,
+                        ret,
+                    });
+                }
+            }
+        }
+        if done_real % cfg.checkpoint_every == 0 {
+            let mut ckpt = Checkpoint::new();
+            lp.agent.save(&mut ckpt)?;
+            lp.save(LOOP, &mut ckpt)?;
+            ckpt.put_json(PROGRESS, &p)?;
+            if let Some((menv, data)) = imagination.as_ref() {
+                menv.model().save_to(MODEL, &mut ckpt)?;
+                data.save_to(DATA, &mut ckpt)?;
+            }
+            store.save(method.name(), &ckpt)?;
+        }
+    }
+    let record = RunRecord {
+        method,
+        seed,
+        solved_at: solved(&p.real_returns),
+        real_returns: p.real_returns,
+        real_samples: count.get(),
+        imagined_episodes: p.imagined_episodes,
+        imagined_steps: p.imagined_steps,
+        fit_losses: p.fit_losses,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    };
+    Ok((record, points))
+}
+
+/// Settings of [`model_quality`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct QualityConfig {
+    /// Score the model after this many real episodes (p2: 10, 100, 300).
+    pub checkpoints: Vec<u64>,
+    /// On the transitions of this many real episodes after each checkpoint.
+    pub heldout_episodes: u64,
+}
+
+impl Default for QualityConfig {
+    fn default() -> Self {
+        Self {
+            checkpoints: vec![10, 100, 300],
+            heldout_episodes: 10,
+        }
+    }
+}
+
+/// The model after some training episodes: F1 per channel on held-out real transitions and its
+/// prediction of one of them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct QualityPoint {
+    /// Real episodes the model had trained on.
+    pub episodes: u64,
+    /// Real transitions it had trained on.
+    pub transitions: u64,
+    /// Held-out transitions scored.
+    pub heldout_transitions: u64,
+    /// F1 of the agent (blue channel).
+    pub agent: f64,
+    /// F1 of the obstacles (red channel).
+    pub obstacles: f64,
+    /// F1 of the goal (green channel).
+    pub goal: f64,
+    /// The shown held-out transition's last input frame (`16 × 16 × 3`).
+    pub shown_input: Vec<f32>,
+    /// Its true next frame.
+    pub shown_truth: Vec<f32>,
+    /// The model's predicted probabilities of that frame.
+    pub predicted: Vec<f32>,
+}
+
+/// What [`model_quality`] measures for one seed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Quality {
+    /// The seed.
+    pub seed: u64,
+    /// One point per checkpoint.
+    pub points: Vec<QualityPoint>,
+    /// The run's record (its real episodes go past "solved").
+    pub real_returns: Vec<f64>,
+    /// Wall time, seconds.
+    pub wall_seconds: f64,
+}
+
+/// A copy of the model waiting for its held-out episodes.
+struct Probe {
+    episodes: u64,
+    transitions: u64,
+    model: PixelModel,
+    heldout: PixelEpisodes,
+    left: u64,
+}
+
+/// Scores a probe on its held-out data; shows the `min(10, n − 1)`-th held-out transition.
+fn score(p: &Probe) -> Result<QualityPoint> {
+    let f1 = p.model.f1(&p.heldout)?;
+    let frames = p.model.config().frames;
+    let flen = p.model.config().frame_len();
+    let shown = 10.min(p.heldout.len() - 1);
+    let b = p.heldout.batch(&[shown], frames);
+    let pred = p.model.predict(&b.stacks, &b.actions)?;
+    Ok(QualityPoint {
+        episodes: p.episodes,
+        transitions: p.transitions,
+        heldout_transitions: p.heldout.len() as u64,
+        obstacles: f1[0],
+        goal: f1[1],
+        agent: f1[2],
+        shown_input: b.stacks[b.stacks.len() - flen..].to_vec(),
+        shown_truth: b.next,
+        predicted: pred.frame_probs,
+    })
+}
+
+/// The pixel model's F1 experiment for `seed`: a with-model run of `cfg` that ignores "solved"
+/// and `max_real_episodes`, playing until the last checkpoint's held-out episodes are in. It
+/// polls `stop` (and returns [`PipelineError::Stopped`]) but keeps no checkpoints: the copies
+/// of the model are not in them, so a stopped experiment starts again.
+pub fn model_quality(
+    cfg: &MazeConfig,
+    quality: &QualityConfig,
+    seed: u64,
+    stop: &dyn Checkpoints,
+) -> Result<Quality> {
+    if quality.heldout_episodes == 0 || quality.checkpoints.contains(&0) {
+        return Err(PipelineError::Config(
+            "quality: heldout_episodes and every checkpoint must be >= 1".into(),
+        ));
+    }
+    let t0 = Instant::now();
+    let last = quality.checkpoints.iter().copied().max().unwrap_or(0) + quality.heldout_episodes;
+    let cfg = MazeConfig {
+        max_real_episodes: last,
+        solved_return: f64::MAX,
+        ..cfg.clone()
+    };
+    let mut probe = Some(quality);
+    let mut store = StopOnly(stop);
+    let (record, points) = run_probed(
+        Method::WithModel,
+        &cfg,
+        seed,
+        &mut store,
+        &mut |_| {},
+        &mut probe,
+    )?;
+    Ok(Quality {
+        seed,
+        points,
+        real_returns: record.real_returns,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    })
+}
