@@ -234,3 +234,29 @@ fn holding_still_takes_the_gravity_torque_of_inverse_dynamics() {
     }
     assert!((&x - &x0).abs().max() < 1e-9, "{x}");
 }
+
+#[test]
+fn analytic_linearization_matches_finite_differences_inside_and_on_the_motor_envelope() {
+    for params in [Leg2RParams::idealized(), Leg2RParams::real()] {
+        let p = leg2r_plant(&params).unwrap();
+        // Inside the envelope; the knee on its back-EMF bound (3 N m asked at 20 rad/s); the hip
+        // against its hard stop.
+        let cases = [
+            ([-0.6, 1.2, 1.5, -2.0], [0.4, -0.3]),
+            ([-0.6, 1.2, 0.5, 20.0], [0.4, 3.0]),
+            ([-1.6, 1.2, -0.5, 1.0], [0.1, 0.2]),
+        ];
+        for (x, u) in cases {
+            let (x, u) = (DVector::from_vec(x.to_vec()), DVector::from_vec(u.to_vec()));
+            let (a, b) = p.linearize(&x, &u);
+            let (fa, fb) = p.linearize_fd(&x, &u);
+            // Central differences carry about 5e-6 of relative error against the stiff hard stop.
+            let scale = fa.abs().max().max(1.0);
+            assert!((&a - &fa).abs().max() < 1e-5 * scale, "{x}: A\n{a}\n{fa}");
+            assert!(
+                (&b - &fb).abs().max() < 1e-5 * fb.abs().max().max(1.0),
+                "{x}: B"
+            );
+        }
+    }
+}

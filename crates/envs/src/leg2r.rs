@@ -9,7 +9,7 @@
 //! |---|---|
 //! | state | `[q_hip, q_knee, q̇_hip, q̇_knee, cos φ, sin φ]` (rad, rad/s) |
 //! | observation | `[q_hip, q_knee, q̇_hip, q̇_knee, cos φ, sin φ, p_x − p_dx, p_z − p_dz, ṗ_x − ṗ_dx, ṗ_z − ṗ_dz]`: the joints, the phase and the foot's tracking error (m, m/s) |
-//! | action | `Box(2)` in `[-1, 1]`: hip and knee torques as fractions of the 3 N m limit (clipped) |
+//! | action | `Box(2)` in `[-1, 1]` (clipped): hip and knee torque commands as fractions of the motors' 3 N m peak; a motor delivers less in the direction of motion at speed (back-EMF, no torque left at 40 rad/s) |
 //! | reward | [`leg2r_reward`] of the foot's errors after the step, in metres as p3: at most 1 per step |
 //! | start | a random phase, the joints on the target (inverse kinematics, `J⁻¹ ṗ_d`) perturbed by up to ±0.05 rad and ±0.2 rad/s, from the seeded generator |
 //! | episode | 1000 steps (2 s, four gait periods); never terminates |

@@ -240,6 +240,20 @@ fn invalid_configurations_are_errors_naming_the_problem() {
 }
 
 #[test]
+fn configurations_read_from_serde_with_the_registered_defaults() {
+    let c: Leg2RConfig =
+        serde_json::from_str(r#"{"position_scale": 0.02, "trajectory": {"period": 0.4}}"#).unwrap();
+    assert_eq!(c.position_scale, 0.02);
+    assert_eq!(c.trajectory.period, 0.4);
+    assert_eq!(c.trajectory.stance_z, -0.24);
+    assert_eq!(c.plant, Leg2RConfig::default().plant);
+    assert!(serde_json::from_str::<Leg2RConfig>(r#"{"scale": 1.0}"#).is_err());
+    let real = Leg2RConfig::for_model(Leg2RModel::Real);
+    let back: Leg2RConfig = serde_json::from_str(&serde_json::to_string(&real).unwrap()).unwrap();
+    assert_eq!(back, real);
+}
+
+#[test]
 fn canonicalize_puts_the_clock_back_on_the_unit_circle() {
     let env = Leg2REnv::new(Leg2RModel::Idealized);
     let mut s = vec![0.1, 1.0, 0.0, 0.0, 0.6, 0.8 * 1.1];
