@@ -12,7 +12,7 @@
 //! | thigh mass, inertia about its centre (y) | 0.35 kg, 6.8e-4 kg m² | an aluminium-like bar 0.15 × 0.03 × 0.03 m plus the knee drive's belt and pulley; both motors sit at the hip, as on most small quadrupeds |
 //! | shank mass, inertia about its centre (y) | 0.20 kg, 3.9e-4 kg m² | a lighter bar and the rubber foot |
 //! | centres of mass | mid-length | uniform bars |
-//! | motors ([`TorqueMotor`], URDF `effort`, `velocity`) | 3 N m peak, 40 rad/s no-load speed | a small BLDC behind a 6:1 reduction (about 0.5 N m at the rotor; 24 V at about 100 rpm/V), torque-controlled as p3's; a leg that carries a body needs this margin, the rig's foot trajectory alone needs at most 0.45 N m of feedforward |
+//! | motors ([`TorqueMotor`], URDF `effort`, `velocity`) | 3 N m peak, 40 rad/s no-load speed | a small BLDC behind a 6:1 reduction (about 0.5 N m at the rotor; 24 V at about 100 rpm/V), torque-controlled as p3's; a leg that carries a body needs this margin, p3's foot trajectory on the rig needs at most 0.43 N m of feedforward (0.50 N m on the real leg), and a computed-torque controller asks for more only where the target velocity jumps |
 //! | position limits (URDF) | hip ±90°, knee 0 (straight) to 2.7 rad | the rig's hard stops, enforced by compliant [`LimitSpring`]s (100 N m/rad) so that an exploring policy cannot fold the leg through itself |
 //! | control period | 2 ms (500 Hz) | p3 §5 controls the torque at 500 Hz |
 //! | internal RK4 step | 0.5 ms (4 per period) | resolves the limit springs (about 260 rad/s on the shank) and the regularized Coulomb friction of the real variant |
