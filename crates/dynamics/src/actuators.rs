@@ -6,6 +6,8 @@
 //! - [`JointFriction`]: viscous `b q̇` and Coulomb `c · tanh(q̇ / v_s)` (regularized so the
 //!   dynamics stay smooth for fixed-step integration).
 //! - [`PdController`]: `τ = kp (q* − q) − kd q̇` for joints that are not learned (Leo's shoulder).
+//! - [`TorqueMotor`]: a torque-controlled motor (a BLDC behind a current loop, p3's leg): the
+//!   commanded torque, within the peak torque and the back-EMF envelope of its supply voltage.
 //!
 //! Each actuator clips its torque to its limit.
 
@@ -176,6 +178,63 @@ impl PdController {
     }
 }
 
+/// A torque-controlled motor: a current loop (p3's leg: 40 kHz) makes the commanded torque,
+/// clipped to `±peak_torque` and to what the supply voltage can drive against the back-EMF,
+/// `−τ_p (1 + q̇/ω₀) ≤ τ ≤ τ_p (1 − q̇/ω₀)` with `ω₀` the no-load speed: full torque at rest, none
+/// left in the direction of motion at `ω₀`, so the joint cannot run away past it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TorqueMotor {
+    /// Peak joint torque `τ_p` (N m).
+    pub peak_torque: f64,
+    /// No-load joint speed `ω₀` (rad/s).
+    pub no_load_speed: f64,
+}
+
+impl TorqueMotor {
+    /// The torque range `(low, high)` available at joint velocity `qdot`.
+    #[inline]
+    pub fn bounds(&self, qdot: f64) -> (f64, f64) {
+        let (tp, w) = (self.peak_torque, self.no_load_speed);
+        (
+            (-tp * (1.0 + qdot / w)).max(-tp),
+            (tp * (1.0 - qdot / w)).min(tp),
+        )
+    }
+
+    /// The torque for command `u` at `qdot`: `u` clipped into [`TorqueMotor::bounds`].
+    #[inline]
+    pub fn torque(&self, u: f64, qdot: f64) -> f64 {
+        let (lo, hi) = self.bounds(qdot);
+        u.max(lo).min(hi)
+    }
+
+    /// [`TorqueMotor::torque`] and its partials `(τ, ∂τ/∂u, ∂τ/∂q̇)`: `(u, 1, 0)` inside the
+    /// range, `(bound, 0, ∓τ_p/ω₀)` on a back-EMF bound, `(±τ_p, 0, 0)` on the peak.
+    #[inline]
+    pub fn torque_partials(&self, u: f64, qdot: f64) -> (f64, f64, f64) {
+        let (tp, w) = (self.peak_torque, self.no_load_speed);
+        let (lo, hi) = self.bounds(qdot);
+        if u > hi {
+            let slope = if tp * (1.0 - qdot / w) < tp {
+                -tp / w
+            } else {
+                0.0
+            };
+            (hi, 0.0, slope)
+        } else if u < lo {
+            let slope = if -tp * (1.0 + qdot / w) > -tp {
+                -tp / w
+            } else {
+                0.0
+            };
+            (lo, 0.0, slope)
+        } else {
+            (u, 1.0, 0.0)
+        }
+    }
+}
+
 /// What drives a joint of a [`crate::rigid_plant::RigidBodyPlant`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "snake_case")]
@@ -189,6 +248,8 @@ pub enum Actuator {
     },
     /// A PD controller that is not part of the action.
     Pd(PdController),
+    /// A torque-controlled motor; its action component is the commanded torque.
+    TorqueMotor(TorqueMotor),
 }
 
 impl Actuator {
@@ -204,6 +265,7 @@ impl Actuator {
             Actuator::Motor(m) => m.torque(u, qdot),
             Actuator::Torque { limit } => u.clamp(-limit, *limit),
             Actuator::Pd(pd) => pd.torque(q, qdot),
+            Actuator::TorqueMotor(m) => m.torque(u, qdot),
         }
     }
 
@@ -223,6 +285,10 @@ impl Actuator {
             Actuator::Pd(pd) => {
                 let (t, dq, dv) = pd.torque_partials(q, qdot);
                 (t, 0.0, dq, dv)
+            }
+            Actuator::TorqueMotor(m) => {
+                let (t, du, dv) = m.torque_partials(u, qdot);
+                (t, du, 0.0, dv)
             }
         }
     }
@@ -281,6 +347,10 @@ mod tests {
             torque_max: 3.0,
         });
         let src = Actuator::Torque { limit: 2.0 };
+        let bldc = Actuator::TorqueMotor(TorqueMotor {
+            peak_torque: 3.0,
+            no_load_speed: 40.0,
+        });
         // (actuator, u, q, q̇): inside the limits, then voltage-, torque- and output-clipped.
         let cases = [
             (motor, 3.0, 0.1, 0.4, true),
@@ -290,6 +360,13 @@ mod tests {
             (pd, 0.0, -1.0, 0.0, false),
             (src, 1.5, 0.0, 0.0, true),
             (src, -2.5, 0.0, 0.0, false),
+            (bldc, 1.0, 0.0, 10.0, true),
+            // On the back-EMF bound, in and against the direction of motion, beyond ω₀ (the
+            // motor brakes), then on the peak.
+            (bldc, 2.9, 0.0, 10.0, false),
+            (bldc, -2.9, 0.0, -10.0, false),
+            (bldc, 0.5, 0.0, 50.0, false),
+            (bldc, -3.5, 0.0, 10.0, false),
         ];
         for (a, u, q, v, inside) in cases {
             let (t, du, dq, dv) = a.torque_partials(u, q, v);
@@ -318,6 +395,23 @@ mod tests {
                 "{v}: {an} vs {num}"
             );
         }
+    }
+
+    #[test]
+    fn torque_motor_follows_the_command_inside_its_envelope() {
+        let m = TorqueMotor {
+            peak_torque: 3.0,
+            no_load_speed: 40.0,
+        };
+        assert_eq!(m.torque(1.2, 0.0), 1.2);
+        assert_eq!(m.torque(5.0, 0.0), 3.0);
+        // At 10 rad/s a quarter of the peak is lost in the direction of motion, none against it.
+        assert_eq!(m.bounds(10.0), (-3.0, 2.25));
+        assert_eq!(m.bounds(-10.0), (-2.25, 3.0));
+        assert_eq!(m.torque(3.0, 10.0), 2.25);
+        // At the no-load speed no driving torque is left; beyond it the motor brakes.
+        assert_eq!(m.torque(3.0, 40.0), 0.0);
+        assert_eq!(m.torque(3.0, 60.0), -1.5);
     }
 
     #[test]

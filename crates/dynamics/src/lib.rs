@@ -11,7 +11,10 @@
 //! - [`rigid`]: rigid bodies from URDF (kinematics, Jacobians, RNEA, CRBA, ABA, analytical
 //!   derivatives, COM, energies) in Pinocchio's Model/Data style; [`actuators`] (DC motor, joint
 //!   friction, PD), [`contact`] (compliant ground contact), [`rigid_plant::RigidBodyPlant`] (a URDF
-//!   robot as a [`Plant`], with idealized/true overrides) and [`biped`] (a planar Leo-like biped).
+//!   robot as a [`Plant`], with idealized/true overrides), [`biped`] (a planar Leo-like biped) and
+//!   [`leg2r`] (p3's 2R leg on a test rig, from `assets/leg2r.urdf`),
+//! - [`Clocked`]: any plant with a phase clock in its state, for tasks that track a periodic
+//!   reference.
 //!
 //! Dependencies: `nalgebra` (states, small matrices and spatial algebra), `serde` (plant
 //! parameters are readable from configs), `thiserror` (error types), `urdf-rs` (the only reader of
@@ -24,10 +27,13 @@
 pub mod actuators;
 pub mod biped;
 pub mod classic;
+mod clock;
 pub mod contact;
 pub mod integrate;
+pub mod leg2r;
 mod plant;
 pub mod rigid;
 pub mod rigid_plant;
 
+pub use clock::Clocked;
 pub use plant::{check_dims, linearize_fd, Plant, PlantError};

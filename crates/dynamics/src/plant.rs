@@ -2,7 +2,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-/// Errors of plants: bad inputs at a checked boundary.
+/// Errors of plants: bad inputs at a checked boundary, or bad parameters at construction.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PlantError {
     /// A state or action vector of the wrong length.
@@ -25,6 +25,9 @@ pub enum PlantError {
         /// Its value.
         value: f64,
     },
+    /// A plant parameter out of its range (e.g. a clock period that is not positive).
+    #[error("invalid plant parameter: {0}")]
+    InvalidParameter(String),
 }
 
 /// A known physical model in discrete time: `x_{t+1} = step(x_t, u_t)` every [`Plant::dt`]

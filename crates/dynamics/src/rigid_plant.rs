@@ -2,10 +2,11 @@
 //! [`Plant`].
 //!
 //! State `x = [q; q̇]` (`2 nv`), action `u` = one component per learned actuator (a voltage for a
-//! [`DcMotor`](crate::actuators::DcMotor), a torque for a torque source), in the order they were
-//! added. The continuous dynamics `q̈ = ABA(q, q̇, τ_act + τ_friction + Jᵀ f_contact)` are integrated
-//! by RK4 with a fixed internal step; [`Plant::step`] advances one control period with the action
-//! held (zero-order hold).
+//! [`DcMotor`](crate::actuators::DcMotor), a torque for a torque source or a
+//! [`TorqueMotor`](crate::actuators::TorqueMotor)), in the order they were added. The continuous
+//! dynamics `q̈ = ABA(q, q̇, τ_act + τ_friction + Jᵀ f_contact)` are integrated by RK4 with a fixed
+//! internal step; [`Plant::step`] advances one control period with the action held (zero-order
+//! hold).
 //!
 //! Joint position limits (the URDF `<limit lower upper>`) are not enforced unless
 //! [`RigidBodyPlant::with_position_limits`] adds a compliant [`LimitSpring`] on every limited

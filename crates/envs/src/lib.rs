@@ -9,6 +9,7 @@
 //! | [`CartPoleEnv`] (`CartPole-v1`), [`PendulumEnv`] (`Pendulum-v1`) | exact to gymnasium 1.x |
 //! | [`PixelMazeEnv`] (`PixelMaze-v0`) | p2's crowd-navigation maze as 16×16 RGB images, 5 discrete actions |
 //! | [`DcMotorPendulumEnv`] (`DcMotorPendulum-idealized-v0`, `DcMotorPendulum-real-v0`) | p0's swing-up pair; reward [`dc_motor_pendulum_reward`] |
+//! | [`Leg2REnv`] (`Leg2R-v0`, `Leg2R-real-v0`) | p3's 2R leg on a test rig (URDF, 500 Hz, 3 N m joints) tracking a semi-elliptical foot trajectory; reward (15) [`leg2r_reward`]; idealized/true pair |
 //! | [`make`], [`make_unwrapped`], [`registered`] | the registry |
 //! | [`TimeLimit`], [`SampleCounter`], [`ClipAction`], [`RescaleAction`], [`TransformObservation`] | wrappers |
 //!
@@ -18,6 +19,7 @@
 mod cartpole;
 mod dc_motor;
 mod env;
+mod leg2r;
 mod pendulum;
 mod pixel_maze;
 mod registry;
@@ -30,6 +32,10 @@ pub use dc_motor::{
     DC_MOTOR_PENDULUM_STEPS,
 };
 pub use env::{check_state, round_to_f32, Env, EnvError, Step};
+pub use leg2r::{
+    leg2r_reward, FootTarget, FootTrajectory, Leg2RConfig, Leg2REnv, Leg2RModel, Leg2RTask,
+    LEG2R_STEPS,
+};
 pub use pendulum::{angle_normalize, pendulum_reward, PendulumEnv, PendulumTask};
 pub use pixel_maze::{PixelMazeEnv, PIXEL_MAZE_GRID, PIXEL_MAZE_OBSTACLES, PIXEL_MAZE_PIXELS};
 pub use registry::{make, make_unwrapped, registered, EnvSpec};

@@ -3,8 +3,8 @@
 use tandem_core::Space;
 
 use crate::{
-    CartPoleEnv, DcMotorPendulumEnv, Env, EnvError, PendulumEnv, PendulumModel, PixelMazeEnv,
-    TimeLimit,
+    CartPoleEnv, DcMotorPendulumEnv, Env, EnvError, Leg2REnv, Leg2RModel, PendulumEnv,
+    PendulumModel, PixelMazeEnv, TimeLimit, LEG2R_STEPS,
 };
 
 /// One registered environment: its id, what it is, its episode limit and its spaces.
@@ -49,6 +49,16 @@ const REGISTRY: &[(&str, &str, usize)] = &[
         "p2's maze: reach the goal past patrolling obstacles, observed as 16x16 RGB images",
         50,
     ),
+    (
+        Leg2REnv::ID,
+        "p3's 2R leg (0.15 m links, 3 N m, 500 Hz) tracking a semi-elliptical foot trajectory",
+        LEG2R_STEPS,
+    ),
+    (
+        Leg2REnv::ID_REAL,
+        "p3's 2R leg, true model (shank 0.26 kg instead of 0.20, joint friction)",
+        LEG2R_STEPS,
+    ),
 ];
 
 /// The environment `id` without a time limit, or [`EnvError::Unknown`].
@@ -61,6 +71,8 @@ pub fn make_unwrapped(id: &str) -> Result<Box<dyn Env>, EnvError> {
         }
         DcMotorPendulumEnv::ID_REAL => Box::new(DcMotorPendulumEnv::new(PendulumModel::Real)),
         PixelMazeEnv::ID => Box::new(PixelMazeEnv::new()),
+        Leg2REnv::ID => Box::new(Leg2REnv::new(Leg2RModel::Idealized)),
+        Leg2REnv::ID_REAL => Box::new(Leg2REnv::new(Leg2RModel::Real)),
         _ => return Err(EnvError::Unknown(id.to_string())),
     })
 }
@@ -115,7 +127,7 @@ mod tests {
             assert_eq!(env.action_space(), &spec.action_space);
         }
         let limits: Vec<usize> = registered().iter().map(|s| s.max_episode_steps).collect();
-        assert_eq!(limits, vec![500, 200, 400, 400, 50]);
+        assert_eq!(limits, vec![500, 200, 400, 400, 50, 1000, 1000]);
     }
 
     #[test]
