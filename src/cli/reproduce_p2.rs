@@ -139,7 +139,7 @@ pub enum Settings {
     /// The maze's, with the pixel model's F1 experiment.
     Maze {
         /// The runs.
-        runs: MazeConfig,
+        runs: Box<MazeConfig>,
         /// The F1 experiment.
         quality: QualityConfig,
     },
@@ -151,12 +151,15 @@ impl Settings {
             (Experiment::CartPole, false) => Settings::CartPole(P2Config::default()),
             (Experiment::CartPole, true) => Settings::CartPole(quick_config()),
             (Experiment::Maze, false) => Settings::Maze {
-                runs: MazeConfig::default(),
+                runs: Box::default(),
                 quality: QualityConfig::default(),
             },
             (Experiment::Maze, true) => {
                 let (runs, quality) = quick_maze_config();
-                Settings::Maze { runs, quality }
+                Settings::Maze {
+                    runs: Box::new(runs),
+                    quality,
+                }
             }
         }
     }
@@ -167,7 +170,7 @@ impl Settings {
                 .map(Settings::CartPole)
                 .map_err(|e| e.to_string()),
             Experiment::Maze => {
-                let runs: MazeConfig = toml::from_str(text).map_err(|e| e.to_string())?;
+                let runs: Box<MazeConfig> = toml::from_str(text).map_err(|e| e.to_string())?;
                 let quality = QualityConfig::default();
                 Ok(Settings::Maze { runs, quality })
             }
@@ -998,6 +1001,20 @@ mod tests {
         // The one lit pixel of the true frame, blue, at 8 screen pixels per image pixel.
         assert_eq!(svg.matches("fill=\"#0000ff\"").count(), 2, "{svg}");
         assert!(svg.contains("after 100") && svg.ends_with("</svg>\n"));
+    }
+
+    /// The committed maze results (`results/p2-maze/`) read back as a table, with the F1 table.
+    #[test]
+    fn the_committed_maze_table_reads_back() {
+        let text = include_str!("../../results/p2-maze/table.json");
+        let t: P2Table = serde_json::from_str(text).unwrap();
+        assert_eq!(t.model_free.episodes_to_solve.seeds, 10);
+        let f1 = t.f1.as_ref().unwrap();
+        assert_eq!(
+            f1.keys().collect::<Vec<_>>(),
+            ["after_10", "after_100", "after_300"]
+        );
+        assert_eq!(to_json_pretty(&t).unwrap().trim_end(), text.trim_end());
     }
 
     /// The committed results (`results/p2-cartpole/`) read back as a table.

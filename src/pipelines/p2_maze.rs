@@ -214,7 +214,7 @@ pub fn run(
     store: &mut dyn Checkpoints,
     on_event: &mut dyn FnMut(Event),
 ) -> Result<RunRecord> {
-    run_probed(method, cfg, seed, store, on_event, &mut None).map(|(r, _)| r)
+    run_probed(method, cfg, seed, store, on_event, None).map(|(r, _)| r)
 }
 
 /// Polls another store's stop requests; loads and saves nothing (the F1 experiment's copies of
@@ -240,7 +240,7 @@ fn run_probed(
     seed: u64,
     store: &mut dyn Checkpoints,
     on_event: &mut dyn FnMut(Event),
-    probe: &mut Option<&QualityConfig>,
+    probe: Option<&QualityConfig>,
 ) -> Result<(RunRecord, Vec<QualityPoint>)> {
     cfg.validate()?;
     let mut probes: Vec<Probe> = Vec::new();
@@ -522,7 +522,6 @@ pub fn model_quality(
         solved_return: f64::MAX,
         ..cfg.clone()
     };
-    let mut probe = Some(quality);
     let mut store = StopOnly(stop);
     let (record, points) = run_probed(
         Method::WithModel,
@@ -530,7 +529,7 @@ pub fn model_quality(
         seed,
         &mut store,
         &mut |_| {},
-        &mut probe,
+        Some(quality),
     )?;
     Ok(Quality {
         seed,

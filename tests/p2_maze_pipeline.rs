@@ -1,0 +1,177 @@
+//! p2's loop on the pixel maze (DQN through the shared off-policy loop, the pixel model): the
+//! schedule of real and imagined episodes, exact real-sample counts, a stopped run resumed from
+//! its checkpoint, and the F1 experiment's held-out scoring.
+
+use std::collections::BTreeMap;
+
+use tandem::pipelines::p2::{Checkpoints, Ephemeral, Event, Method, PipelineError, RunRecord};
+use tandem::pipelines::p2_maze::{model_quality, run, MazeConfig, QualityConfig};
+use tandem_nn::Checkpoint;
+
+/// A small configuration that never counts as solved: 8 real episodes, the first 3 real only,
+/// then 2 imagined after each real one; a tiny model; learning from the 100th transition.
+fn small() -> MazeConfig {
+    let mut c = MazeConfig::default();
+    c.model.channels = [4, 4, 4];
+    c.model.features = 16;
+    c.model.factors = 16;
+    c.fit.steps = 2;
+    c.fit.batch_size = 8;
+    c.dqn.learning_starts = 100;
+    c.dqn.buffer_size = 2000;
+    c.dqn.conv.channels = vec![4, 4, 4];
+    c.dqn.hidden = vec![16];
+    c.real_only_episodes = 3;
+    c.imagined_per_cycle = 2;
+    c.max_real_episodes = 8;
+    c.solved_return = 1e9;
+    c.checkpoint_every = 2;
+    c
+}
+
+fn schedule(events: &[Event]) -> String {
+    events
+        .iter()
+        .map(|e| match e {
+            Event::Real { .. } => 'R',
+            Event::Imagined { .. } => 'I',
+        })
+        .collect()
+}
+
+fn whole(method: Method, cfg: &MazeConfig, seed: u64) -> (Vec<Event>, RunRecord) {
+    let mut events = Vec::new();
+    let r = run(method, cfg, seed, &mut Ephemeral, &mut |e| events.push(e)).unwrap();
+    (events, r)
+}
+
+#[test]
+fn real_episodes_first_then_imagined_ones_and_real_samples_counted_exactly() {
+    let cfg = small();
+    let (events, r) = whole(Method::WithModel, &cfg, 0);
+    assert_eq!(schedule(&events), "RRR".to_string() + &"RII".repeat(5));
+    assert_eq!((r.real_returns.len(), r.imagined_episodes), (8, 10));
+    // The real samples are the real episodes' steps (events report the count after each), and
+    // imagined steps add none.
+    let mut last = 0;
+    for e in &events {
+        if let Event::Real { real_samples, .. } = e {
+            assert!(*real_samples > last);
+            last = *real_samples;
+        }
+    }
+    assert_eq!(r.real_samples, last);
+    let imagined: u64 = events
+        .iter()
+        .filter_map(|e| match e {
+            Event::Imagined { steps, .. } => Some(*steps),
+            _ => None,
+        })
+        .sum();
+    assert_eq!(r.imagined_steps, imagined);
+    assert!((10..=10 * 50).contains(&imagined));
+    assert_eq!(r.fit_losses.len(), 8);
+    assert!(r.fit_losses.iter().all(|l| l.is_finite() && *l > 0.0));
+    // The baseline meets the same first start and acts the same until learning starts.
+    let (events, mf) = whole(Method::ModelFree, &cfg, 0);
+    assert_eq!(schedule(&events), "R".repeat(8));
+    assert_eq!((mf.imagined_episodes, mf.fit_losses.len()), (0, 0));
+    assert_eq!(mf.real_returns[0], r.real_returns[0]);
+}
+
+/// Keeps checkpoints in memory and asks to stop once `stop_after` real episodes are done.
+struct Memory {
+    saved: BTreeMap<String, Checkpoint>,
+    real_done: std::rc::Rc<std::cell::Cell<u64>>,
+    stop_after: Option<u64>,
+}
+
+impl Checkpoints for Memory {
+    fn load(&mut self, key: &str) -> tandem::pipelines::Result<Option<Checkpoint>> {
+        Ok(self.saved.get(key).cloned())
+    }
+    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> tandem::pipelines::Result<()> {
+        self.saved.insert(key.into(), ckpt.clone());
+        Ok(())
+    }
+    fn stop_requested(&self) -> bool {
+        self.stop_after.is_some_and(|n| self.real_done.get() >= n)
+    }
+}
+
+#[test]
+fn a_stopped_run_resumes_to_the_same_numbers() {
+    let cfg = small();
+    for method in Method::ALL {
+        let (_, all) = whole(method, &cfg, 2);
+        let real_done = std::rc::Rc::new(std::cell::Cell::new(0));
+        let mut store = Memory {
+            saved: BTreeMap::new(),
+            real_done: real_done.clone(),
+            // Stops after 5 real episodes; the last checkpoint is from episode 4.
+            stop_after: Some(5),
+        };
+        let mut count = |e: Event| {
+            if let Event::Real { episode, .. } = e {
+                real_done.set(episode + 1);
+            }
+        };
+        let e = run(method, &cfg, 2, &mut store, &mut count).unwrap_err();
+        assert!(matches!(e, PipelineError::Stopped), "{e}");
+        store.stop_after = None;
+        let resumed = run(method, &cfg, 2, &mut store, &mut |_| {}).unwrap();
+        assert_eq!(resumed.real_returns, all.real_returns, "{method:?}");
+        assert_eq!(resumed.real_samples, all.real_samples);
+        assert_eq!(resumed.imagined_steps, all.imagined_steps);
+        assert_eq!(resumed.fit_losses, all.fit_losses);
+        let e = run(method, &cfg, 3, &mut store, &mut |_| {}).unwrap_err();
+        assert!(e.to_string().contains("seed 2"), "{e}");
+    }
+}
+
+#[test]
+fn the_f1_experiment_scores_copies_on_later_episodes_past_solved() {
+    let mut cfg = small();
+    cfg.solved_return = -100.0; // solved at once: the experiment goes on regardless
+    cfg.max_real_episodes = 1;
+    let q = QualityConfig {
+        checkpoints: vec![2, 4],
+        heldout_episodes: 2,
+    };
+    let out = model_quality(&cfg, &q, 1, &Ephemeral).unwrap();
+    assert_eq!(out.real_returns.len(), 6); // the last checkpoint and its 2 held-out episodes
+    let eps: Vec<u64> = out.points.iter().map(|p| p.episodes).collect();
+    assert_eq!(eps, [2, 4]);
+    for p in &out.points {
+        assert!(p.heldout_transitions >= 2 && p.transitions >= 2);
+        for f in [p.agent, p.obstacles, p.goal] {
+            assert!((0.0..=1.0).contains(&f), "{f}");
+        }
+        assert_eq!(p.shown_truth.len(), 768);
+        assert_eq!(p.predicted.len(), 768);
+        // The true frame is binary; the prediction a probability.
+        assert!(p.shown_truth.iter().all(|v| *v == 0.0 || *v == 1.0));
+        assert!(p.predicted.iter().all(|v| (0.0..=1.0).contains(v)));
+    }
+    // The model after 4 episodes trained on more transitions than after 2.
+    assert!(out.points[1].transitions > out.points[0].transitions);
+    let bad = QualityConfig {
+        checkpoints: vec![0],
+        heldout_episodes: 2,
+    };
+    assert!(model_quality(&cfg, &bad, 1, &Ephemeral).is_err());
+}
+
+#[test]
+fn out_of_range_settings_are_errors() {
+    let mut c = small();
+    c.fit.steps = 0;
+    assert!(run(Method::WithModel, &c, 0, &mut Ephemeral, &mut |_| {}).is_err());
+    let mut c = small();
+    c.model.image = [8, 8, 3];
+    let e = run(Method::ModelFree, &c, 0, &mut Ephemeral, &mut |_| {}).unwrap_err();
+    assert!(e.to_string().contains("16, 16, 3"), "{e}");
+    let mut c = small();
+    c.solved_return = f64::NAN;
+    assert!(run(Method::ModelFree, &c, 0, &mut Ephemeral, &mut |_| {}).is_err());
+}
