@@ -307,3 +307,31 @@ fn the_planners_view_steps_the_model_with_the_tasks_controls_from_canonical_stat
         )
         .is_err());
 }
+
+/// A learning check, loose and honest: on Pendulum-v1 M-DeMoRL (small networks, 40% of p3's MPC
+/// data) lifts the deterministic policy's return by more than 250 within 2000 real steps
+/// (measured: −1117 → −893 → −718 after 0, 1000, 2000 steps; the preset's networks reach −144).
+#[test]
+fn m_demorl_lifts_the_pendulum_within_two_thousand_real_steps() {
+    let mut cfg = P3Config::pendulum();
+    cfg.base.sac.hidden = vec![32, 32];
+    cfg.base.sac.batch_size = 128;
+    cfg.base.ensemble.members = 5;
+    cfg.base.ensemble.elites = 3;
+    cfg.base.ensemble.hidden = vec![32, 32];
+    cfg.base.real_steps = 2000;
+    cfg.base.eval_episodes = 2;
+    cfg.transitions_per_epoch = LinearSchedule::constant(4000);
+    cfg.mpc.samples = 50;
+    let r = run(Method::MDemorl, &cfg, 0, &mut Vec::new());
+    let curve: Vec<f64> = r.curve.iter().map(|p| p.eval_return).collect();
+    eprintln!(
+        "M-DeMoRL on Pendulum-v1: {curve:?} after {:?} real steps",
+        [0, 1000, 2000]
+    );
+    assert!(
+        curve[0] < -1000.0,
+        "the untrained policy already swings up: {curve:?}"
+    );
+    assert!(curve[2] > curve[0] + 250.0, "{curve:?}");
+}

@@ -352,16 +352,21 @@ impl RunRecord {
     }
 }
 
-/// What fills the loop's secondary buffer after each refit: MBPO's rollouts, M-DeMoRL's plans.
-pub trait Imagination<T: Task> {
+/// What fills the loop's secondary buffer after each refit (MBPO's rollouts, M-DeMoRL's plans):
+/// its name and sizes. [`Imagine`] does the filling.
+pub trait Imagination {
     /// The method's name in records and checkpoints.
     fn name(&self) -> &'static str;
     /// The secondary buffer's capacity during `epoch`.
     fn capacity(&self, cfg: &MbpoConfig, epoch: u64) -> usize;
     /// The schedule's value (`k` or `H`) at `epoch`.
     fn horizon(&self, epoch: u64) -> usize;
+}
+
+/// Fills the loop's secondary buffer for a task `T`.
+pub trait Imagine<T: Task>: Imagination {
     /// Fills the secondary buffer after a refit during `epoch`; returns how many transitions
-    /// it stored. `data` are all real transitions (canonical states).
+    /// it stored. `data` are all real transitions (canonical states); `seed` is this refit's.
     #[allow(clippy::too_many_arguments)]
     fn imagine(
         &mut self,
@@ -406,7 +411,7 @@ impl Rollouts {
     }
 }
 
-impl<T: Task> Imagination<T> for Rollouts {
+impl Imagination for Rollouts {
     fn name(&self) -> &'static str {
         "mbpo"
     }
@@ -421,7 +426,9 @@ impl<T: Task> Imagination<T> for Rollouts {
     fn horizon(&self, epoch: u64) -> usize {
         self.length.at(epoch)
     }
+}
 
+impl<T: Task> Imagine<T> for Rollouts {
     fn imagine(
         &mut self,
         lp: &mut OffPolicyLoop<Sac>,
@@ -495,7 +502,7 @@ const DATA: &str = "mbpo.data";
 /// The loop every method of this module and [`super::p3`] runs: SAC on the real system, with
 /// `imagination` (none: SAC alone) filling the secondary buffer after each refit of the
 /// ensemble. See the module docs.
-pub fn run_with<T: Task, F, I: Imagination<T>>(
+pub fn run_with<T: Task, F, I: Imagine<T>>(
     problem: &Problem<T, F>,
     cfg: &MbpoConfig,
     seed: u64,

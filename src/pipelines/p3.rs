@@ -44,8 +44,8 @@ use tandem_planners::{Bounds, DmdMpc, DmdMpcConfig, Noise, Objective};
 
 use super::dyna::sample_states;
 use super::mbpo::{
-    observations, run_with, Event, Imagination, LinearSchedule, MbpoConfig, Problem, Rollouts,
-    RunRecord,
+    observations, run_with, Event, Imagination, Imagine, LinearSchedule, MbpoConfig, Problem,
+    Rollouts, RunRecord,
 };
 use super::{Checkpoints, PipelineError, Result};
 
@@ -122,8 +122,8 @@ impl Default for P3Config {
 }
 
 impl P3Config {
-    /// [`MbpoConfig::pendulum`] as the loop, `H` 5 → 10 over epochs 0–4 and 2000 MPC
-    /// transitions an epoch (ours, a small budget's share).
+    /// [`MbpoConfig::pendulum`] as the loop, `H` 5 → 10 over epochs 0–4 (ours, a short run's
+    /// share of p3's ramp) and p3's 10 000 MPC transitions an epoch.
     pub fn pendulum() -> Self {
         Self {
             base: MbpoConfig::pendulum(),
@@ -133,7 +133,6 @@ impl P3Config {
                 start: 5,
                 end: 10,
             },
-            transitions_per_epoch: LinearSchedule::constant(2000),
             ..Self::default()
         }
     }
@@ -205,7 +204,7 @@ pub struct MpcPlans {
     pub cfg: P3Config,
 }
 
-impl<T: Task + Clone + Send + Sync + 'static> Imagination<T> for MpcPlans {
+impl Imagination for MpcPlans {
     fn name(&self) -> &'static str {
         Method::MDemorl.name()
     }
@@ -217,7 +216,9 @@ impl<T: Task + Clone + Send + Sync + 'static> Imagination<T> for MpcPlans {
     fn horizon(&self, epoch: u64) -> usize {
         self.cfg.horizon.at(epoch)
     }
+}
 
+impl<T: Task + Clone + Send + Sync + 'static> Imagine<T> for MpcPlans {
     fn imagine(
         &mut self,
         lp: &mut OffPolicyLoop<Sac>,
