@@ -11,7 +11,7 @@ use tandem::core::seeding::rng_from_seed;
 use tandem::dynamics::classic::GymPendulum;
 use tandem::models::{DynamicsModel, ModelInput, PlantModel};
 use tandem::pipelines::mbpo::{
-    pendulum_problem, run_sac, Event, LinearSchedule, MbpoConfig, RunRecord,
+    leg2r_problem, pendulum_problem, run_sac, Event, LinearSchedule, MbpoConfig, RunRecord,
 };
 use tandem::pipelines::p3::{self, InActions, Method, P3Config};
 use tandem::pipelines::{Checkpoints, Ephemeral, PipelineError};
@@ -334,4 +334,24 @@ fn m_demorl_lifts_the_pendulum_within_two_thousand_real_steps() {
         "the untrained policy already swings up: {curve:?}"
     );
     assert!(curve[2] > curve[0] + 250.0, "{curve:?}");
+}
+
+/// The leg's actions are fractions of its torque limits and its state carries a clock: every
+/// method runs on it (the planner plans in fractions through the model of torques), with its
+/// real steps and refits counted.
+#[test]
+fn every_method_runs_on_the_2r_leg() {
+    let mut cfg = small();
+    cfg.base.real_steps = 300;
+    cfg.base.eval_every = 300;
+    cfg.base.checkpoint_every = 300;
+    let problem = leg2r_problem();
+    for method in Method::ALL {
+        let r = p3::run(method, &problem, &cfg, 1, &mut Ephemeral, &mut |_| {}).unwrap();
+        assert_eq!(r.real_steps, 300, "{method:?}");
+        assert_eq!(r.curve.len(), 2);
+        assert!(r.curve.iter().all(|p| p.eval_return.is_finite()));
+        let refits = if method == Method::Sac { 0 } else { 3 };
+        assert_eq!(r.fit_holdout_loss.len(), refits, "{method:?}");
+    }
 }

@@ -37,7 +37,9 @@ use serde::{Deserialize, Serialize};
 use tandem_agents::{evaluate, EpisodeRunner, OffPolicyLoop, Sac, SacConfig, StepOptions};
 use tandem_core::{Rng, SeedStream};
 use tandem_dynamics::classic::GymPendulumParams;
-use tandem_envs::{Env, EnvError, PendulumTask, SampleCounter, Task};
+use tandem_envs::{
+    Env, EnvError, Leg2REnv, Leg2RModel, Leg2RTask, PendulumTask, SampleCounter, Task,
+};
 use tandem_models::{
     DynamicsModel, EnsembleConfig, FitConfig, Judge, Judges, ProbabilisticEnsemble, Propagation,
     Transitions, TransitionsBuilder,
@@ -289,6 +291,16 @@ pub fn pendulum_problem() -> Problem<PendulumTask, MakeEnv> {
     Problem {
         task: PendulumTask::new(&GymPendulumParams::default()),
         env: || tandem_envs::make("Pendulum-v1"),
+    }
+}
+
+/// p3's 2R leg (`Leg2R-v0`, the idealized leg) with its task (reward (15); 1000-step episodes).
+/// Its actions are torques as fractions of the motors' limits, so a planner plans in fractions
+/// and the model sees newton metres.
+pub fn leg2r_problem() -> Problem<Leg2RTask, MakeEnv> {
+    Problem {
+        task: Leg2REnv::new(Leg2RModel::Idealized).task().clone(),
+        env: || tandem_envs::make(Leg2REnv::ID),
     }
 }
 

@@ -81,7 +81,8 @@ impl Method {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct P3Config {
-    /// The loop all three methods run (p3 §4.2: MBPO's hyper-parameters for all).
+    /// The loop all three methods run (p3 §4.2: MBPO's hyper-parameters for all). Its `reward`
+    /// judges MBPO's rollouts only: the MPC always scores with the model's mean reward (§4.1).
     pub base: MbpoConfig,
     /// DMD-MPC: 100 sampled sequences (§4.1), CEM utility with 10% elites (§4.1, eq. 13),
     /// equally weighted among the elites (eq. 14's "reward weighted mean" read literally weighs
