@@ -355,3 +355,17 @@ fn every_method_runs_on_the_2r_leg() {
         assert_eq!(r.fit_holdout_loss.len(), refits, "{method:?}");
     }
 }
+
+#[test]
+fn settings_read_from_toml_with_defaults_for_what_is_left_out() {
+    let text = "noise_fraction = 0.2\n[base]\nreal_steps = 7000\nupdates_per_step = 5\n\
+                [horizon]\nfrom_epoch = 0\nto_epoch = 10\nstart = 3\nend = 6\n";
+    let c: P3Config = toml::from_str(text).unwrap();
+    assert_eq!((c.base.real_steps, c.base.updates_per_step), (7000, 5));
+    assert_eq!((c.noise_fraction, c.horizon.at(5)), (0.2, 4));
+    assert_eq!(c.base.rollouts_per_step, 400);
+    assert_eq!(c.transitions_per_epoch.at(50), 10_000);
+    let back: P3Config = toml::from_str(&toml::to_string(&c).unwrap()).unwrap();
+    assert_eq!(back, c);
+    assert!(toml::from_str::<P3Config>("[base]\nreal_stepz = 1\n").is_err());
+}

@@ -149,7 +149,8 @@ pub struct MbpoConfig {
     pub reward: Judge,
     /// Evaluate every this many real steps (MBPO: every epoch).
     pub eval_every: u64,
-    /// Deterministic evaluation episodes (MBPO's configurations: 10... ours 5, the mean).
+    /// Deterministic evaluation episodes, their mean reported (MBPO's configurations: 1 to 10;
+    /// ours: 5).
     pub eval_episodes: usize,
     /// Save a checkpoint every this many real steps (ours: every epoch).
     pub checkpoint_every: u64,
