@@ -2,7 +2,8 @@
 //! real steps, through `tandem::pipelines::p3::run`: the return of each evaluation, the wall time
 //! and SAC's update rate per run.
 //!
-//! `cargo run --release --example p3_compare [seeds] [real_steps]` (defaults 2, 5000).
+//! `cargo run --release --example p3_compare [seeds] [real_steps] [first_seed]` (defaults 2,
+//! 5000, 0).
 use tandem::pipelines::mbpo::pendulum_problem;
 use tandem::pipelines::p3::{run, Method, P3Config};
 use tandem::pipelines::Ephemeral;
@@ -12,7 +13,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut cfg = P3Config::pendulum();
     cfg.base.real_steps = arg(2).unwrap_or(5000);
     let problem = pendulum_problem();
-    for seed in 0..arg(1).unwrap_or(2) {
+    let first = arg(3).unwrap_or(0);
+    for seed in first..first + arg(1).unwrap_or(2) {
         for method in Method::ALL {
             let r = run(method, &problem, &cfg, seed, &mut Ephemeral, &mut |_| {})?;
             let curve: Vec<String> = r
