@@ -361,6 +361,24 @@ impl<A: OffPolicyAgent> OffPolicyLoop<A> {
         Ok(self)
     }
 
+    /// Changes the secondary buffer's capacity, keeping its newest transitions
+    /// ([`ReplayBuffer::resized`]); an error without a secondary buffer.
+    pub fn resize_secondary(&mut self, capacity: usize) -> Result<()> {
+        match &mut self.secondary {
+            Some((b, _)) => {
+                if b.capacity() != capacity {
+                    *b = b.resized(capacity)?;
+                }
+                Ok(())
+            }
+            None => Err(AgentError::Config {
+                field: "store",
+                value: "secondary".into(),
+                reason: "this loop has no secondary buffer (with_secondary)",
+            }),
+        }
+    }
+
     /// Steps and updates so far.
     pub fn counts(&self) -> LoopCounts {
         self.s.counts

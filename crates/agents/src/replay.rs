@@ -147,6 +147,27 @@ impl ReplayBuffer {
         Ok(())
     }
 
+    /// A buffer of `capacity` transitions holding the newest `min(len, capacity)` of these, in
+    /// the same order (MBPO reallocates its model buffer when the rollout length changes).
+    pub fn resized(&self, capacity: usize) -> Result<Self> {
+        let mut out = Self::new(capacity, self.obs_dim(), self.act_dim())?;
+        let keep = self.len.min(capacity);
+        for (dst, k) in (self.len - keep..self.len).enumerate() {
+            let src = self.slot(k);
+            out.obs.row_mut(dst).assign(&self.obs.row(src));
+            out.actions.row_mut(dst).assign(&self.actions.row(src));
+            out.prev_actions
+                .row_mut(dst)
+                .assign(&self.prev_actions.row(src));
+            out.next_obs.row_mut(dst).assign(&self.next_obs.row(src));
+            out.rewards[dst] = self.rewards[src];
+            out.terminated[dst] = self.terminated[src];
+        }
+        out.len = keep;
+        out.next = keep % capacity;
+        Ok(out)
+    }
+
     /// Index in storage of the `k`-th oldest transition held.
     fn slot(&self, k: usize) -> usize {
         if self.len < self.capacity {
@@ -388,6 +409,29 @@ mod tests {
             assert_eq!(t.terminated[0], if k as i64 % 3 == 0 { 1.0 } else { 0.0 });
         }
         assert!(b.get(3).is_none());
+    }
+
+    #[test]
+    fn a_resized_buffer_keeps_the_newest_in_order() {
+        let mut b = ReplayBuffer::new(4, 2, 1).unwrap();
+        for k in 0..6 {
+            push_k(&mut b, k as f64); // holds 2, 3, 4, 5
+        }
+        let small = b.resized(2).unwrap();
+        let big = b.resized(6).unwrap();
+        let rewards = |r: &ReplayBuffer| -> Vec<f32> {
+            (0..r.len()).map(|k| r.get(k).unwrap().rewards[0]).collect()
+        };
+        assert_eq!(rewards(&small), [4.0, 5.0]);
+        assert_eq!(rewards(&big), [2.0, 3.0, 4.0, 5.0]);
+        assert_eq!(big.get(1), b.get(1));
+        // Pushing on continues as a ring: the small one overwrites its oldest, the big one grows.
+        let (mut small, mut big) = (small, big);
+        push_k(&mut small, 6.0);
+        push_k(&mut big, 6.0);
+        assert_eq!(rewards(&small), [5.0, 6.0]);
+        assert_eq!(rewards(&big), [2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert!(b.resized(0).is_err());
     }
 
     #[test]

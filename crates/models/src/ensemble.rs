@@ -8,7 +8,10 @@ use rand::Rng as _;
 use rand_distr::{Distribution, StandardNormal};
 use tandem_core::seeding::SeedStream;
 use tandem_core::Rng;
-use tandem_nn::{gaussian_nll, Activation, GaussianHead, GaussianOutput, Mlp, MlpConfig};
+use tandem_nn::{
+    gaussian_nll, Activation, Checkpoint, Checkpointable, GaussianHead, GaussianOutput, Mlp,
+    MlpConfig, NnError,
+};
 
 use crate::data::{check_input, holdout_indices};
 use crate::model::{
@@ -263,6 +266,85 @@ impl ProbabilisticEnsemble {
         let mut g = GaussianOutput::default();
         m.head.forward(out, b, &mut g).map_err(nn_other)?;
         Ok(g)
+    }
+}
+
+/// What a fit learned, besides the members: elites, their scores, the standardizations and the
+/// propagation state.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Learned {
+    elites: Vec<usize>,
+    holdout_mse: Vec<f64>,
+    norms: (Standardizer, Standardizer, Standardizer),
+    propagation: Propagation,
+    member_offset: usize,
+}
+
+/// The learned part (every member's network, optimizer states and log-variance bounds, the
+/// elites and their held-out scores, the standardizations, the propagation mode and offset);
+/// widths and settings are the constructor's. Loading into an ensemble of other widths or
+/// another member count is an error naming the entry, and leaves the ensemble unchanged. A
+/// run that saves and loads its ensemble predicts and fits on exactly as one that did not.
+impl Checkpointable for ProbabilisticEnsemble {
+    fn save_to(&self, prefix: &str, ckpt: &mut Checkpoint) -> tandem_nn::Result<()> {
+        for (k, m) in self.members.iter().enumerate() {
+            let p = format!("{prefix}.member{k}");
+            m.net.save_to(&format!("{p}.net"), ckpt)?;
+            m.opt.save_to(&format!("{p}.opt"), ckpt)?;
+            m.bounds_opt.save_to(&format!("{p}.bounds_opt"), ckpt)?;
+            let b = m.head.bounds();
+            ckpt.put_f32(&format!("{p}.bounds"), &[b.len()], b)?;
+        }
+        let learned = Learned {
+            elites: self.elites.clone(),
+            holdout_mse: self.holdout_mse.clone(),
+            norms: (
+                self.in_state.clone(),
+                self.in_action.clone(),
+                self.out_norm.clone(),
+            ),
+            propagation: self.propagation,
+            member_offset: self.member_offset,
+        };
+        ckpt.put_json(&format!("{prefix}.learned"), &learned)
+    }
+
+    fn load_from(&mut self, prefix: &str, ckpt: &Checkpoint) -> tandem_nn::Result<()> {
+        let name = format!("{prefix}.learned");
+        let l: Learned = ckpt.get_json(&name)?;
+        let (s, a, d) = (self.state_dim, self.action_dim, self.out_dim());
+        let widths = (l.norms.0.dim(), l.norms.1.dim(), l.norms.2.dim());
+        let k = self.members.len();
+        if widths != (s, a, d)
+            || l.holdout_mse.len() != k
+            || l.elites.len() != self.cfg.elites
+            || l.elites.iter().any(|&e| e >= k)
+        {
+            return Err(NnError::Checkpoint(format!(
+                "`{name}`: an ensemble of widths {widths:?} with {} scores and elites {:?}; this one \
+                 has widths {:?}, {k} members and {} elites",
+                l.holdout_mse.len(),
+                l.elites,
+                (s, a, d),
+                self.cfg.elites
+            )));
+        }
+        let mut members = self.members.clone();
+        for (k, m) in members.iter_mut().enumerate() {
+            let p = format!("{prefix}.member{k}");
+            m.net.load_from(&format!("{p}.net"), ckpt)?;
+            m.opt.load_from(&format!("{p}.opt"), ckpt)?;
+            m.bounds_opt.load_from(&format!("{p}.bounds_opt"), ckpt)?;
+            let n = m.head.bounds().len();
+            ckpt.read_f32_into(&format!("{p}.bounds"), &[n], m.head.bounds_mut())?;
+        }
+        self.members = members;
+        (self.in_state, self.in_action, self.out_norm) = l.norms;
+        self.elites = l.elites;
+        self.holdout_mse = l.holdout_mse;
+        self.propagation = l.propagation;
+        self.member_offset = l.member_offset;
+        Ok(())
     }
 }
 
@@ -750,6 +832,42 @@ mod tests {
         ens.set_propagation(Propagation::FixedMember);
         let ps = ens.predict(&input, &mut rng_from_seed(5)).unwrap();
         assert!((0..8).any(|r| ps.next_states[[r, 0]] != p1.next_states[[r, 0]]));
+    }
+
+    #[test]
+    fn a_saved_ensemble_loads_into_one_that_predicts_and_fits_on_alike() {
+        let data = noisy(200, 6);
+        let fit = FitConfig {
+            epochs: 2,
+            batch_size: 32,
+            holdout_fraction: 0.2,
+            seed: 1,
+        };
+        let mut a = ProbabilisticEnsemble::new(1, 1, small(7)).unwrap();
+        a.fit(&data, &fit).unwrap();
+        a.set_propagation(Propagation::FixedMember);
+        a.set_member_offset(3);
+        let mut ckpt = Checkpoint::new();
+        a.save_to("ens", &mut ckpt).unwrap();
+        // Another initialization, then the checkpoint: the same predictions and the same next fit.
+        let mut b = ProbabilisticEnsemble::new(1, 1, small(8)).unwrap();
+        b.load_from("ens", &ckpt).unwrap();
+        assert_eq!(b.elites(), a.elites());
+        assert_eq!(b.propagation(), Propagation::FixedMember);
+        let input = ModelInput::new(data.states.view(), data.actions.view());
+        let pa = a.predict(&input, &mut rng_from_seed(2)).unwrap();
+        assert_eq!(pa, b.predict(&input, &mut rng_from_seed(2)).unwrap());
+        let (ra, rb) = (a.fit(&data, &fit).unwrap(), b.fit(&data, &fit).unwrap());
+        assert_eq!(ra, rb);
+        assert_eq!(
+            a.member_network(4).unwrap().params(),
+            b.member_network(4).unwrap().params()
+        );
+        // Another shape is refused and leaves the ensemble as it was.
+        let mut c = ProbabilisticEnsemble::new(2, 1, small(9)).unwrap();
+        let before = c.member_network(0).unwrap().params().to_vec();
+        assert!(c.load_from("ens", &ckpt).is_err());
+        assert_eq!(c.member_network(0).unwrap().params(), &before[..]);
     }
 
     #[test]

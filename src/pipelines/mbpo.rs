@@ -1,0 +1,734 @@
+//! MBPO (Janner et al. 2019, "When to trust your model", Algorithm 2) as a reusable pipeline
+//! over any real system (an [`Env`]) and the [`Task`] that describes it to a model, with SAC.
+//!
+//! Every real step, one line each:
+//!
+//! 1. act in the real system with SAC's exploring policy (uniformly random actions for the first
+//!    [`SacConfig::learning_starts`] steps), transition into `D_env` (the [`OffPolicyLoop`]'s
+//!    primary buffer) and, in the task's canonical state coordinates, into the model's data;
+//! 2. every [`MbpoConfig::model_train_freq`] real steps: fit the [`ProbabilisticEnsemble`] (7
+//!    Gaussian members, the 5 with the lowest held-out error predict) on all real data, then
+//!    start `rollouts_per_step × model_train_freq` branched rollouts of length `k` (the
+//!    [`MbpoConfig::rollout_length`] schedule of the epoch) at real states drawn uniformly,
+//!    acted by SAC, each step through a random elite; their transitions go into `D_model` (the
+//!    loop's secondary buffer, sized `rollouts_per_step × epoch_length × k × retain_epochs` and
+//!    reallocated, newest kept, when `k` changes);
+//! 3. `G` ([`MbpoConfig::updates_per_step`]) SAC updates on minibatches of
+//!    [`MbpoConfig::real_ratio`] real and the rest model transitions.
+//!
+//! The rollouts in step 2 are MBPO's own implementation's batching: the paper's box draws `M`
+//! rollouts every step, the authors' code draws `M × 250` every 250 steps, right after the model
+//! is trained; the count is the same.
+//!
+//! The same loop without a model ([`run_sac`]) is the model-free baseline at equal real steps and
+//! equal updates per step, and M-DeMoRL ([`super::p3`]) fills the secondary buffer with DMD-MPC
+//! plans instead of rollouts: both share [`run_with`], which counts real samples exactly (a
+//! [`SampleCounter`] around the real system), evaluates the deterministic policy with
+//! [`evaluate`] on a separate, uncounted copy every [`MbpoConfig::eval_every`] real steps, and
+//! saves itself in a [`Checkpoints`] store every [`MbpoConfig::checkpoint_every`] real steps so a
+//! stopped run resumes to exactly the numbers of an uninterrupted one.
+//!
+//! `examples/mbpo.rs` runs it on Pendulum-v1 ([`MbpoConfig::pendulum`]).
+
+use std::time::Instant;
+
+use ndarray::Array2;
+use serde::{Deserialize, Serialize};
+use tandem_agents::{evaluate, EpisodeRunner, OffPolicyLoop, Sac, SacConfig, StepOptions};
+use tandem_core::{Rng, SeedStream};
+use tandem_dynamics::classic::GymPendulumParams;
+use tandem_envs::{
+    Env, EnvError, Leg2REnv, Leg2RModel, Leg2RTask, PendulumTask, SampleCounter, Task,
+};
+use tandem_models::{
+    DynamicsModel, EnsembleConfig, FitConfig, Judge, Judges, ProbabilisticEnsemble, Propagation,
+    Transitions, TransitionsBuilder,
+};
+use tandem_nn::{Checkpoint, Checkpointable};
+
+use super::dyna::{imagine, sample_states};
+use super::p0::CurvePoint;
+use super::{Checkpoints, PipelineError, Result};
+
+/// A value that moves linearly with the epoch, as MBPO's rollout-length schedule
+/// `[from_epoch, to_epoch, start, end]`: `start` up to `from_epoch`, `end` from `to_epoch` on,
+/// linear in between and rounded down.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LinearSchedule {
+    /// The last epoch at `start` (epochs count from 0).
+    pub from_epoch: u64,
+    /// The first epoch at `end`.
+    pub to_epoch: u64,
+    /// The value up to `from_epoch`.
+    pub start: usize,
+    /// The value from `to_epoch` on.
+    pub end: usize,
+}
+
+impl LinearSchedule {
+    /// The same value at every epoch.
+    pub fn constant(v: usize) -> Self {
+        Self {
+            from_epoch: 0,
+            to_epoch: 1,
+            start: v,
+            end: v,
+        }
+    }
+
+    /// The value at `epoch`.
+    pub fn at(&self, epoch: u64) -> usize {
+        if epoch <= self.from_epoch {
+            return self.start;
+        }
+        let span = self.to_epoch.saturating_sub(self.from_epoch).max(1) as f64;
+        let dx = ((epoch - self.from_epoch) as f64 / span).min(1.0);
+        let y = self.start as f64 + dx * (self.end as f64 - self.start as f64);
+        y.floor() as usize
+    }
+
+    /// The largest value it takes.
+    pub fn max(&self) -> usize {
+        self.start.max(self.end)
+    }
+
+    /// An error naming `what` unless `from_epoch < to_epoch` and both values are at least 1.
+    pub fn validate(&self, what: &str) -> Result<()> {
+        if self.from_epoch >= self.to_epoch || self.start == 0 || self.end == 0 {
+            return Err(PipelineError::Config(format!(
+                "{what}: need from_epoch < to_epoch and start, end >= 1, got {self:?}"
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Settings of an MBPO run (and of the loop M-DeMoRL and the SAC baseline share). `Default` is
+/// MBPO's (Janner et al. 2019, Appendix C, and the authors' configuration files), cited per
+/// field; where a figure is ours it says so.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MbpoConfig {
+    /// The agent: SAC with two hidden layers of 256, Adam 3e-4, batch 256, τ = 0.005, γ = 0.99,
+    /// automatic entropy tuning, replay 10⁶ (MBPO's SAC, the softlearning defaults), and 5000
+    /// uniformly random steps before learning (MBPO's `n_initial_exploration_steps`). Its
+    /// `train_freq`/`gradient_steps` are unused: the pipeline takes `updates_per_step`.
+    pub sac: SacConfig,
+    /// The model: 7 members, 5 elites, 4 hidden layers of 200 swish units, Adam 1e-3, learned
+    /// log-variance bounds, reward learned (MBPO Appendix C; [`EnsembleConfig`]'s default).
+    pub ensemble: EnsembleConfig,
+    /// Each refit of the model on all real data: minibatch 256, 20% held out (the elites are
+    /// chosen on it; MBPO's `holdout_ratio` 0.2), `epochs` passes continuing from the previous
+    /// weights. MBPO trains each refit until the held-out loss stops improving (5 epochs
+    /// without a 1% gain); ours: a fixed count, 5, and see `model_min_updates`.
+    pub model_fit: FitConfig,
+    /// At least this many minibatches per member per refit (ours: 200): on little data an
+    /// epoch is a few steps, where MBPO's early stopping would train on.
+    pub model_min_updates: usize,
+    /// Real steps per epoch (MBPO: 1000); schedules count epochs.
+    pub epoch_length: u64,
+    /// Real steps of the run (the budget; MBPO's HalfCheetah: 400 epochs).
+    pub real_steps: u64,
+    /// Refit the model and refill `D_model` every this many real steps (MBPO: 250).
+    pub model_train_freq: u64,
+    /// Model rollouts per real step `M` (MBPO: 400, its `rollout_batch_size` 10⁵ every 250
+    /// steps).
+    pub rollouts_per_step: usize,
+    /// Rollout length `k` by epoch (MBPO's Hopper: 1 → 15 over epochs 20–100; HalfCheetah and
+    /// Walker2d keep 1).
+    pub rollout_length: LinearSchedule,
+    /// Epochs of model rollouts `D_model` holds (MBPO's configurations: 1).
+    pub retain_epochs: usize,
+    /// Fraction of every SAC minibatch from real data (MBPO: 0.05).
+    pub real_ratio: f64,
+    /// SAC updates per real step `G` (MBPO: 20; 40 on HalfCheetah).
+    pub updates_per_step: usize,
+    /// Who scores imagined transitions: MBPO's model learns the reward ([`Judge::Model`]);
+    /// termination always comes from the task (MBPO's hand-written termination functions).
+    pub reward: Judge,
+    /// Evaluate every this many real steps (MBPO: every epoch).
+    pub eval_every: u64,
+    /// Deterministic evaluation episodes, their mean reported (MBPO's configurations: 1 to 10;
+    /// ours: 5).
+    pub eval_episodes: usize,
+    /// Save a checkpoint every this many real steps (ours: every epoch).
+    pub checkpoint_every: u64,
+}
+
+impl Default for MbpoConfig {
+    fn default() -> Self {
+        Self {
+            sac: SacConfig {
+                learning_starts: 5000,
+                ..SacConfig::default()
+            },
+            ensemble: EnsembleConfig::default(),
+            model_fit: FitConfig {
+                epochs: 5,
+                batch_size: 256,
+                holdout_fraction: 0.2,
+                seed: 0,
+            },
+            model_min_updates: 200,
+            epoch_length: 1000,
+            real_steps: 400_000,
+            model_train_freq: 250,
+            rollouts_per_step: 400,
+            rollout_length: LinearSchedule {
+                from_epoch: 20,
+                to_epoch: 100,
+                start: 1,
+                end: 15,
+            },
+            retain_epochs: 1,
+            real_ratio: 0.05,
+            updates_per_step: 20,
+            reward: Judge::Model,
+            eval_every: 1000,
+            eval_episodes: 5,
+            checkpoint_every: 1000,
+        }
+    }
+}
+
+impl MbpoConfig {
+    /// A small preset for Pendulum-v1 (ours; MBPO did not run it): 5 epochs of 1000 steps,
+    /// SAC 64×64 with Adam 1e-3 and 250 random steps, an ensemble of 3-layer 64-unit members,
+    /// 100 rollouts per step of length 1 → 3 over epochs 1–3, `G` = 10, 5 evaluation episodes.
+    pub fn pendulum() -> Self {
+        Self {
+            sac: SacConfig {
+                hidden: vec![64, 64],
+                learning_rate: 1e-3,
+                learning_starts: 250,
+                ..SacConfig::default()
+            },
+            ensemble: EnsembleConfig {
+                hidden: vec![64, 64, 64],
+                ..EnsembleConfig::default()
+            },
+            real_steps: 5000,
+            rollouts_per_step: 100,
+            rollout_length: LinearSchedule {
+                from_epoch: 1,
+                to_epoch: 3,
+                start: 1,
+                end: 3,
+            },
+            updates_per_step: 10,
+            ..Self::default()
+        }
+    }
+
+    /// Checks the ranges the loop relies on.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: &str| Err(PipelineError::Config(m.to_string()));
+        let counts = [
+            self.epoch_length,
+            self.real_steps,
+            self.model_train_freq,
+            self.eval_every,
+            self.checkpoint_every,
+        ];
+        if counts.contains(&0) {
+            return bad("epoch_length, real_steps, model_train_freq, eval_every and checkpoint_every must be >= 1");
+        }
+        if self.rollouts_per_step == 0 || self.retain_epochs == 0 || self.updates_per_step == 0 {
+            return bad("rollouts_per_step, retain_epochs and updates_per_step must be >= 1");
+        }
+        if !(0.0..=1.0).contains(&self.real_ratio) {
+            return bad("real_ratio must lie in [0, 1]");
+        }
+        if self.eval_episodes == 0 || self.model_fit.epochs == 0 || self.model_fit.batch_size == 0 {
+            return bad("eval_episodes, model_fit.epochs and model_fit.batch_size must be >= 1");
+        }
+        if !(0.0..1.0).contains(&self.model_fit.holdout_fraction) {
+            return bad("model_fit.holdout_fraction must lie in [0, 1)");
+        }
+        if self.reward == Judge::Model && !self.ensemble.learn_reward {
+            return bad("reward = model needs ensemble.learn_reward");
+        }
+        self.rollout_length.validate("rollout_length")?;
+        self.sac.validate()?;
+        Ok(())
+    }
+
+    /// The epoch (from 0) that real step `t` (from 1) belongs to.
+    pub fn epoch_of(&self, t: u64) -> u64 {
+        (t.max(1) - 1) / self.epoch_length
+    }
+
+    /// The model fit at a refit on `n` transitions: `model_fit` with enough epochs for
+    /// `model_min_updates` minibatches per member, and the seed `seed`.
+    pub fn fit_for(&self, n: usize, seed: u64) -> FitConfig {
+        let train = ((n as f64) * (1.0 - self.model_fit.holdout_fraction)).ceil() as usize;
+        let per_epoch = train.div_ceil(self.model_fit.batch_size).max(1);
+        FitConfig {
+            epochs: self
+                .model_fit
+                .epochs
+                .max(self.model_min_updates.div_ceil(per_epoch)),
+            seed,
+            ..self.model_fit.clone()
+        }
+    }
+}
+
+/// A real system and the task that describes it to a model: its observations, the plant input
+/// of an action, canonical states, reward and termination (the same the real system uses).
+pub struct Problem<T, F> {
+    /// The task (shared by the real system and the model's rollouts).
+    pub task: T,
+    /// Builds a fresh real system with its episode limit.
+    pub env: F,
+}
+
+/// A constructor of the real system.
+pub type MakeEnv = fn() -> std::result::Result<Box<dyn Env>, EnvError>;
+
+/// Pendulum-v1 with its own rules as the task.
+pub fn pendulum_problem() -> Problem<PendulumTask, MakeEnv> {
+    Problem {
+        task: PendulumTask::new(&GymPendulumParams::default()),
+        env: || tandem_envs::make("Pendulum-v1"),
+    }
+}
+
+/// p3's 2R leg (`Leg2R-v0`, the idealized leg) with its task (reward (15); 1000-step episodes).
+/// Its actions are torques as fractions of the motors' limits, so a planner plans in fractions
+/// and the model sees newton metres.
+pub fn leg2r_problem() -> Problem<Leg2RTask, MakeEnv> {
+    Problem {
+        task: Leg2REnv::new(Leg2RModel::Idealized).task().clone(),
+        env: || tandem_envs::make(Leg2REnv::ID),
+    }
+}
+
+/// What a run reports as it goes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Event {
+    /// A real step was taken; `real_steps` so far.
+    Step {
+        /// Real steps so far.
+        real_steps: u64,
+    },
+    /// The model was refit and the secondary buffer refilled.
+    Fit {
+        /// Real steps so far.
+        real_steps: u64,
+        /// The fit's last held-out loss (mean Gaussian NLL per element).
+        holdout_loss: f64,
+        /// Imagined transitions stored.
+        imagined: u64,
+    },
+    /// The deterministic policy was evaluated.
+    Eval(CurvePoint),
+}
+
+/// What one run reports.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunRecord {
+    /// `"sac"`, `"mbpo"` or `"m_demorl"`.
+    pub method: String,
+    /// The seed.
+    pub seed: u64,
+    /// Mean evaluation return after `true_samples` real steps, at 0 and every `eval_every`.
+    pub curve: Vec<CurvePoint>,
+    /// Real steps taken, counted by the [`SampleCounter`] around the real system.
+    pub real_steps: u64,
+    /// Imagined transitions stored in the secondary buffer (model rollouts or MPC plans).
+    pub imagined: u64,
+    /// The schedule's value at each refit (MBPO's `k`, M-DeMoRL's `H`), one per refit.
+    pub horizons: Vec<usize>,
+    /// Last held-out loss of each refit.
+    pub fit_holdout_loss: Vec<f64>,
+    /// SAC updates.
+    pub updates: u64,
+    /// Seconds spent in SAC updates (their rate: `updates / update_seconds`).
+    pub update_seconds: f64,
+    /// Wall time, seconds (this process's share, if resumed).
+    pub wall_seconds: f64,
+}
+
+impl RunRecord {
+    /// The return at the last evaluation with at most `budget` real steps.
+    pub fn return_at(&self, budget: u64) -> Option<f64> {
+        let last = self.curve.iter().take_while(|p| p.true_samples <= budget);
+        last.last().map(|p| p.eval_return)
+    }
+
+    /// Real steps at the first evaluation whose return reached `target`.
+    pub fn steps_to(&self, target: f64) -> Option<u64> {
+        let mut hit = self.curve.iter().filter(|p| p.eval_return >= target);
+        hit.next().map(|p| p.true_samples)
+    }
+}
+
+/// What fills the loop's secondary buffer after each refit (MBPO's rollouts, M-DeMoRL's plans):
+/// its name and sizes. [`Imagine`] does the filling.
+pub trait Imagination {
+    /// The method's name in records and checkpoints.
+    fn name(&self) -> &'static str;
+    /// The secondary buffer's capacity during `epoch`.
+    fn capacity(&self, cfg: &MbpoConfig, epoch: u64) -> usize;
+    /// The schedule's value (`k` or `H`) at `epoch`.
+    fn horizon(&self, epoch: u64) -> usize;
+}
+
+/// Fills the loop's secondary buffer for a task `T`.
+pub trait Imagine<T: Task>: Imagination {
+    /// Fills the secondary buffer after a refit during `epoch`; returns how many transitions
+    /// it stored. `data` are all real transitions (canonical states); `seed` is this refit's.
+    #[allow(clippy::too_many_arguments)]
+    fn imagine(
+        &mut self,
+        lp: &mut OffPolicyLoop<Sac>,
+        model: &mut ProbabilisticEnsemble,
+        task: &T,
+        data: &Transitions,
+        epoch: u64,
+        seed: u64,
+        rng: &mut Rng,
+    ) -> Result<usize>;
+}
+
+/// MBPO's branched rollouts ([`super::dyna::imagine`]).
+#[derive(Debug, Clone)]
+pub struct Rollouts {
+    /// `M`, per real step.
+    pub rollouts_per_step: usize,
+    /// Real steps between refits.
+    pub per_refit: u64,
+    /// `k` by epoch.
+    pub length: LinearSchedule,
+    /// Epochs kept.
+    pub retain_epochs: usize,
+    /// Reward and termination of imagined steps.
+    pub judges: Judges,
+}
+
+impl Rollouts {
+    /// MBPO's rollouts as `cfg` sets them.
+    pub fn of(cfg: &MbpoConfig) -> Self {
+        Self {
+            rollouts_per_step: cfg.rollouts_per_step,
+            per_refit: cfg.model_train_freq,
+            length: cfg.rollout_length,
+            retain_epochs: cfg.retain_epochs,
+            judges: Judges {
+                reward: cfg.reward,
+                ..Judges::default()
+            },
+        }
+    }
+}
+
+impl Imagination for Rollouts {
+    fn name(&self) -> &'static str {
+        "mbpo"
+    }
+
+    fn capacity(&self, cfg: &MbpoConfig, epoch: u64) -> usize {
+        self.rollouts_per_step
+            * cfg.epoch_length as usize
+            * self.length.at(epoch)
+            * self.retain_epochs
+    }
+
+    fn horizon(&self, epoch: u64) -> usize {
+        self.length.at(epoch)
+    }
+}
+
+impl<T: Task> Imagine<T> for Rollouts {
+    fn imagine(
+        &mut self,
+        lp: &mut OffPolicyLoop<Sac>,
+        model: &mut ProbabilisticEnsemble,
+        task: &T,
+        data: &Transitions,
+        epoch: u64,
+        _seed: u64,
+        rng: &mut Rng,
+    ) -> Result<usize> {
+        model.set_propagation(Propagation::RandomMember);
+        let n = self.rollouts_per_step * self.per_refit as usize;
+        let starts = sample_states(data, n, rng)?;
+        let k = self.length.at(epoch);
+        imagine(lp, model, task, &self.judges, &starts, k, rng)
+    }
+}
+
+/// Runs MBPO for `seed` on `problem` (from the checkpoint `store` holds under `"mbpo"`, if any).
+pub fn run<T: Task, F>(
+    problem: &Problem<T, F>,
+    cfg: &MbpoConfig,
+    seed: u64,
+    store: &mut dyn Checkpoints,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<RunRecord>
+where
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    let mut rollouts = Rollouts::of(cfg);
+    run_with(problem, cfg, seed, Some(&mut rollouts), store, on_event)
+}
+
+/// The model-free baseline: the same loop, SAC alone on real data (`G` updates per real step,
+/// the same evaluations), checkpointed under `"sac"`.
+pub fn run_sac<T: Task, F>(
+    problem: &Problem<T, F>,
+    cfg: &MbpoConfig,
+    seed: u64,
+    store: &mut dyn Checkpoints,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<RunRecord>
+where
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    run_with::<T, F, Rollouts>(problem, cfg, seed, None, store, on_event)
+}
+
+/// Where a run stands at a checkpoint, besides the agent, its loop, the model and its data.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Progress {
+    method: String,
+    seed: u64,
+    real_steps: u64,
+    curve: Vec<CurvePoint>,
+    horizons: Vec<usize>,
+    fit_losses: Vec<f64>,
+    imagined: u64,
+    refits: u64,
+    capacity: usize,
+    runner: EpisodeRunner,
+    env_state: Option<Vec<f64>>,
+    rng: Rng,
+}
+
+const PROGRESS: &str = "mbpo.progress";
+const LOOP: &str = "mbpo.loop";
+const MODEL: &str = "mbpo.model";
+const DATA: &str = "mbpo.data";
+
+/// The loop every method of this module and [`super::p3`] runs: SAC on the real system, with
+/// `imagination` (none: SAC alone) filling the secondary buffer after each refit of the
+/// ensemble. See the module docs.
+pub fn run_with<T: Task, F, I: Imagine<T>>(
+    problem: &Problem<T, F>,
+    cfg: &MbpoConfig,
+    seed: u64,
+    mut imagination: Option<&mut I>,
+    store: &mut dyn Checkpoints,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<RunRecord>
+where
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    cfg.validate()?;
+    let t0 = Instant::now();
+    let task = &problem.task;
+    let name = imagination.as_ref().map_or("sac", |i| i.name());
+    let seeds = SeedStream::new(seed);
+    let mut eval_env = (problem.env)()?;
+    let (obs_space, act_space) = (
+        task.observation_space().clone(),
+        task.action_space().clone(),
+    );
+    for (what, task_space, env_space) in [
+        ("observation", &obs_space, eval_env.observation_space()),
+        ("action", &act_space, eval_env.action_space()),
+    ] {
+        if task_space.flat_dim() != env_space.flat_dim() {
+            return Err(PipelineError::Config(format!(
+                "the task's {what} space has {} components, the real system's {}",
+                task_space.flat_dim(),
+                env_space.flat_dim()
+            )));
+        }
+    }
+    let agent = Sac::new(
+        cfg.sac.clone(),
+        &obs_space,
+        &act_space,
+        seeds.derive("agent"),
+    )?;
+    let schedule = cfg.sac.schedule();
+    let mut lp = OffPolicyLoop::new(
+        agent,
+        schedule,
+        &obs_space,
+        &act_space,
+        seeds.rng("minibatches"),
+    )?;
+    let capacity0 = imagination.as_ref().map_or(0, |i| i.capacity(cfg, 0));
+    if imagination.is_some() {
+        lp = lp.with_secondary(capacity0, cfg.real_ratio)?;
+    }
+    let (s_dim, u_dim) = (task.state_dim(), tandem_envs::control_dim(task));
+    let mut model = match imagination {
+        Some(_) => Some(ProbabilisticEnsemble::new(
+            s_dim,
+            u_dim,
+            EnsembleConfig {
+                seed: seeds.derive("model"),
+                ..cfg.ensemble.clone()
+            },
+        )?),
+        None => None,
+    };
+    let mut all = Transitions::default();
+    let eval = |agent: &mut Sac, env: &mut dyn Env| -> Result<f64> {
+        let r = evaluate(agent, env, cfg.eval_episodes, &seeds, None)?;
+        Ok(r.iter().sum::<f64>() / r.len() as f64)
+    };
+    let mut p = match store.load(name)? {
+        Some(ckpt) => {
+            let p: Progress = ckpt.get_json(PROGRESS)?;
+            super::ensure_same_run((&p.method, p.seed), (name, seed))?;
+            lp.agent.load(&ckpt)?;
+            if imagination.is_some() {
+                lp.resize_secondary(p.capacity)?;
+            }
+            lp.load(LOOP, &ckpt)?;
+            if let Some(m) = model.as_mut() {
+                m.load_from(MODEL, &ckpt)?;
+            }
+            all.load_from(DATA, &ckpt)?;
+            p
+        }
+        None => Progress {
+            method: name.to_string(),
+            seed,
+            real_steps: 0,
+            curve: vec![CurvePoint {
+                true_samples: 0,
+                eval_return: eval(&mut lp.agent, eval_env.as_mut())?,
+            }],
+            horizons: Vec::new(),
+            fit_losses: Vec::new(),
+            imagined: 0,
+            refits: 0,
+            capacity: capacity0,
+            runner: EpisodeRunner::new(seeds.derive("episodes"), "episode-"),
+            env_state: None,
+            rng: seeds.rng("imagination"),
+        },
+    };
+    let (mut env, count) = SampleCounter::starting_at((problem.env)()?, p.real_steps);
+    if let Some(state) = &p.env_state {
+        env.set_state(state)?;
+    }
+    let mut pending = TransitionsBuilder::new(s_dim, u_dim);
+    let mut update_seconds = 0.0;
+    let opts = StepOptions::real().recording_states().without_updates();
+    while count.get() < cfg.real_steps {
+        if store.stop_requested() {
+            return Err(PipelineError::Stopped);
+        }
+        let rec = lp.step(&mut env, &mut p.runner, opts)?;
+        let t = count.get();
+        on_event(Event::Step { real_steps: t });
+        if let (Some(imagination), Some(model)) = (imagination.as_deref_mut(), model.as_mut()) {
+            let (x, x1) = rec.states.as_ref().expect("recorded");
+            let u = task.control(&rec.action);
+            pending.push_canonical(task, x, &u, x1, rec.reward, rec.terminated, rec.done())?;
+            if t % cfg.model_train_freq == 0 && t >= cfg.sac.learning_starts as u64 {
+                flush(&mut all, &mut pending, (s_dim, u_dim))?;
+                let epoch = cfg.epoch_of(t);
+                let fit = cfg.fit_for(all.len(), seeds.derive(&format!("fit-{}", p.refits)));
+                let report = model.fit(&all, &fit)?;
+                let loss = report.holdout_loss.last().copied().unwrap_or(f64::NAN);
+                let capacity = imagination.capacity(cfg, epoch);
+                if capacity != p.capacity {
+                    lp.resize_secondary(capacity)?;
+                    p.capacity = capacity;
+                }
+                let plan_seed = seeds.derive(&format!("imagine-{}", p.refits));
+                let n = imagination
+                    .imagine(&mut lp, model, task, &all, epoch, plan_seed, &mut p.rng)?;
+                p.refits += 1;
+                p.imagined += n as u64;
+                p.fit_losses.push(loss);
+                p.horizons.push(imagination.horizon(epoch));
+                on_event(Event::Fit {
+                    real_steps: t,
+                    holdout_loss: loss,
+                    imagined: n as u64,
+                });
+            }
+        }
+        if lp.primary().len() > cfg.sac.learning_starts {
+            let u0 = Instant::now();
+            lp.update(cfg.updates_per_step)?;
+            update_seconds += u0.elapsed().as_secs_f64();
+        }
+        if t % cfg.eval_every == 0 {
+            let point = CurvePoint {
+                true_samples: t,
+                eval_return: eval(&mut lp.agent, eval_env.as_mut())?,
+            };
+            p.curve.push(point);
+            on_event(Event::Eval(point));
+        }
+        if t % cfg.checkpoint_every == 0 {
+            flush(&mut all, &mut pending, (s_dim, u_dim))?;
+            p.real_steps = t;
+            p.env_state = p.runner.in_episode().then(|| env.state());
+            let mut ckpt = Checkpoint::new();
+            lp.agent.save(&mut ckpt)?;
+            lp.save(LOOP, &mut ckpt)?;
+            if let Some(m) = model.as_ref() {
+                m.save_to(MODEL, &mut ckpt)?;
+            }
+            all.save_to(DATA, &mut ckpt)?;
+            ckpt.put_json(PROGRESS, &p)?;
+            store.save(name, &ckpt)?;
+        }
+    }
+    Ok(RunRecord {
+        method: name.to_string(),
+        seed,
+        curve: p.curve,
+        real_steps: count.get(),
+        imagined: p.imagined,
+        horizons: p.horizons,
+        fit_holdout_loss: p.fit_losses,
+        updates: lp.counts().updates,
+        update_seconds,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// Moves the transitions gathered since the last flush into `all`.
+fn flush(
+    all: &mut Transitions,
+    pending: &mut TransitionsBuilder,
+    dims: (usize, usize),
+) -> Result<()> {
+    if pending.is_empty() {
+        return Ok(());
+    }
+    let new = std::mem::replace(pending, TransitionsBuilder::new(dims.0, dims.1)).build();
+    if all.is_empty() {
+        *all = new;
+    } else {
+        all.extend(&new)?;
+    }
+    Ok(())
+}
+
+/// Observations of the rows of `states` under `task` (`B x O`).
+pub fn observations<T: Task + ?Sized>(
+    task: &T,
+    states: ndarray::ArrayView2<'_, f64>,
+) -> Array2<f64> {
+    let o = task.observation_space().flat_dim();
+    let mut out = Array2::zeros((states.nrows(), o));
+    for (i, s) in states.rows().into_iter().enumerate() {
+        let obs = task.observe(&s.to_vec());
+        out.row_mut(i).assign(&ndarray::ArrayView1::from(&obs[..]));
+    }
+    out
+}

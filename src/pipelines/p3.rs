@@ -1,0 +1,427 @@
+//! Paper p3 (Mishra et al.): M-DeMoRL, Algorithm 1, against SAC and MBPO on the same loop.
+//!
+//! M-DeMoRL is [`super::mbpo`]'s loop with its secondary buffer `D_MPC` filled by a DMD-MPC
+//! inner loop instead of branched rollouts. Each iteration (Algorithm 1, lines 3–19):
+//!
+//! - line 4: **the real system is stepped with SAC's action** `u ~ π_θ(x)` (exploring), and the
+//!   transition joins `D_ENV`; the MPC's actions never reach the real system (they only make
+//!   data);
+//! - lines 5–7: the ensemble `f_φ` is fitted on `D_ENV` (every [`MbpoConfig::model_train_freq`]
+//!   real steps, as MBPO, whose hyper-parameters p3 takes);
+//! - line 8: `D_MPC` is initialized (emptied; [`P3Config::keep_iterations`] `> 1` keeps older
+//!   plans, ours);
+//! - line 9: `H` and the number of plans from their schedules ([`P3Config::horizon`]: 5 → 15,
+//!   §4.1; [`P3Config::transitions_per_epoch`]: up to 10 000 MPC transitions an epoch);
+//! - lines 10–15, per plan: `x_{t,0}` drawn uniformly from `D_ENV`; [`DmdMpc`] samples `M = 100`
+//!   sequences around SAC's own actions along each sample's model rollout (the shift, eq.
+//!   10–12: `u_{t,h} ~ N(π_θ(x_{t,h}), Σ)`, `π_θ` sampled as footnote 2 says), through the
+//!   ensemble's elites (each plan keeps one random elite per sample row: PETS's TS∞), costs
+//!   `Σ γ^h (−r̂) − γ^H V(x_{t,H})` with the model's mean reward `r̂` and SAC's soft value `V`
+//!   (eq. 3, §3 item 2); the mean of the best 10% (eq. 13–14) is the mirror-descent step (eq.
+//!   9, step size α); the model rollout of that mean is the plan, and its `H` transitions (up
+//!   to the first terminal one, the task says which) join `D_MPC`;
+//! - lines 16–18: `G` SAC updates on minibatches of `D_ENV ∪ D_MPC` (MBPO's real ratio).
+//!
+//! The planner plans in the agent's action space ([`InActions`] turns actions into plant
+//! inputs with the task), so SAC's proposals, the MPC's bounds and the `D_MPC` actions are all
+//! in the units SAC acts in.
+//!
+//! [`run`] runs one [`Method`] for one seed; `examples/m_demorl.rs` runs M-DeMoRL on Pendulum-v1.
+
+use std::cell::RefCell;
+use std::sync::Arc;
+
+use ndarray::{Array1, Array2, ArrayView2};
+use serde::{Deserialize, Serialize};
+use tandem_agents::{BatchPolicy, Critic, Mode, OffPolicyLoop, Sac, Store};
+use tandem_core::{seeding::rng_from_seed, Action, Rng, Space};
+use tandem_envs::{Env, EnvError, Task};
+use tandem_models::{
+    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, ProbabilisticEnsemble,
+    Propagation, Transitions,
+};
+use tandem_planners::{Bounds, DmdMpc, DmdMpcConfig, Noise, Objective};
+
+use super::dyna::sample_states;
+use super::mbpo::{
+    observations, run_with, Event, Imagination, Imagine, LinearSchedule, MbpoConfig, Problem,
+    Rollouts, RunRecord,
+};
+use super::{Checkpoints, PipelineError, Result};
+
+/// One of the three methods p3 compares.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// SAC alone on the real system.
+    Sac,
+    /// MBPO: branched model rollouts.
+    Mbpo,
+    /// M-DeMoRL: DMD-MPC plans.
+    MDemorl,
+}
+
+impl Method {
+    /// All three, in p3's order.
+    pub const ALL: [Method; 3] = [Method::Sac, Method::Mbpo, Method::MDemorl];
+
+    /// `"sac"`, `"mbpo"` or `"m_demorl"` (the keys of records and checkpoints).
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Sac => "sac",
+            Method::Mbpo => "mbpo",
+            Method::MDemorl => "m_demorl",
+        }
+    }
+}
+
+/// Settings of a p3 comparison: the shared loop (MBPO's settings, which p3 says it takes) and
+/// M-DeMoRL's inner loop. `Default` follows p3 §4.1 where it gives a figure and says where a
+/// figure is ours.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct P3Config {
+    /// The loop all three methods run (p3 §4.2: MBPO's hyper-parameters for all). Its `reward`
+    /// judges MBPO's rollouts only: the MPC always scores with the model's mean reward (§4.1).
+    pub base: MbpoConfig,
+    /// DMD-MPC: 100 sampled sequences (§4.1), CEM utility with 10% elites (§4.1, eq. 13),
+    /// equally weighted among the elites (eq. 14's "reward weighted mean" read literally weighs
+    /// by the cost, which is sign-ambiguous; [`tandem_planners::Utility`] offers the margin
+    /// weighting), step size α = 0.8 (ours: p3 gives none), one round per plan. Its `horizon`,
+    /// `bounds`, `noise` and `seed` are set by the pipeline.
+    pub mpc: DmdMpcConfig,
+    /// Standard deviation of the control distribution `Σ^{1/2}` per action component, as a
+    /// fraction of the component's half range (ours: 0.3; p3 gives none).
+    pub noise_fraction: f64,
+    /// Planning horizon `H` by epoch (§4.1: 5 → 15; the ramp over epochs 0–80 is MoPAC's, whose
+    /// configuration p3's figures match).
+    pub horizon: LinearSchedule,
+    /// MPC transitions per epoch (§4.1: "a varying batch-size with maximum of 10,000"; ours:
+    /// 10 000 throughout), spread over the epoch's refits: `ceil(n · model_train_freq /
+    /// epoch_length / H)` plans per refit.
+    pub transitions_per_epoch: LinearSchedule,
+    /// Refits' worth of plans `D_MPC` keeps (Algorithm 1, line 8: 1, a fresh buffer each time).
+    pub keep_iterations: usize,
+}
+
+impl Default for P3Config {
+    fn default() -> Self {
+        Self {
+            base: MbpoConfig::default(),
+            mpc: DmdMpcConfig::default(),
+            noise_fraction: 0.3,
+            horizon: LinearSchedule {
+                from_epoch: 0,
+                to_epoch: 80,
+                start: 5,
+                end: 15,
+            },
+            transitions_per_epoch: LinearSchedule::constant(10_000),
+            keep_iterations: 1,
+        }
+    }
+}
+
+impl P3Config {
+    /// [`MbpoConfig::pendulum`] as the loop, `H` 5 → 10 over epochs 0–4 (ours, a short run's
+    /// share of p3's ramp) and p3's 10 000 MPC transitions an epoch.
+    pub fn pendulum() -> Self {
+        Self {
+            base: MbpoConfig::pendulum(),
+            horizon: LinearSchedule {
+                from_epoch: 0,
+                to_epoch: 4,
+                start: 5,
+                end: 10,
+            },
+            ..Self::default()
+        }
+    }
+
+    /// Checks the ranges the loops rely on.
+    pub fn validate(&self) -> Result<()> {
+        self.base.validate()?;
+        self.horizon.validate("horizon")?;
+        self.transitions_per_epoch
+            .validate("transitions_per_epoch")?;
+        if self.keep_iterations == 0 {
+            return Err(PipelineError::Config("keep_iterations must be >= 1".into()));
+        }
+        if !(self.noise_fraction > 0.0 && self.noise_fraction.is_finite()) {
+            return Err(PipelineError::Config(format!(
+                "noise_fraction must be positive and finite, got {}",
+                self.noise_fraction
+            )));
+        }
+        // The planner checks the rest of its settings.
+        DmdMpc::new(DmdMpcConfig {
+            horizon: self.horizon.max(),
+            ..self.mpc.clone()
+        })?;
+        Ok(())
+    }
+
+    /// Plans per refit at `epoch`.
+    pub fn plans_per_refit(&self, epoch: u64) -> usize {
+        let b = &self.base;
+        let n = self.transitions_per_epoch.at(epoch) as u64 * b.model_train_freq;
+        let per_refit = n.div_ceil(b.epoch_length) as usize;
+        per_refit.div_ceil(self.horizon.at(epoch)).max(1)
+    }
+}
+
+/// Runs `method` for `seed` on `problem` (resuming from the checkpoint `store` holds under the
+/// method's name, if any). SAC and MBPO run [`super::mbpo`]'s loop with `cfg.base`.
+pub fn run<T, F>(
+    method: Method,
+    problem: &Problem<T, F>,
+    cfg: &P3Config,
+    seed: u64,
+    store: &mut dyn Checkpoints,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<RunRecord>
+where
+    T: Task + Clone + Send + Sync + 'static,
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    cfg.validate()?;
+    match method {
+        Method::Sac => run_with::<T, F, Rollouts>(problem, &cfg.base, seed, None, store, on_event),
+        Method::Mbpo => {
+            let mut r = Rollouts::of(&cfg.base);
+            run_with(problem, &cfg.base, seed, Some(&mut r), store, on_event)
+        }
+        Method::MDemorl => {
+            let mut plans = MpcPlans { cfg: cfg.clone() };
+            run_with(problem, &cfg.base, seed, Some(&mut plans), store, on_event)
+        }
+    }
+}
+
+/// M-DeMoRL's inner loop as the shared loop's [`Imagination`].
+#[derive(Debug, Clone)]
+pub struct MpcPlans {
+    /// The settings.
+    pub cfg: P3Config,
+}
+
+impl Imagination for MpcPlans {
+    fn name(&self) -> &'static str {
+        Method::MDemorl.name()
+    }
+
+    fn capacity(&self, _base: &MbpoConfig, epoch: u64) -> usize {
+        self.cfg.plans_per_refit(epoch) * self.cfg.horizon.at(epoch) * self.cfg.keep_iterations
+    }
+
+    fn horizon(&self, epoch: u64) -> usize {
+        self.cfg.horizon.at(epoch)
+    }
+}
+
+impl<T: Task + Clone + Send + Sync + 'static> Imagine<T> for MpcPlans {
+    fn imagine(
+        &mut self,
+        lp: &mut OffPolicyLoop<Sac>,
+        model: &mut ProbabilisticEnsemble,
+        task: &T,
+        data: &Transitions,
+        epoch: u64,
+        seed: u64,
+        rng: &mut Rng,
+    ) -> Result<usize> {
+        if self.cfg.keep_iterations == 1 {
+            lp.clear(Store::Secondary)?;
+        }
+        model.set_propagation(Propagation::FixedMember);
+        let h = self.cfg.horizon.at(epoch);
+        let starts = sample_states(data, self.cfg.plans_per_refit(epoch), rng)?;
+        let (low, high) = match task.action_space() {
+            Space::Box { low, high, .. } => (low.clone(), high.clone()),
+            Space::Discrete { .. } => {
+                return Err(PipelineError::Config(
+                    "M-DeMoRL plans over a continuous (box) action space".into(),
+                ))
+            }
+        };
+        let half: Vec<f64> = low.iter().zip(&high).map(|(l, u)| 0.5 * (u - l)).collect();
+        let mut planner = DmdMpc::new(DmdMpcConfig {
+            horizon: h,
+            bounds: Some(Bounds::new(low, high)),
+            noise: Noise::Diagonal(half.iter().map(|r| r * self.cfg.noise_fraction).collect()),
+            seed,
+            ..self.cfg.mpc.clone()
+        })?;
+        let objective = value_objective(&lp.agent, task, model.state_dim(), half.len())?;
+        let rows = {
+            let agent = &lp.agent;
+            let rng = RefCell::new(&mut *rng);
+            let proposal = |states: ArrayView2<'_, f64>| {
+                let obs = observations(task, states);
+                let mut r = rng.borrow_mut();
+                agent
+                    .act_batch(obs.view(), Mode::Explore, &mut r)
+                    .unwrap_or_else(|_| Array2::from_elem((states.nrows(), half.len()), f64::NAN))
+            };
+            let mut rows = PlanRows::default();
+            for x0 in starts.rows() {
+                model.resample_member_offset(&mut rng.borrow_mut());
+                let m = InActions::new(&*model, task);
+                let x0 = x0.to_vec();
+                let plan = planner.plan_with_proposal(&x0, None, &m, &objective, &proposal)?;
+                rows.push(task, &plan.transitions());
+            }
+            rows
+        };
+        rows.store(lp)
+    }
+}
+
+/// The MPC objective: the model's mean reward as the running reward, SAC's discount, and SAC's
+/// soft value of the final state's observation as the terminal value (p3 eq. 3, §3 item 2). The
+/// value is a copy of the critic at the time of the call.
+fn value_objective<T: Task + Clone + Send + Sync + 'static>(
+    agent: &Sac,
+    task: &T,
+    state_dim: usize,
+    action_dim: usize,
+) -> Result<Objective> {
+    let critic = Arc::new(agent.clone());
+    let task = task.clone();
+    let value = move |states: ArrayView2<'_, f64>| {
+        let obs = observations(&task, states);
+        // Deterministic: V at the mean action, no random number drawn.
+        critic
+            .v_batch(obs.view(), Mode::Deterministic, &mut rng_from_seed(0))
+            .unwrap_or_else(|_| Array1::from_elem(states.nrows(), f64::NAN))
+    };
+    let obj = Objective::new(state_dim, action_dim, |_, _| 0.0)
+        .with_model_reward()
+        .with_terminal_value(value)
+        .with_discount(agent.config().gamma)
+        .map_err(|e| PipelineError::Config(e.to_string()))?;
+    Ok(obj)
+}
+
+/// The MPC's transitions in the agent's terms, gathered plan by plan.
+#[derive(Default)]
+struct PlanRows {
+    obs: Vec<f64>,
+    actions: Vec<f64>,
+    rewards: Vec<f64>,
+    next_obs: Vec<f64>,
+    terminated: Vec<bool>,
+    widths: (usize, usize),
+}
+
+impl PlanRows {
+    /// Adds a plan's transitions up to (and with) the first terminal one.
+    fn push<T: Task + ?Sized>(&mut self, task: &T, t: &Transitions) {
+        let obs = observations(task, t.states.view());
+        let next = observations(task, t.next_states.view());
+        self.widths = (obs.ncols(), t.actions.ncols());
+        for h in 0..t.len() {
+            let mut s1 = t.next_states.row(h).to_vec();
+            task.canonicalize(&mut s1);
+            let done = task.terminated(&s1);
+            self.obs.extend(obs.row(h));
+            self.actions.extend(t.actions.row(h));
+            self.rewards.push(t.rewards[h]);
+            self.next_obs.extend(next.row(h));
+            self.terminated.push(done);
+            if done {
+                break;
+            }
+        }
+    }
+
+    /// Stores them in the loop's secondary buffer; returns how many.
+    fn store(self, lp: &mut OffPolicyLoop<Sac>) -> Result<usize> {
+        let n = self.rewards.len();
+        let (o, a) = self.widths;
+        let shape = |v: Vec<f64>, w: usize| {
+            Array2::from_shape_vec((n, w), v).map_err(|e| PipelineError::Config(e.to_string()))
+        };
+        lp.push_rows(
+            Store::Secondary,
+            shape(self.obs, o)?.view(),
+            shape(self.actions, a)?.view(),
+            Array1::from(self.rewards).view(),
+            shape(self.next_obs, o)?.view(),
+            &self.terminated,
+        )?;
+        Ok(n)
+    }
+}
+
+/// A model of plant inputs seen through a task's actions: `predict` takes the agent's actions,
+/// turns each row into the plant input ([`Task::control`]) and the states into canonical ones
+/// ([`Task::canonicalize`]), and asks the model. So a planner plans in the units the agent acts
+/// in. Not fittable.
+pub struct InActions<'a, M: ?Sized, T: ?Sized> {
+    model: &'a M,
+    task: &'a T,
+    action_dim: usize,
+}
+
+impl<'a, M: DynamicsModel + ?Sized, T: Task + ?Sized> InActions<'a, M, T> {
+    /// `model` under `task`'s actions.
+    pub fn new(model: &'a M, task: &'a T) -> Self {
+        Self {
+            model,
+            task,
+            action_dim: task.action_space().flat_dim(),
+        }
+    }
+}
+
+impl<M: DynamicsModel + ?Sized, T: Task + ?Sized> DynamicsModel for InActions<'_, M, T> {
+    fn state_dim(&self) -> usize {
+        self.model.state_dim()
+    }
+
+    fn action_dim(&self) -> usize {
+        self.action_dim
+    }
+
+    fn predict(
+        &self,
+        input: &ModelInput<'_>,
+        rng: &mut Rng,
+    ) -> std::result::Result<Prediction, ModelError> {
+        let b = input.states.nrows();
+        if input.actions.dim() != (b, self.action_dim) {
+            return Err(ModelError::Dim {
+                what: "actions (rows x columns)".into(),
+                expected: b * self.action_dim,
+                got: input.actions.len(),
+            });
+        }
+        let mut states = input.states.to_owned();
+        for mut r in states.rows_mut() {
+            if let Some(s) = r.as_slice_mut() {
+                self.task.canonicalize(s);
+            }
+        }
+        let m = tandem_envs::control_dim(self.task);
+        let mut controls = Array2::zeros((b, m));
+        for (i, a) in input.actions.rows().into_iter().enumerate() {
+            let u = self.task.control(&Action::Continuous(a.to_vec()));
+            controls
+                .row_mut(i)
+                .assign(&ndarray::ArrayView1::from(&u[..]));
+        }
+        self.model
+            .predict(&ModelInput::new(states.view(), controls.view()), rng)
+    }
+
+    fn fit(
+        &mut self,
+        _data: &Transitions,
+        _cfg: &FitConfig,
+    ) -> std::result::Result<FitReport, ModelError> {
+        Err(ModelError::Other(
+            "InActions is a view for planning; fit the model it wraps".into(),
+        ))
+    }
+}
