@@ -2,11 +2,9 @@
 //! schedule of real and imagined episodes, exact real-sample counts, a stopped run resumed from
 //! its checkpoint, and the F1 experiment's held-out scoring.
 
-use std::collections::BTreeMap;
-
-use tandem::pipelines::p2::{Checkpoints, Ephemeral, Event, Method, PipelineError, RunRecord};
+use tandem::pipelines::p2::{Ephemeral, Event, Method, PipelineError, RunRecord};
 use tandem::pipelines::p2_maze::{model_quality, run, MazeConfig, QualityConfig};
-use tandem_nn::Checkpoint;
+use tandem::pipelines::InMemory;
 
 /// A small configuration that never counts as solved: 8 real episodes, the first 3 real only,
 /// then 2 imagined after each real one; a tiny model; learning from the 100th transition.
@@ -79,46 +77,23 @@ fn real_episodes_first_then_imagined_ones_and_real_samples_counted_exactly() {
     assert_eq!(mf.real_returns[0], r.real_returns[0]);
 }
 
-/// Keeps checkpoints in memory and asks to stop once `stop_after` real episodes are done.
-struct Memory {
-    saved: BTreeMap<String, Checkpoint>,
-    real_done: std::rc::Rc<std::cell::Cell<u64>>,
-    stop_after: Option<u64>,
-}
-
-impl Checkpoints for Memory {
-    fn load(&mut self, key: &str) -> tandem::pipelines::Result<Option<Checkpoint>> {
-        Ok(self.saved.get(key).cloned())
-    }
-    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> tandem::pipelines::Result<()> {
-        self.saved.insert(key.into(), ckpt.clone());
-        Ok(())
-    }
-    fn stop_requested(&self) -> bool {
-        self.stop_after.is_some_and(|n| self.real_done.get() >= n)
-    }
-}
-
 #[test]
 fn a_stopped_run_resumes_to_the_same_numbers() {
     let cfg = small();
     for method in Method::ALL {
         let (_, all) = whole(method, &cfg, 2);
-        let real_done = std::rc::Rc::new(std::cell::Cell::new(0));
-        let mut store = Memory {
-            saved: BTreeMap::new(),
-            real_done: real_done.clone(),
-            // Stops after 5 real episodes; the last checkpoint is from episode 4.
-            stop_after: Some(5),
-        };
+        let mut store = InMemory::default();
+        let stop = store.stop_flag();
+        // Stops after 5 real episodes; the last checkpoint is from episode 4.
         let mut count = |e: Event| {
-            if let Event::Real { episode, .. } = e {
-                real_done.set(episode + 1);
+            if let Event::Real { episode: 4, .. } = e {
+                stop.set(true);
             }
         };
         let e = run(method, &cfg, 2, &mut store, &mut count).unwrap_err();
         assert!(matches!(e, PipelineError::Stopped), "{e}");
-        store.stop_after = None;
+        assert_eq!(store.saves(), 2);
+        store.stop_flag().set(false);
         let resumed = run(method, &cfg, 2, &mut store, &mut |_| {}).unwrap();
         assert_eq!(resumed.real_returns, all.real_returns, "{method:?}");
         assert_eq!(resumed.real_samples, all.real_samples);

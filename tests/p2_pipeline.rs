@@ -1,12 +1,10 @@
 //! p2's loop (Fig. 3): the schedule of real and imagined episodes, exact real-sample counts,
 //! determinism, and a stopped run resumed from its checkpoint.
 
-use std::collections::BTreeMap;
-
 use tandem::pipelines::p2::{
-    cartpole, solved_at, Checkpoints, Ephemeral, Event, Method, P2Config, PipelineError, RunRecord,
+    cartpole, solved_at, Ephemeral, Event, Method, P2Config, PipelineError, RunRecord,
 };
-use tandem_nn::Checkpoint;
+use tandem::pipelines::InMemory;
 
 /// A small, fast configuration that never counts as solved: 12 real episodes, the first 4 real
 /// only, then 3 imagined after every 2 real.
@@ -89,46 +87,22 @@ fn the_same_seed_gives_the_same_run_and_another_seed_another() {
     assert_ne!(a.real_returns, c.real_returns);
 }
 
-/// Keeps checkpoints in memory and asks to stop once `stop_after` real episodes are done.
-struct Memory {
-    saved: BTreeMap<String, Checkpoint>,
-    real_done: std::rc::Rc<std::cell::Cell<u64>>,
-    stop_after: Option<u64>,
-}
-
-impl Checkpoints for Memory {
-    fn load(&mut self, key: &str) -> tandem::pipelines::Result<Option<Checkpoint>> {
-        Ok(self.saved.get(key).cloned())
-    }
-    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> tandem::pipelines::Result<()> {
-        self.saved.insert(key.into(), ckpt.clone());
-        Ok(())
-    }
-    fn stop_requested(&self) -> bool {
-        self.stop_after.is_some_and(|n| self.real_done.get() >= n)
-    }
-}
-
 #[test]
 fn a_run_stopped_between_episodes_resumes_to_the_same_numbers() {
     let cfg = small();
     for method in Method::ALL {
         let whole = run(method, &cfg, 5).2;
-        let real_done = std::rc::Rc::new(std::cell::Cell::new(0));
-        let mut store = Memory {
-            saved: BTreeMap::new(),
-            real_done: real_done.clone(),
-            // Stops after 8 real episodes; the last checkpoint is from episode 6.
-            stop_after: Some(8),
-        };
+        let mut store = InMemory::default();
+        let stop = store.stop_flag();
+        // Stops after 8 real episodes; the last checkpoint is from episode 6.
         let mut count = |e: Event| {
-            if let Event::Real { episode, .. } = e {
-                real_done.set(episode + 1);
+            if let Event::Real { episode: 7, .. } = e {
+                stop.set(true);
             }
         };
         let e = cartpole(method, &cfg, 5, &mut store, &mut count).unwrap_err();
         assert!(matches!(e, PipelineError::Stopped), "{e}");
-        store.stop_after = None;
+        store.stop_flag().set(false);
         let resumed = cartpole(method, &cfg, 5, &mut store, &mut |_| {}).unwrap();
         assert_eq!(resumed.real_returns, whole.real_returns, "{method:?}");
         assert_eq!(resumed.real_samples, whole.real_samples);

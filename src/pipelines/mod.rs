@@ -88,6 +88,63 @@ pub fn ensure_same_run(saved: (&str, u64), this: (&str, u64)) -> Result<()> {
     )))
 }
 
+/// Keeps checkpoints in memory, as the bytes of their file format (so they go through the same
+/// serialization and checks as files on disk), and stops when its [`InMemory::stop_flag`] is
+/// raised: a run embedded in another program, or a test that stops a run where it likes (raise
+/// the flag from the run's event callback) and resumes it from the same store.
+///
+/// ```
+/// use tandem::pipelines::{Checkpoints, InMemory};
+/// use tandem_nn::Checkpoint;
+///
+/// let mut store = InMemory::default();
+/// let mut ckpt = Checkpoint::new();
+/// ckpt.put_json("progress", &3u32).unwrap();
+/// store.save("sac", &ckpt).unwrap();
+/// assert_eq!(store.load("sac").unwrap().unwrap().get_json::<u32>("progress").unwrap(), 3);
+/// assert!(store.load("mbpo").unwrap().is_none());
+/// let stop = store.stop_flag();
+/// stop.set(true);
+/// assert!(store.stop_requested());
+/// ```
+#[derive(Debug, Default)]
+pub struct InMemory {
+    files: std::collections::BTreeMap<String, Vec<u8>>,
+    stop: std::rc::Rc<std::cell::Cell<bool>>,
+    saves: usize,
+}
+
+impl InMemory {
+    /// The flag [`Checkpoints::stop_requested`] reads; set it to `true` to stop the run at its
+    /// next poll, back to `false` before resuming.
+    pub fn stop_flag(&self) -> std::rc::Rc<std::cell::Cell<bool>> {
+        self.stop.clone()
+    }
+
+    /// How many checkpoints were saved.
+    pub fn saves(&self) -> usize {
+        self.saves
+    }
+}
+
+impl Checkpoints for InMemory {
+    fn load(&mut self, key: &str) -> Result<Option<Checkpoint>> {
+        Ok(self
+            .files
+            .get(key)
+            .map(|b| Checkpoint::from_bytes(b))
+            .transpose()?)
+    }
+    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> Result<()> {
+        self.files.insert(key.to_string(), ckpt.to_bytes()?);
+        self.saves += 1;
+        Ok(())
+    }
+    fn stop_requested(&self) -> bool {
+        self.stop.get()
+    }
+}
+
 /// Keeps no checkpoints and never stops: a run from start to end in one go.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Ephemeral;

@@ -133,15 +133,12 @@ impl P2Config {
     /// Checks the ranges the loop relies on.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: &str| Err(PipelineError::Config(m.to_string()));
-        if self.real_per_cycle == 0 || self.fit_every == 0 || self.checkpoint_every == 0 {
-            return bad("real_per_cycle, fit_every and checkpoint_every must be >= 1");
-        }
-        if self.max_real_episodes == 0 || self.solved_window == 0 {
-            return bad("max_real_episodes and solved_window must be >= 1");
-        }
-        if !self.solved_return.is_finite() {
-            return bad("solved_return must be finite");
-        }
+        check_schedule(
+            [self.real_per_cycle, self.fit_every, self.checkpoint_every],
+            self.max_real_episodes,
+            self.solved_window,
+            self.solved_return,
+        )?;
         if self.fit.epochs == 0 || self.fit.batch_size == 0 {
             return bad("fit.epochs and fit.batch_size must be >= 1");
         }
@@ -154,6 +151,27 @@ impl P2Config {
         self.reinforce.validate()?;
         Ok(())
     }
+}
+
+/// The checks both p2 loops' schedules need: `[real_per_cycle, fit_every, checkpoint_every]`
+/// and the stop (`max_real_episodes`, `solved_window`, `solved_return`).
+pub(super) fn check_schedule(
+    periods: [u64; 3],
+    max_real_episodes: u64,
+    solved_window: usize,
+    solved_return: f64,
+) -> Result<()> {
+    let bad = |m: &str| Err(PipelineError::Config(m.to_string()));
+    if periods.contains(&0) {
+        return bad("real_per_cycle, fit_every and checkpoint_every must be >= 1");
+    }
+    if max_real_episodes == 0 || solved_window == 0 {
+        return bad("max_real_episodes and solved_window must be >= 1");
+    }
+    if !solved_return.is_finite() {
+        return bad("solved_return must be finite");
+    }
+    Ok(())
 }
 
 /// What a run reports.

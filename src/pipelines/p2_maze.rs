@@ -109,15 +109,12 @@ impl MazeConfig {
     /// Checks the ranges the loop relies on.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: &str| Err(PipelineError::Config(m.to_string()));
-        if self.real_per_cycle == 0 || self.fit_every == 0 || self.checkpoint_every == 0 {
-            return bad("real_per_cycle, fit_every and checkpoint_every must be >= 1");
-        }
-        if self.max_real_episodes == 0 || self.solved_window == 0 {
-            return bad("max_real_episodes and solved_window must be >= 1");
-        }
-        if !self.solved_return.is_finite() {
-            return bad("solved_return must be finite");
-        }
+        super::p2::check_schedule(
+            [self.real_per_cycle, self.fit_every, self.checkpoint_every],
+            self.max_real_episodes,
+            self.solved_window,
+            self.solved_return,
+        )?;
         if self.fit.steps == 0 || self.fit.batch_size == 0 {
             return bad("fit.steps and fit.batch_size must be >= 1");
         }
