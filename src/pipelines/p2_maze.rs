@@ -194,7 +194,6 @@ struct Progress {
     fit_losses: Vec<f64>,
     real_runner: EpisodeRunner,
     imagined_runner: EpisodeRunner,
-    starts: Vec<Vec<f64>>,
 }
 
 const PROGRESS: &str = "p2maze.progress";
@@ -284,8 +283,9 @@ fn run_probed(
             if let Some((menv, data)) = imagination.as_mut() {
                 menv.model_mut().load_from(MODEL, &ckpt)?;
                 data.load_from(DATA, &ckpt)?;
-                for s in &p.starts {
-                    menv.add_start(s.clone())?;
+                // The imagined episodes' start pool: every real episode's first frame.
+                for f in data.first_frames() {
+                    menv.add_start(f)?;
                 }
             }
             p
@@ -300,7 +300,6 @@ fn run_probed(
             fit_losses: Vec::new(),
             real_runner: EpisodeRunner::new(seeds.derive("real"), "real-episode-"),
             imagined_runner: EpisodeRunner::new(seeds.derive("imagined"), "imagined-episode-"),
-            starts: Vec::new(),
         },
     };
     let (mut env, count) = SampleCounter::starting_at(maze()?, p.real_samples);
@@ -344,7 +343,6 @@ fn run_probed(
             probes.retain(|pr| pr.left > 0);
             data.push_episode(&frames.frames, &frames.actions, &frames.rewards, terminated)?;
             menv.add_start(frames.frames[0].clone())?;
-            p.starts.push(frames.frames[0].clone());
             if done_real % cfg.fit_every == 0 {
                 let fit = PixelFit {
                     seed: seeds.derive(&format!("fit-{}", done_real / cfg.fit_every)),

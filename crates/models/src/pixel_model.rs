@@ -303,6 +303,22 @@ impl PixelEpisodes {
         Ok(())
     }
 
+    /// The first frame of every episode, in the order they were added (as `f64`, the
+    /// observations' type): where imagined episodes may start.
+    pub fn first_frames(&self) -> impl Iterator<Item = Vec<f64>> + '_ {
+        let n = self.frame_len;
+        // An episode's first transition is the one that starts at its first frame.
+        self.rows
+            .iter()
+            .filter(|r| r.frame == r.first)
+            .map(move |r| {
+                self.frames[r.first * n..(r.first + 1) * n]
+                    .iter()
+                    .map(|&b| f64::from(b))
+                    .collect()
+            })
+    }
+
     /// Writes the input stack of transition `i` (`frames` frames ending at its frame, the
     /// episode's first repeated before it) into `out`.
     fn stack_into(&self, i: usize, frames: usize, out: &mut [f32]) {
@@ -1296,6 +1312,7 @@ mod tests {
             [1., 0., 1., 0., 1., 0., 1., 0., 1., 0., 0., 1., 0., 0., 0., 0., 0., 0.]
         );
         assert_eq!(b.next, [0., 1., 1., 1., 1., 0.]);
+        assert_eq!(d.first_frames().collect::<Vec<_>>(), [f(1., 0.), f(0., 0.)]);
         assert_eq!(b.actions, [0, 1, 2]);
         assert_eq!(b.rewards, [0.5, -1.0, 2.0]);
         // Only the last step of a terminated episode is terminal.
