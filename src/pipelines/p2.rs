@@ -216,6 +216,48 @@ pub fn solved_at(returns: &[f64], window: usize, target: f64) -> Option<u64> {
     None
 }
 
+/// What both p2 loops count between episodes and report in their [`RunRecord`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub(super) struct Tally {
+    pub(super) method: Method,
+    pub(super) seed: u64,
+    pub(super) real_returns: Vec<f64>,
+    pub(super) real_samples: u64,
+    pub(super) imagined_episodes: u64,
+    pub(super) imagined_steps: u64,
+    pub(super) fit_losses: Vec<f64>,
+}
+
+impl Tally {
+    /// Nothing done yet.
+    pub(super) fn new(method: Method, seed: u64) -> Self {
+        Self {
+            method,
+            seed,
+            real_returns: Vec::new(),
+            real_samples: 0,
+            imagined_episodes: 0,
+            imagined_steps: 0,
+            fit_losses: Vec::new(),
+        }
+    }
+
+    /// The record of a run that ended here, solved as `solved_at` says, after `wall_seconds`.
+    pub(super) fn record(self, solved_at: Option<u64>, wall_seconds: f64) -> RunRecord {
+        RunRecord {
+            method: self.method,
+            seed: self.seed,
+            solved_at,
+            real_returns: self.real_returns,
+            real_samples: self.real_samples,
+            imagined_episodes: self.imagined_episodes,
+            imagined_steps: self.imagined_steps,
+            fit_losses: self.fit_losses,
+            wall_seconds,
+        }
+    }
+}
+
 /// What the loop reports as it goes (progress bars; tests follow the schedule with it).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Event {
@@ -275,13 +317,7 @@ pub fn play<T: Task + ?Sized>(
 /// (stored beside it).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct Progress {
-    method: Method,
-    seed: u64,
-    real_returns: Vec<f64>,
-    real_samples: u64,
-    imagined_episodes: u64,
-    imagined_steps: u64,
-    fit_losses: Vec<f64>,
+    t: Tally,
     /// Start states of the real episodes so far (where imagined episodes start).
     starts: Vec<Vec<f64>>,
     /// Episodes waiting for the next update (`reinforce.episodes_per_update > 1`).
@@ -309,7 +345,7 @@ fn save<A: Resumable>(
     if let Some(t) = real {
         t.save_to(REAL, &mut ckpt)?;
     }
-    store.save(p.method.name(), &ckpt)
+    store.save(p.t.method.name(), &ckpt)
 }
 
 /// Runs `method` for `seed` from a fresh `agent` (or from the checkpoint `store` holds under the
@@ -346,7 +382,7 @@ where
     let mut p = match store.load(method.name())? {
         Some(ckpt) => {
             let p: Progress = ckpt.get_json(PROGRESS)?;
-            super::ensure_same_run((p.method.name(), p.seed), (method.name(), seed))?;
+            super::ensure_same_run((p.t.method.name(), p.t.seed), (method.name(), seed))?;
             agent.load(&ckpt)?;
             if let Some(m) = model_env.as_mut() {
                 m.model_mut().load_from(MODEL, &ckpt)?;
@@ -359,18 +395,12 @@ where
             p
         }
         None => Progress {
-            method,
-            seed,
-            real_returns: Vec::new(),
-            real_samples: 0,
-            imagined_episodes: 0,
-            imagined_steps: 0,
-            fit_losses: Vec::new(),
+            t: Tally::new(method, seed),
             starts: Vec::new(),
             pending: Vec::new(),
         },
     };
-    let (mut env, count) = SampleCounter::starting_at(real_env()?, p.real_samples);
+    let (mut env, count) = SampleCounter::starting_at(real_env()?, p.t.real_samples);
     let per_update = cfg.reinforce.episodes_per_update;
     let learn = |agent: &mut A, pending: &mut Vec<Episode>, ep: Episode| -> Result<()> {
         pending.push(ep);
@@ -381,20 +411,21 @@ where
         Ok(())
     };
     let solved = |r: &[f64]| solved_at(r, cfg.solved_window, cfg.solved_return);
-    while (p.real_returns.len() as u64) < cfg.max_real_episodes && solved(&p.real_returns).is_none()
+    while (p.t.real_returns.len() as u64) < cfg.max_real_episodes
+        && solved(&p.t.real_returns).is_none()
     {
         if store.stop_requested() {
             return Err(PipelineError::Stopped);
         }
         // One real episode.
-        let k = p.real_returns.len() as u64;
+        let k = p.t.real_returns.len() as u64;
         let obs = env.reset(Some(seeds.derive(&format!("real-episode-{k}"))));
         p.starts.push(env.state());
         let mut b = TransitionsBuilder::new(task.state_dim(), action_dim);
         let rec = model_env.is_some().then_some((task, &mut b));
         let ep = play(&mut env, &mut agent, obs, rec)?;
-        p.real_returns.push(ep.total_reward());
-        p.real_samples = count.get();
+        p.t.real_returns.push(ep.total_reward());
+        p.t.real_samples = count.get();
         on_event(Event::Real {
             episode: k,
             ret: ep.total_reward(),
@@ -426,20 +457,20 @@ where
                     ..cfg.fit.clone()
                 };
                 let report = menv.model_mut().fit(&data, &fit)?;
-                p.fit_losses
+                p.t.fit_losses
                     .push(report.train_loss.last().copied().unwrap_or(f64::NAN));
             }
             // Imagined episodes, once the first N real ones are done, after each cycle.
             let after_n = done_real.checked_sub(cfg.real_only_episodes);
             if after_n.is_some_and(|n| n > 0 && n % cfg.real_per_cycle == 0) {
                 for _ in 0..cfg.imagined_per_cycle {
-                    let i = p.imagined_episodes;
+                    let i = p.t.imagined_episodes;
                     let mut rng = seeds.rng(&format!("imagined-{i}"));
                     let start = &p.starts[rng.random_range(0..p.starts.len())];
                     let obs = menv.set_state(start)?;
                     let ep = play::<T>(menv, &mut agent, obs, None)?;
-                    p.imagined_episodes += 1;
-                    p.imagined_steps += ep.len() as u64;
+                    p.t.imagined_episodes += 1;
+                    p.t.imagined_steps += ep.len() as u64;
                     on_event(Event::Imagined {
                         episode: i,
                         steps: ep.len() as u64,
@@ -454,17 +485,8 @@ where
             save(store, &p, &agent, model, real.as_ref())?;
         }
     }
-    Ok(RunRecord {
-        method,
-        seed,
-        solved_at: solved(&p.real_returns),
-        real_returns: p.real_returns,
-        real_samples: count.get(),
-        imagined_episodes: p.imagined_episodes,
-        imagined_steps: p.imagined_steps,
-        fit_losses: p.fit_losses,
-        wall_seconds: t0.elapsed().as_secs_f64(),
-    })
+    let solved_at = solved(&p.t.real_returns);
+    Ok(p.t.record(solved_at, t0.elapsed().as_secs_f64()))
 }
 
 /// An action of `task`'s action space (to learn the width of its plant input).

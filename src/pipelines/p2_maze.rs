@@ -34,7 +34,7 @@ use tandem_envs::{Env, PixelMazeEnv, SampleCounter};
 use tandem_models::{PixelEpisodes, PixelFit, PixelModel, PixelModelConfig, PixelModelEnv};
 use tandem_nn::{Checkpoint, Checkpointable};
 
-use super::p2::{solved_at, Event, Method, RunRecord};
+use super::p2::{solved_at, Event, Method, RunRecord, Tally};
 use super::{Checkpoints, PipelineError, Result};
 
 /// Settings of a maze run. `Default` follows p2 where it gives a figure and says where a figure
@@ -185,13 +185,7 @@ fn episode(
 /// Where a run stands between episodes, besides the loop, the model and its data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct Progress {
-    method: Method,
-    seed: u64,
-    real_returns: Vec<f64>,
-    real_samples: u64,
-    imagined_episodes: u64,
-    imagined_steps: u64,
-    fit_losses: Vec<f64>,
+    t: Tally,
     real_runner: EpisodeRunner,
     imagined_runner: EpisodeRunner,
 }
@@ -277,7 +271,7 @@ fn run_probed(
     let mut p = match store.load(method.name())? {
         Some(ckpt) => {
             let p: Progress = ckpt.get_json(PROGRESS)?;
-            super::ensure_same_run((p.method.name(), p.seed), (method.name(), seed))?;
+            super::ensure_same_run((p.t.method.name(), p.t.seed), (method.name(), seed))?;
             lp.agent.load(&ckpt)?;
             lp.load(LOOP, &ckpt)?;
             if let Some((menv, data)) = imagination.as_mut() {
@@ -291,25 +285,20 @@ fn run_probed(
             p
         }
         None => Progress {
-            method,
-            seed,
-            real_returns: Vec::new(),
-            real_samples: 0,
-            imagined_episodes: 0,
-            imagined_steps: 0,
-            fit_losses: Vec::new(),
+            t: Tally::new(method, seed),
             real_runner: EpisodeRunner::new(seeds.derive("real"), "real-episode-"),
             imagined_runner: EpisodeRunner::new(seeds.derive("imagined"), "imagined-episode-"),
         },
     };
-    let (mut env, count) = SampleCounter::starting_at(maze()?, p.real_samples);
+    let (mut env, count) = SampleCounter::starting_at(maze()?, p.t.real_samples);
     let solved = |r: &[f64]| solved_at(r, cfg.solved_window, cfg.solved_return);
-    while (p.real_returns.len() as u64) < cfg.max_real_episodes && solved(&p.real_returns).is_none()
+    while (p.t.real_returns.len() as u64) < cfg.max_real_episodes
+        && solved(&p.t.real_returns).is_none()
     {
         if store.stop_requested() {
             return Err(PipelineError::Stopped);
         }
-        let k = p.real_returns.len() as u64;
+        let k = p.t.real_returns.len() as u64;
         let keep = imagination.is_some();
         let (ret, _, terminated, frames) = episode(
             &mut lp,
@@ -318,8 +307,8 @@ fn run_probed(
             StepOptions::real(),
             keep,
         )?;
-        p.real_returns.push(ret);
-        p.real_samples = count.get();
+        p.t.real_returns.push(ret);
+        p.t.real_samples = count.get();
         on_event(Event::Real {
             episode: k,
             ret,
@@ -348,7 +337,7 @@ fn run_probed(
                     seed: seeds.derive(&format!("fit-{}", done_real / cfg.fit_every)),
                     ..cfg.fit.clone()
                 };
-                p.fit_losses.push(menv.model_mut().fit(data, &fit)?);
+                p.t.fit_losses.push(menv.model_mut().fit(data, &fit)?);
             }
             if let Some(q) = probe
                 .as_ref()
@@ -365,7 +354,7 @@ fn run_probed(
             let after_n = done_real.checked_sub(cfg.real_only_episodes);
             if after_n.is_some_and(|n| n > 0 && n % cfg.real_per_cycle == 0) {
                 for _ in 0..cfg.imagined_per_cycle {
-                    let i = p.imagined_episodes;
+                    let i = p.t.imagined_episodes;
                     let (ret, steps, _, _) = episode(
                         &mut lp,
                         menv,
@@ -373,8 +362,8 @@ fn run_probed(
                         StepOptions::model(),
                         false,
                     )?;
-                    p.imagined_episodes += 1;
-                    p.imagined_steps += steps;
+                    p.t.imagined_episodes += 1;
+                    p.t.imagined_steps += steps;
                     on_event(Event::Imagined {
                         episode: i,
                         steps,
@@ -395,18 +384,8 @@ fn run_probed(
             store.save(method.name(), &ckpt)?;
         }
     }
-    let record = RunRecord {
-        method,
-        seed,
-        solved_at: solved(&p.real_returns),
-        real_returns: p.real_returns,
-        real_samples: count.get(),
-        imagined_episodes: p.imagined_episodes,
-        imagined_steps: p.imagined_steps,
-        fit_losses: p.fit_losses,
-        wall_seconds: t0.elapsed().as_secs_f64(),
-    };
-    Ok((record, points))
+    let solved_at = solved(&p.t.real_returns);
+    Ok((p.t.record(solved_at, t0.elapsed().as_secs_f64()), points))
 }
 
 /// Settings of [`model_quality`].
