@@ -2,10 +2,12 @@
 
 pub mod env;
 pub mod envs;
+pub mod harness;
 pub mod json;
 pub mod presets;
 pub mod reproduce;
 pub mod reproduce_p2;
+pub mod reproduce_p3;
 pub mod rollout;
 pub mod train;
 pub mod urdf;

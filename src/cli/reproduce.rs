@@ -26,25 +26,19 @@
 //! configuration or about to be written is an error naming it.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
-use std::time::Instant;
 
 use clap::{Args, Subcommand};
-use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
-use serde::{Deserialize, Serialize};
-use tandem::interrupt::{Stop, EXIT_SIGINT};
 use tandem::pipelines::p0::{
     ddpg_agent, pendulum_problem, run_seed, Method, P0Config, RunRecord, Tick,
 };
-use tandem::pipelines::{Checkpoints, PipelineError, Result as PipelineResult};
+use tandem::pipelines::Checkpoints;
 use tandem::report::{
-    ensure_finite, mean_stderr, to_json_pretty, Comparison, Curve, Figure, MarkdownText,
-    MethodFigures, Reference, ReturnAtBudget, SamplesToTarget, Table,
+    mean_stderr, Comparison, Curve, Figure, MarkdownText, MethodFigures, Reference, SeedRun, Table,
 };
-use tandem::run::{csv, Existing, Layout, RunDir};
-use tandem_nn::Checkpoint;
+use tandem::run::RunDir;
 
+use super::harness::{self, JobError, Study, StudyArgs};
+use super::reproduce_p3::P3Leg;
 use super::{CliError, Result};
 
 /// The reproductions.
@@ -58,7 +52,10 @@ pub enum ReproduceCommand {
     /// p2 (model-augmented DQN) on its pixel maze: DQN alone and with the pixel model, and the
     /// pixel model's F1 after 10, 100 and 300 training episodes.
     P2Maze(super::reproduce_p2::P2Args),
-    /// Combine p0-pendulum reproductions of disjoint seeds (e.g. one process per seed,
+    /// p3 (M-DeMoRL) on the 2R leg: SAC, MBPO and M-DeMoRL on the same seeds and real-step
+    /// budget; p3 Fig. 4, and Fig. 3's elite-fraction ablation with `--ablate-elites`.
+    P3Leg(super::reproduce_p3::P3Args),
+    /// Combine p0-pendulum or p3-leg reproductions of disjoint seeds (e.g. one process per seed,
     /// `--first-seed`) into one table and figure; their settings must be equal.
     Merge(MergeArgs),
 }
@@ -69,7 +66,7 @@ pub struct MergeArgs {
     /// The reproductions' directories (each complete).
     #[arg(required = true)]
     pub dirs: Vec<PathBuf>,
-    /// Output directory (default `runs/p0-pendulum-merged__<time>/`).
+    /// Output directory (default `runs/<study>-merged__<time>/`).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Replace a merge already in `--out`.
@@ -77,56 +74,46 @@ pub struct MergeArgs {
     pub overwrite: bool,
 }
 
-/// Arguments of `tandem reproduce p0-pendulum`.
+/// Arguments of `tandem reproduce p0-pendulum` (per seed, the cold start and the pre-trained
+/// pair of warm start and difference model are separate jobs).
 #[derive(Debug, Args)]
 pub struct P0Args {
-    /// Number of seeds (S, S+1, ..., S+N-1 for `--first-seed S`) [default: 5].
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
-    pub seeds: Option<u64>,
-    /// The first seed [default: 0]: `--seeds 1 --first-seed 3` runs seed 3 alone, so that seeds
-    /// can run as separate processes (or cluster jobs) whose directories
-    /// `tandem reproduce merge` combines into one table.
-    #[arg(long)]
-    pub first_seed: Option<u64>,
-    /// Small smoke configuration (small networks, short budgets; numbers are meaningless).
-    #[arg(long)]
-    pub quick: bool,
-    /// Output directory (default `runs/p0-pendulum__<time>/`).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Parallel jobs, one thread each (per seed, the cold start and the pre-trained pair of warm
-    /// start and difference model are separate jobs).
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..=64))]
-    pub jobs: u64,
-    /// TOML file overriding fields of the configuration (`P0Config`; unknown keys are errors).
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// No progress bars.
-    #[arg(long)]
-    pub quiet: bool,
-    /// Replace the reproduction in an existing `--out` directory (its seed runs, tables and
-    /// figure); without it, an existing reproduction there is an error.
-    #[arg(long, conflicts_with = "resume")]
-    pub overwrite: bool,
-    /// Continue the reproduction in DIR (interrupted or killed) from its checkpoints, with the
-    /// settings its `config.json` records; finished runs are kept, unfinished ones resume from
-    /// their last evaluation. `--seeds`, `--quick` and `--config` may be given and must then
-    /// agree with the recorded ones.
-    #[arg(long, value_name = "DIR", conflicts_with = "out")]
-    pub resume: Option<PathBuf>,
+    /// Seeds, output, jobs, resume: as every study.
+    #[command(flatten)]
+    pub study: StudyArgs,
 }
 
 /// Runs a reproduction.
 pub fn run(cmd: ReproduceCommand) -> Result<()> {
     match cmd {
-        ReproduceCommand::P0Pendulum(args) => p0_pendulum(&args),
+        ReproduceCommand::P0Pendulum(args) => harness::run(&P0Pendulum, &args.study),
         ReproduceCommand::P2Cartpole(args) => {
             super::reproduce_p2::p2(super::reproduce_p2::Experiment::CartPole, &args)
         }
         ReproduceCommand::P2Maze(args) => {
             super::reproduce_p2::p2(super::reproduce_p2::Experiment::Maze, &args)
         }
-        ReproduceCommand::Merge(args) => merge_runs(&args),
+        ReproduceCommand::P3Leg(args) => harness::run(&P3Leg::new(args.ablate_elites), &args.study),
+        ReproduceCommand::Merge(args) => {
+            let Some(first) = args.dirs.first() else {
+                return Err(CliError::input("merge", "no directories given"));
+            };
+            match harness::study_of(first)?.as_str() {
+                "p0-pendulum" => {
+                    harness::merge(&P0Pendulum, &args.dirs, args.out.as_deref(), args.overwrite)
+                }
+                "p3-leg" => harness::merge(
+                    &P3Leg::new(false),
+                    &args.dirs,
+                    args.out.as_deref(),
+                    args.overwrite,
+                ),
+                other => Err(CliError::input(
+                    first.display().to_string(),
+                    format!("`tandem reproduce merge` does not merge {other} studies"),
+                )),
+            }
+        }
     }
 }
 
@@ -147,38 +134,17 @@ pub fn quick_config() -> P0Config {
     c
 }
 
-fn other(e: impl std::fmt::Display) -> CliError {
-    CliError::other(e)
-}
-
-fn read_config(quick: bool, path: Option<&Path>) -> Result<P0Config> {
-    let base = if quick {
-        quick_config()
-    } else {
-        P0Config::default()
-    };
-    let Some(p) = path else { return Ok(base) };
-    let text = std::fs::read_to_string(p).map_err(|source| CliError::Io {
-        path: p.to_path_buf(),
-        source,
-    })?;
-    parse_config(base, &text, &format!("--config {}", p.display()))
-}
-
 /// Applies the overrides in `text` (a `--config` file, named `what` in errors) to `base` and
 /// validates the result.
 pub fn parse_config(base: P0Config, text: &str, what: &str) -> Result<P0Config> {
-    // Overrides on top of `base`: merge the file's table into the serialized base.
-    let mut v = toml::Value::try_from(&base).map_err(other)?;
-    let over: toml::Table =
-        toml::from_str(text).map_err(|e| CliError::input(what, e.to_string()))?;
-    merge(&mut v, toml::Value::Table(over));
-    let cfg: P0Config = v
-        .try_into()
-        .map_err(|e: toml::de::Error| CliError::input(what, e.to_string()))?;
+    let cfg = harness::override_settings(&base, text, what)?;
+    checked(cfg, what)
+}
+
+/// `cfg` if valid, else an error naming `what`.
+fn checked(cfg: P0Config, what: &str) -> Result<P0Config> {
     cfg.validate()
         .map_err(|e| CliError::input(what, e.to_string()))?;
-    ensure_finite(&cfg).map_err(|e| CliError::input(what, e.to_string()))?;
     let h = cfg.fit.holdout_fraction;
     if !(0.0..1.0).contains(&h) {
         return Err(CliError::input(
@@ -188,35 +154,6 @@ pub fn parse_config(base: P0Config, text: &str, what: &str) -> Result<P0Config> 
     }
     Ok(cfg)
 }
-
-fn merge(base: &mut toml::Value, over: toml::Value) {
-    match (base, over) {
-        (toml::Value::Table(b), toml::Value::Table(o)) => {
-            for (k, v) in o {
-                match b.get_mut(&k) {
-                    Some(bv) if bv.is_table() && v.is_table() => merge(bv, v),
-                    _ => {
-                        b.insert(k, v);
-                    }
-                }
-            }
-        }
-        (b, o) => *b = o,
-    }
-}
-
-/// The files and folders `tandem reproduce` writes (what `--overwrite` removes).
-pub const LAYOUT: Layout = Layout {
-    owned: &[
-        "config.json",
-        "runs",
-        "state",
-        "table.json",
-        "table.md",
-        "fig5.svg",
-    ],
-    resumable: true,
-};
 
 /// p0's methods as the table names them, in row order.
 const LABELS: &[(&str, &str)] = &[
@@ -242,30 +179,19 @@ pub fn table(records: &[RunRecord], cfg: &P0Config) -> Table {
         if runs.is_empty() {
             continue;
         }
-        let ret: Vec<f64> = runs
+        let seeds: Vec<SeedRun> = runs
             .iter()
-            .map(|r| r.return_at(cfg.real_budget).unwrap_or(f64::NAN))
+            .map(|r| SeedRun {
+                seed: r.seed,
+                samples: r.true_samples,
+                return_at_budget: r.return_at(cfg.real_budget).unwrap_or(f64::NAN),
+                samples_to_target: r.samples_to(cfg.target_return),
+            })
             .collect();
-        let to: Vec<Option<u64>> = runs
-            .iter()
-            .map(|r| r.samples_to(cfg.target_return))
-            .collect();
-        let searched = runs.iter().map(|r| r.true_samples).max().unwrap_or(0);
-        let samples: Vec<f64> = runs
-            .iter()
-            .zip(&to)
-            .map(|(r, t)| t.unwrap_or(r.true_samples) as f64)
-            .collect();
-        let mean_samples = samples.iter().sum::<f64>() / samples.len() as f64;
-        used.push((m, mean_samples, to.iter().any(Option::is_none)));
-        t.methods.insert(
-            m.name().into(),
-            MethodFigures {
-                return_at_budget: ReturnAtBudget::from_seeds(cfg.real_budget, ret),
-                samples_to_target: SamplesToTarget::from_seeds(cfg.target_return, to, searched),
-                seeds: runs.iter().map(|r| r.seed).collect(),
-            },
-        );
+        let (figures, mean_samples, short) =
+            MethodFigures::from_runs(cfg.real_budget, cfg.target_return, &seeds);
+        used.push((m, mean_samples, short));
+        t.methods.insert(m.name().into(), figures);
     }
     let cold: Vec<&RunRecord> = records
         .iter()
@@ -378,536 +304,121 @@ pub fn fig5(records: &[RunRecord]) -> Figure {
     }
 }
 
-/// What `config.json` records: the settings (what `--resume` continues with) and how the run
-/// stands.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-struct RunConfig {
-    config: P0Config,
-    seeds: u64,
-    #[serde(default)]
-    first_seed: u64,
-    quick: bool,
-    jobs: u64,
-    /// `running`, `interrupted` or `complete`.
-    status: String,
-    /// Wall time of the last (or only) process, seconds; absent while running.
-    wall_seconds: Option<f64>,
-    note: String,
-}
+/// The p0-pendulum study: per seed, the cold start, and the warm start with the difference
+/// method (one job: they share the pre-trained agent).
+pub struct P0Pendulum;
 
-impl RunConfig {
-    fn write(&self, dir: &RunDir) -> Result<()> {
-        let text =
-            to_json_pretty(self).map_err(|e| CliError::Other(format!("config.json: {e}")))?;
-        dir.write("config.json", &text)
-            .map(drop)
-            .map_err(|source| CliError::Io {
-                path: dir.path().join("config.json"),
-                source,
-            })
-    }
-}
+impl Study for P0Pendulum {
+    type Settings = P0Config;
+    type Record = RunRecord;
 
-/// The settings of a new reproduction from the command line.
-fn fresh(args: &P0Args) -> Result<RunConfig> {
-    let cfg = read_config(args.quick, args.config.as_deref())?;
-    cfg.validate().map_err(other)?;
-    Ok(RunConfig {
-        config: cfg,
-        seeds: args.seeds.unwrap_or(5),
-        first_seed: args.first_seed.unwrap_or(0),
-        quick: args.quick,
-        jobs: args.jobs,
-        status: "running".into(),
-        wall_seconds: None,
-        note: "evaluation episodes on the true system are not counted as training samples".into(),
-    })
-}
-
-/// The settings recorded in `dir/config.json`, checked against the command line.
-fn recorded(args: &P0Args, dir: &Path) -> Result<RunConfig> {
-    let what = format!("--resume {}", dir.display());
-    let path = dir.join("config.json");
-    let text = std::fs::read_to_string(&path).map_err(|e| {
-        CliError::input(
-            &what,
-            format!(
-                "{} cannot be read ({e}): not a `tandem reproduce p0-pendulum` directory",
-                path.display()
-            ),
-        )
-    })?;
-    let mut rc: RunConfig = serde_json::from_str(&text)
-        .map_err(|e| CliError::input(path.display().to_string(), e.to_string()))?;
-    let mut conflicts = Vec::new();
-    if let Some(n) = args.seeds.filter(|n| *n != rc.seeds) {
-        conflicts.push(format!("--seeds {n} (the run has {})", rc.seeds));
-    }
-    if let Some(s) = args.first_seed.filter(|s| *s != rc.first_seed) {
-        conflicts.push(format!("--first-seed {s} (the run has {})", rc.first_seed));
-    }
-    if args.quick && !rc.quick {
-        conflicts.push("--quick (the run is not quick)".into());
-    }
-    if args.config.is_some() || args.quick {
-        let given = read_config(rc.quick, args.config.as_deref())?;
-        if given != rc.config {
-            conflicts.push("--config (its settings differ from the run's config.json)".into());
-        }
-    }
-    if !conflicts.is_empty() {
-        return Err(CliError::input(
-            what,
-            format!(
-                "conflicts with the run being resumed: {}; a resumed run keeps its settings",
-                conflicts.join(", ")
-            ),
-        ));
-    }
-    rc.jobs = args.jobs;
-    Ok(rc)
-}
-
-/// One seed's checkpoints as files `state/seed<k>/<key>.safetensors` of the run directory,
-/// stopping on SIGINT/SIGTERM.
-struct SeedState {
-    dir: PathBuf,
-    stop: Stop,
-}
-
-impl SeedState {
-    fn path(&self, key: &str) -> PathBuf {
-        self.dir.join(format!("{key}.safetensors"))
+    fn name(&self) -> &str {
+        "p0-pendulum"
     }
 
-    /// Removes `key`'s checkpoint (its run is finished and recorded).
-    fn discard(&self, key: &str) -> Result<()> {
-        match std::fs::remove_file(self.path(key)) {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(CliError::Io {
-                path: self.path(key),
-                source: e,
-            }),
-            _ => Ok(()),
-        }
-    }
-}
-
-impl Checkpoints for SeedState {
-    fn load(&mut self, key: &str) -> PipelineResult<Option<Checkpoint>> {
-        let path = self.path(key);
-        if !path.exists() {
-            return Ok(None);
-        }
-        Checkpoint::load(&path)
-            .map(Some)
-            .map_err(|e| PipelineError::Checkpoint(format!("{}: {e}", path.display())))
-    }
-
-    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> PipelineResult<()> {
-        std::fs::create_dir_all(&self.dir)
-            .map_err(|e| PipelineError::Checkpoint(format!("{}: {e}", self.dir.display())))?;
-        Ok(ckpt.save(self.path(key))?)
-    }
-
-    fn stop_requested(&self) -> bool {
-        self.stop.requested()
-    }
-}
-
-/// `runs/<method>__seed<k>/`: where a finished run's record and curve go.
-fn run_dir(dir: &RunDir, method: Method, seed: u64) -> PathBuf {
-    dir.path()
-        .join("runs")
-        .join(format!("{}__seed{seed}", method.name()))
-}
-
-/// Writes a finished run's `record.json` and `curve.csv` (the record last: its presence says
-/// the run is done).
-fn write_record(dir: &RunDir, r: &RunRecord) -> Result<()> {
-    let sub = run_dir(dir, r.method, r.seed);
-    let io = |source| CliError::Io {
-        path: sub.clone(),
-        source,
-    };
-    std::fs::create_dir_all(&sub).map_err(io)?;
-    let rows: Vec<Vec<f64>> = r
-        .curve
-        .iter()
-        .map(|p| vec![p.true_samples as f64, p.eval_return])
-        .collect();
-    let curve = csv(&["true_samples", "eval_return"], &rows);
-    tandem_nn::write_atomic(&sub.join("curve.csv"), curve.as_bytes()).map_err(io)?;
-    let text = to_json_pretty(r)
-        .map_err(|e| CliError::Other(format!("{}: {e}", sub.join("record.json").display())))?;
-    tandem_nn::write_atomic(&sub.join("record.json"), text.as_bytes()).map_err(io)
-}
-
-/// Every method's record for `seeds` in the reproduction directory `dir`.
-fn read_records(dir: &Path, seeds: std::ops::Range<u64>) -> Result<Vec<RunRecord>> {
-    let mut records = Vec::new();
-    for seed in seeds {
-        for &m in &Method::ALL {
-            let r = read_record_at(dir, m, seed)?.ok_or_else(|| {
-                CliError::Other(format!(
-                    "{}: seed {seed}: the {} run left no record",
-                    dir.display(),
-                    m.name()
-                ))
-            })?;
-            records.push(r);
-        }
-    }
-    Ok(records)
-}
-
-/// `table.json`, `table.md` and `fig5.svg` of `records`; returns the markdown.
-fn write_report(dir: &RunDir, records: &[RunRecord], cfg: &P0Config, wall: f64) -> Result<String> {
-    let table = table(records, cfg);
-    let md = markdown(&table, cfg, wall);
-    let w = |name: &str, text: &str| {
-        dir.write(name, text)
-            .map(drop)
-            .map_err(|source| CliError::Io {
-                path: dir.path().join(name),
-                source,
-            })
-    };
-    w(
-        "table.json",
-        &table
-            .to_json()
-            .map_err(|e| CliError::Other(format!("table.json: {e}")))?,
-    )?;
-    w("table.md", &md)?;
-    w("fig5.svg", &fig5(records).svg())?;
-    Ok(md)
-}
-
-/// The files `tandem reproduce merge` writes.
-const MERGE_LAYOUT: Layout = Layout {
-    owned: &["config.json", "runs", "table.json", "table.md", "fig5.svg"],
-    resumable: false,
-};
-
-/// What a merge's `config.json` records.
-#[derive(Debug, Serialize)]
-struct MergeConfig<'a> {
-    config: &'a P0Config,
-    quick: bool,
-    seeds: Vec<u64>,
-    /// The merged directories, with their first seed, seed count and wall time.
-    parts: Vec<(String, u64, u64, Option<f64>)>,
-    /// Sum of the parts' wall times, seconds.
-    wall_seconds: f64,
-    status: &'static str,
-}
-
-fn merge_runs(args: &MergeArgs) -> Result<()> {
-    let mut parts: Vec<(PathBuf, RunConfig)> = Vec::new();
-    for d in &args.dirs {
-        let path = d.join("config.json");
-        let text = std::fs::read_to_string(&path).map_err(|source| CliError::Io {
-            path: path.clone(),
+    fn settings(&self, quick: bool, config: Option<&Path>) -> Result<P0Config> {
+        let base = if quick {
+            quick_config()
+        } else {
+            P0Config::default()
+        };
+        let Some(path) = config else { return Ok(base) };
+        let text = std::fs::read_to_string(path).map_err(|source| CliError::Io {
+            path: path.to_path_buf(),
             source,
         })?;
-        let rc: RunConfig = serde_json::from_str(&text)
-            .map_err(|e| CliError::input(path.display().to_string(), e.to_string()))?;
-        if rc.status != "complete" {
-            return Err(CliError::input(
-                d.display().to_string(),
-                format!(
-                    "the reproduction is {}; finish it first (`tandem reproduce p0-pendulum \
-                     --resume {}`)",
-                    rc.status,
-                    d.display()
-                ),
-            ));
-        }
-        if let Some((first, f)) = parts.first() {
-            if (&f.config, f.quick) != (&rc.config, rc.quick) {
-                return Err(CliError::input(
-                    d.display().to_string(),
-                    format!(
-                        "its settings differ from {}'s: only runs of one configuration merge",
-                        first.display()
-                    ),
-                ));
-            }
-        }
-        parts.push((d.clone(), rc));
+        parse_config(base, &text, &format!("--config {}", path.display()))
     }
-    let mut records = Vec::new();
-    let mut seeds: Vec<u64> = Vec::new();
-    for (d, rc) in &parts {
-        let range = rc.first_seed..rc.first_seed + rc.seeds;
-        if let Some(s) = range.clone().find(|s| seeds.contains(s)) {
-            return Err(CliError::input(
-                d.display().to_string(),
-                format!("seed {s} is in two of the merged directories"),
-            ));
-        }
-        seeds.extend(range.clone());
-        records.extend(read_records(d, range)?);
-    }
-    seeds.sort_unstable();
-    records.sort_by_key(|r| (r.seed, Method::ALL.iter().position(|m| *m == r.method)));
-    let existing = if args.overwrite {
-        Existing::Overwrite
-    } else {
-        Existing::Refuse
-    };
-    let dir = RunDir::create(
-        args.out.as_deref(),
-        "p0-pendulum-merged",
-        MERGE_LAYOUT,
-        existing,
-    )
-    .map_err(other)?;
-    for r in &records {
-        write_record(&dir, r)?;
-    }
-    let cfg = &parts[0].1.config;
-    let wall: f64 = parts.iter().filter_map(|(_, rc)| rc.wall_seconds).sum();
-    let md = write_report(&dir, &records, cfg, wall)?;
-    let merged = MergeConfig {
-        config: cfg,
-        quick: parts[0].1.quick,
-        seeds,
-        parts: parts
-            .iter()
-            .map(|(d, rc)| {
-                let d = d.display().to_string();
-                (d, rc.first_seed, rc.seeds, rc.wall_seconds)
-            })
-            .collect(),
-        wall_seconds: wall,
-        status: "complete",
-    };
-    let text = to_json_pretty(&merged).map_err(|e| CliError::Other(format!("config.json: {e}")))?;
-    dir.write("config.json", &text)
-        .map_err(|source| CliError::Io {
-            path: dir.path().join("config.json"),
-            source,
-        })?;
-    println!("{md}");
-    println!("wrote {}", dir.path().display());
-    Ok(())
-}
 
-/// A finished run's record, if it is there.
-fn read_record(dir: &RunDir, method: Method, seed: u64) -> Result<Option<RunRecord>> {
-    read_record_at(dir.path(), method, seed)
-}
+    fn jobs(&self, _cfg: &P0Config) -> Vec<Vec<String>> {
+        let name = |m: Method| m.name().to_string();
+        vec![
+            vec![name(Method::Warm), name(Method::Difference)],
+            vec![name(Method::Cold)],
+        ]
+    }
 
-fn read_record_at(dir: &Path, method: Method, seed: u64) -> Result<Option<RunRecord>> {
-    let path = dir
-        .join("runs")
-        .join(format!("{}__seed{seed}", method.name()))
-        .join("record.json");
-    match std::fs::read_to_string(&path) {
-        Ok(text) => serde_json::from_str(&text)
-            .map(Some)
-            .map_err(|e| CliError::input(path.display().to_string(), e.to_string())),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(source) => Err(CliError::Io { path, source }),
-    }
-}
-
-fn p0_pendulum(args: &P0Args) -> Result<()> {
-    tandem_nn::set_gemm_threads(1);
-    let stop = Stop::on_signals().map_err(|e| CliError::Other(format!("signal handlers: {e}")))?;
-    let mut rc = match &args.resume {
-        Some(dir) => recorded(args, dir)?,
-        None => fresh(args)?,
-    };
-    let cfg = rc.config.clone();
-    let (out, existing) = match (&args.resume, args.overwrite) {
-        (Some(d), _) => (Some(d.as_path()), Existing::Resume),
-        (None, true) => (args.out.as_deref(), Existing::Overwrite),
-        (None, false) => (args.out.as_deref(), Existing::Refuse),
-    };
-    let dir = RunDir::create(out, "p0-pendulum", LAYOUT, existing).map_err(other)?;
-    if let Some(pid) = dir.stale_lock_taken_over() {
-        eprintln!(
-            "note: took over {} from process {pid}, which is no longer running",
-            dir.path().display()
-        );
-    }
-    rc.status = "running".into();
-    rc.wall_seconds = None;
-    rc.write(&dir)?;
-    let start = Instant::now();
-    let multi = MultiProgress::new();
-    if args.quiet {
-        multi.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
-    let style =
-        ProgressStyle::with_template("{prefix:>22} [{bar:30}] {pos}/{len} {msg} ({elapsed})")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> ");
-
-    let (first, seeds) = (rc.first_seed, rc.seeds);
-    let next = AtomicUsize::new(0);
-    let errors: Mutex<Vec<(u64, String)>> = Mutex::new(Vec::new());
-    std::thread::scope(|scope| {
-        for _ in 0..args.jobs.min(2 * seeds) {
-            scope.spawn(|| loop {
-                // Jobs: per seed, the cold start alone, and warm start with the difference method
-                // (they share one pre-training).
-                let k = next.fetch_add(1, Ordering::Relaxed) as u64;
-                if k >= 2 * seeds || stop.requested() {
-                    break;
-                }
-                let (seed, methods): (u64, &[Method]) = if k % 2 == 0 {
-                    (first + k / 2, &[Method::Warm, Method::Difference])
-                } else {
-                    (first + k / 2, &[Method::Cold])
-                };
-                let mut store = SeedState {
-                    dir: dir.path().join("state").join(format!("seed{seed}")),
-                    stop: stop.clone(),
-                };
-                let r = run_job(&dir, &cfg, seed, methods, &mut store, &multi, &style);
-                if let Err(e) = r {
-                    if !matches!(e, JobError::Stopped) {
-                        errors
-                            .lock()
-                            .expect("no panics while holding the lock")
-                            .push((seed, e.to_string()));
-                    }
-                }
-            });
-        }
-    });
-    let wall = start.elapsed().as_secs_f64();
-    let mut errors = errors.into_inner().expect("threads joined");
-    errors.sort();
-    if let Some((seed, e)) = errors.first() {
-        return Err(CliError::Other(format!("seed {seed}: {e}")));
-    }
-    if stop.requested() {
-        rc.status = "interrupted".into();
-        rc.wall_seconds = Some(wall);
-        rc.write(&dir)?;
-        return Err(CliError::Interrupted {
-            what: format!(
-                "finished runs and the others' last checkpoints are in {}; continue with \
-                 `tandem reproduce p0-pendulum --resume {}`",
-                dir.path().display(),
-                dir.path().display()
-            ),
-            code: stop.exit_code().unwrap_or(EXIT_SIGINT),
-        });
-    }
-    let records = read_records(dir.path(), first..first + seeds)?;
-    let state = dir.path().join("state");
-    if state.exists() {
-        std::fs::remove_dir_all(&state).map_err(|source| CliError::Io {
-            path: state.clone(),
-            source,
-        })?;
-    }
-    let md = write_report(&dir, &records, &cfg, wall)?;
-    rc.status = "complete".into();
-    rc.wall_seconds = Some(wall);
-    rc.write(&dir)?;
-    println!("{md}");
-    println!("wrote {}", dir.path().display());
-    Ok(())
-}
-
-/// Why a job ended early.
-#[derive(Debug, thiserror::Error)]
-enum JobError {
-    #[error("stopped")]
-    Stopped,
-    #[error("{0}")]
-    Failed(String),
-}
-
-impl From<PipelineError> for JobError {
-    fn from(e: PipelineError) -> Self {
-        match e {
-            PipelineError::Stopped => JobError::Stopped,
-            e => JobError::Failed(e.to_string()),
-        }
-    }
-}
-
-impl From<CliError> for JobError {
-    fn from(e: CliError) -> Self {
-        JobError::Failed(e.to_string())
-    }
-}
-
-/// One job: `methods` for `seed`, skipping those already recorded, each recorded as soon as it
-/// finishes; checkpoints in `store`.
-fn run_job(
-    dir: &RunDir,
-    cfg: &P0Config,
-    seed: u64,
-    methods: &[Method],
-    store: &mut SeedState,
-    multi: &MultiProgress,
-    style: &ProgressStyle,
-) -> std::result::Result<(), JobError> {
-    let problem = pendulum_problem();
-    let bar = |name: String, len: u64| {
-        let b = multi.add(ProgressBar::new(len));
-        b.set_style(style.clone());
-        b.set_prefix(name);
-        b
-    };
-    let mut pre: Option<ProgressBar> = None;
-    for &m in methods {
-        if read_record(dir, m, seed)?.is_some() {
-            store.discard(m.name())?;
-            continue;
-        }
-        let len = if m == Method::Difference {
+    fn length(&self, cfg: &P0Config, run: &str) -> u64 {
+        if run == Method::Difference.name() {
             cfg.real_budget
         } else {
             cfg.baseline_max_samples
-        };
-        let mut b: Option<ProgressBar> = None;
-        let r = run_seed(
+        }
+    }
+
+    fn run(
+        &self,
+        cfg: &P0Config,
+        run: &str,
+        seed: u64,
+        store: &mut dyn Checkpoints,
+        progress: &mut dyn FnMut(u64),
+    ) -> std::result::Result<RunRecord, JobError> {
+        let m = Method::ALL
+            .into_iter()
+            .find(|m| m.name() == run)
+            .ok_or_else(|| JobError::Failed(format!("unknown run {run}")))?;
+        let problem = pendulum_problem();
+        let mut records = run_seed(
             &problem,
             cfg,
             &[m],
             seed,
             &|m, s| ddpg_agent(cfg, &problem.task, m, s),
             store,
-            &mut |t| match t {
-                Tick::Pretrain(k) => {
-                    let p = pre.get_or_insert_with(|| {
-                        bar(format!("seed {seed} pretrain"), cfg.pretrain_steps)
-                    });
-                    if k % 100 == 0 || k == cfg.pretrain_steps {
-                        p.set_position(k);
-                    }
-                }
-                Tick::True(m, n) => {
-                    let b = b.get_or_insert_with(|| bar(format!("seed {seed} {}", m.name()), len));
+            &mut |t| {
+                if let Tick::True(_, n) = t {
                     if n % 50 == 0 {
-                        b.set_position(n);
+                        progress(n);
                     }
                 }
             },
-        );
-        if let Some(b) = &b {
-            b.finish();
-        }
-        let r = r?;
-        write_record(dir, &r[0])?;
-        store.discard(m.name())?;
+        )?;
+        records
+            .pop()
+            .ok_or_else(|| JobError::Failed(format!("seed {seed}: {run} left no record")))
     }
-    if let Some(p) = &pre {
-        p.finish();
+
+    fn curve(&self, r: &RunRecord) -> (Vec<&'static str>, Vec<Vec<f64>>) {
+        let rows = r
+            .curve
+            .iter()
+            .map(|p| vec![p.true_samples as f64, p.eval_return])
+            .collect();
+        (vec!["true_samples", "eval_return"], rows)
     }
-    if methods.iter().all(|m| *m != Method::Cold) {
-        store.discard("pretrained")?;
+
+    fn report_files(&self) -> &'static [&'static str] {
+        &["table.json", "table.md", "fig5.svg"]
     }
-    Ok(())
+
+    fn report(
+        &self,
+        dir: &RunDir,
+        cfg: &P0Config,
+        records: &[RunRecord],
+        wall: f64,
+    ) -> Result<String> {
+        let table = table(records, cfg);
+        let md = markdown(&table, cfg, wall);
+        let w = |name: &str, text: &str| {
+            dir.write(name, text)
+                .map(drop)
+                .map_err(|source| CliError::Io {
+                    path: dir.path().join(name),
+                    source,
+                })
+        };
+        w(
+            "table.json",
+            &table
+                .to_json()
+                .map_err(|e| CliError::Other(format!("table.json: {e}")))?,
+        )?;
+        w("table.md", &md)?;
+        w("fig5.svg", &fig5(records).svg())?;
+        Ok(md)
+    }
 }
 
 #[cfg(test)]

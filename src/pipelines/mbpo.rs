@@ -305,6 +305,29 @@ pub fn leg2r_problem() -> Problem<Leg2RTask, MakeEnv> {
     }
 }
 
+/// A constructor of the real system that carries its settings.
+pub type MakeEnvWith = Box<dyn Fn() -> std::result::Result<Box<dyn Env>, EnvError> + Send + Sync>;
+
+/// The 2R leg built from `config` (e.g. the true leg, or the reward in other units), reported as
+/// `id`, with its [`tandem_envs::TimeLimit`] of `config.max_episode_steps`; an error when the
+/// configuration is invalid.
+pub fn leg2r_problem_with(
+    id: &str,
+    config: &tandem_envs::Leg2RConfig,
+) -> Result<Problem<Leg2RTask, MakeEnvWith>> {
+    let env = Leg2REnv::with_config(id, config.clone())?;
+    let task = env.task().clone();
+    let (id, config) = (id.to_string(), config.clone());
+    Ok(Problem {
+        task,
+        env: Box::new(move || {
+            let env = Leg2REnv::with_config(&id, config.clone())?;
+            let limited = tandem_envs::TimeLimit::new(env, config.max_episode_steps);
+            Ok(Box::new(limited) as Box<dyn Env>)
+        }),
+    })
+}
+
 /// What a run reports as it goes.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Event {

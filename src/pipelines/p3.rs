@@ -138,6 +138,34 @@ impl P3Config {
         }
     }
 
+    /// A preset for p3's 2R leg (§5): 80 epochs of 1000 real steps, `H` 5 → 15 over them and
+    /// 10 000 MPC transitions an epoch (§4.1). Ours, where p3 gives no figure for the leg: SAC
+    /// 128×128 with 1000 random steps, `G` = 5 updates per real step, an ensemble of 3-layer
+    /// 128-unit members, MBPO's rollouts 100 per step of length 1, 3 evaluation episodes.
+    pub fn leg2r() -> Self {
+        let defaults = MbpoConfig::default();
+        Self {
+            base: MbpoConfig {
+                sac: tandem_agents::SacConfig {
+                    hidden: vec![128, 128],
+                    learning_starts: 1000,
+                    ..defaults.sac.clone()
+                },
+                ensemble: tandem_models::EnsembleConfig {
+                    hidden: vec![128, 128, 128],
+                    ..defaults.ensemble.clone()
+                },
+                real_steps: 80_000,
+                rollouts_per_step: 100,
+                rollout_length: LinearSchedule::constant(1),
+                updates_per_step: 5,
+                eval_episodes: 3,
+                ..defaults
+            },
+            ..Self::default()
+        }
+    }
+
     /// Checks the ranges the loops rely on.
     pub fn validate(&self) -> Result<()> {
         self.base.validate()?;

@@ -125,6 +125,45 @@ pub struct MethodFigures {
     pub seeds: Vec<u64>,
 }
 
+/// What one seed's run of a method contributes to [`MethodFigures::from_runs`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SeedRun {
+    /// The seed.
+    pub seed: u64,
+    /// Samples the run used in all.
+    pub samples: u64,
+    /// Its return at the budget (`NaN` if it has none: the finiteness check of the table names
+    /// it).
+    pub return_at_budget: f64,
+    /// Samples at its first evaluation that reached the target.
+    pub samples_to_target: Option<u64>,
+}
+
+impl MethodFigures {
+    /// A method's figures from its seeds' runs, with the mean samples to the target where a seed
+    /// that never reached it counts at the samples it used, and whether any seed fell short (the
+    /// inputs of a [`Comparison`]).
+    pub fn from_runs(budget: u64, target: f64, runs: &[SeedRun]) -> (Self, f64, bool) {
+        let to: Vec<Option<u64>> = runs.iter().map(|r| r.samples_to_target).collect();
+        let searched = runs.iter().map(|r| r.samples).max().unwrap_or(0);
+        let used: Vec<f64> = runs
+            .iter()
+            .map(|r| r.samples_to_target.unwrap_or(r.samples) as f64)
+            .collect();
+        let mean_used = used.iter().sum::<f64>() / used.len().max(1) as f64;
+        let short = to.iter().any(Option::is_none);
+        let figures = Self {
+            return_at_budget: ReturnAtBudget::from_seeds(
+                budget,
+                runs.iter().map(|r| r.return_at_budget).collect(),
+            ),
+            samples_to_target: SamplesToTarget::from_seeds(target, to, searched),
+            seeds: runs.iter().map(|r| r.seed).collect(),
+        };
+        (figures, mean_used, short)
+    }
+}
+
 /// A reference level the methods are measured against (e.g. a baseline after all its samples).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Reference {

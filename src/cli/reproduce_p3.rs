@@ -1,0 +1,484 @@
+//! `tandem reproduce p3-leg`: p3's comparison of SAC, MBPO and M-DeMoRL on the 2R leg, on the
+//! same seeds and real-step budget, through the shared [`super::harness`] (resume, separate
+//! processes per seed, merge).
+//!
+//! Writes, besides the harness' `config.json`, `runs/` and `state/`:
+//!
+//! - `table.md`, `table.json`: per method the return at the budget and the real steps to the
+//!   stated return (p0's table layout, methods keyed `sac`, `mbpo`, `m_demorl`), and how many
+//!   times more real steps SAC and MBPO needed than M-DeMoRL;
+//! - `fig4.svg`: the mean return against real steps with ± standard error bands (p3 Fig. 4);
+//! - with `--ablate-elites`, `fig3.svg`: M-DeMoRL's curves for elite fractions 1, 5, 10, 20, 50
+//!   and 100 % (p3 Fig. 3), whose runs are in the table as `m_demorl_elites_<percent>`.
+
+use std::path::Path;
+
+use clap::Args;
+use serde::{Deserialize, Serialize};
+use tandem::pipelines::mbpo::{leg2r_problem_with, Event, LinearSchedule, RunRecord};
+use tandem::pipelines::p3::{run, Method, P3Config};
+use tandem::pipelines::Checkpoints;
+use tandem::report::{Comparison, Curve, Figure, MarkdownText, MethodFigures, SeedRun, Table};
+use tandem::run::RunDir;
+use tandem_envs::{Leg2RConfig, Leg2RModel};
+use tandem_planners::Utility;
+
+use super::harness::{self, JobError, Study, StudyArgs};
+use super::{CliError, Result};
+
+/// p3's elite fractions (Fig. 3).
+pub const ELITE_FRACTIONS: [f64; 6] = [0.01, 0.05, 0.10, 0.20, 0.50, 1.0];
+
+/// Arguments of `tandem reproduce p3-leg`.
+#[derive(Debug, Clone, Args)]
+pub struct P3Args {
+    /// Seeds, output, jobs, resume: as every study.
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// Also run M-DeMoRL with elite fractions 1, 5, 10, 20, 50 and 100 % (p3 Fig. 3).
+    #[arg(long)]
+    pub ablate_elites: bool,
+}
+
+/// Everything that decides a p3-leg study's numbers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct P3Settings {
+    /// The loop all methods share and M-DeMoRL's inner loop ([`P3Config::leg2r`]).
+    pub p3: P3Config,
+    /// The leg the methods train on: the true leg (30 % heavier shank, joint friction), its
+    /// reward (15) with errors in units of 2 cm and 0.2 m/s (ours: in metres the reward is flat,
+    /// random torques score 0.80 of a perfect step, so no method could double another's).
+    pub leg: Leg2RConfig,
+    /// The return (per episode) whose first evaluation at or above it counts as
+    /// reached.
+    pub target_return: f64,
+    /// M-DeMoRL's elite fractions to ablate (p3 Fig. 3); empty: no ablation.
+    pub ablate_elites: Vec<f64>,
+}
+
+impl Default for P3Settings {
+    fn default() -> Self {
+        Self {
+            p3: P3Config::leg2r(),
+            leg: Leg2RConfig {
+                position_scale: 0.02,
+                velocity_scale: 0.2,
+                ..Leg2RConfig::for_model(Leg2RModel::Real)
+            },
+            target_return: 500.0,
+            ablate_elites: Vec::new(),
+        }
+    }
+}
+
+impl P3Settings {
+    /// The `--quick` settings: p3's loop at toy sizes (3 epochs of 300 steps, tiny networks).
+    pub fn quick() -> Self {
+        let mut s = Self::default();
+        let b = &mut s.p3.base;
+        b.sac.hidden = vec![16, 16];
+        b.sac.batch_size = 32;
+        b.sac.learning_starts = 100;
+        b.ensemble.members = 3;
+        b.ensemble.elites = 2;
+        b.ensemble.hidden = vec![16, 16];
+        b.model_fit.epochs = 2;
+        b.model_min_updates = 4;
+        b.epoch_length = 300;
+        b.real_steps = 900;
+        b.model_train_freq = 150;
+        b.rollouts_per_step = 2;
+        b.updates_per_step = 1;
+        b.eval_every = 300;
+        b.eval_episodes = 1;
+        b.checkpoint_every = 150;
+        s.p3.mpc.samples = 8;
+        s.p3.horizon = LinearSchedule {
+            from_epoch: 0,
+            to_epoch: 2,
+            start: 2,
+            end: 4,
+        };
+        s.p3.transitions_per_epoch = LinearSchedule::constant(60);
+        s.leg.max_episode_steps = 300;
+        s.target_return = 30.0;
+        s
+    }
+
+    /// Checks what the runs rely on.
+    fn validate(&self, what: &str) -> Result<()> {
+        let bad = |m: String| Err(CliError::input(what, m));
+        self.p3
+            .validate()
+            .map_err(|e| CliError::input(what, e.to_string()))?;
+        if let Err(e) = leg2r_problem_with("Leg2R-real-v0", &self.leg) {
+            return bad(format!("leg: {e}"));
+        }
+        if !self.target_return.is_finite() {
+            return bad(format!(
+                "target_return {} must be finite",
+                self.target_return
+            ));
+        }
+        if let Some(f) = self
+            .ablate_elites
+            .iter()
+            .find(|f| !(**f > 0.0 && **f <= 1.0))
+        {
+            return bad(format!("ablate_elites: {f} must lie in (0, 1]"));
+        }
+        if !matches!(self.p3.mpc.utility, Utility::CemElite { .. })
+            && !self.ablate_elites.is_empty()
+        {
+            return bad("ablate_elites needs the CEM elite utility (p3.mpc.utility)".into());
+        }
+        Ok(())
+    }
+
+    /// M-DeMoRL's own elite fraction, if it uses CEM elites.
+    fn elite_fraction(&self) -> Option<f64> {
+        match self.p3.mpc.utility {
+            Utility::CemElite { elite_fraction, .. } => Some(elite_fraction),
+            Utility::Exponential { .. } => None,
+        }
+    }
+
+    /// The ablation's runs, as `(name, fraction)`; the fraction M-DeMoRL already uses is its
+    /// `m_demorl` run.
+    fn ablation(&self) -> Vec<(String, f64)> {
+        self.ablate_elites
+            .iter()
+            .map(|&f| {
+                let name = if Some(f) == self.elite_fraction() {
+                    Method::MDemorl.name().to_string()
+                } else {
+                    format!("m_demorl_elites_{}", percent(f))
+                };
+                (name, f)
+            })
+            .collect()
+    }
+}
+
+/// `0.05` as `"5"`, `0.125` as `"12.5"`.
+fn percent(f: f64) -> String {
+    let p = (f * 1e4).round() / 100.0;
+    format!("{p}")
+}
+
+/// The p3-leg study.
+pub struct P3Leg {
+    ablate: bool,
+}
+
+impl P3Leg {
+    /// The study; `ablate` adds p3's elite fractions to the settings.
+    pub fn new(ablate: bool) -> Self {
+        Self { ablate }
+    }
+}
+
+impl Study for P3Leg {
+    type Settings = P3Settings;
+    type Record = RunRecord;
+
+    fn name(&self) -> &str {
+        "p3-leg"
+    }
+
+    fn settings(&self, quick: bool, config: Option<&Path>) -> Result<P3Settings> {
+        let base = if quick {
+            P3Settings::quick()
+        } else {
+            P3Settings::default()
+        };
+        let mut s = harness::read_overrides(base, config)?;
+        if self.ablate && s.ablate_elites.is_empty() {
+            s.ablate_elites = ELITE_FRACTIONS.to_vec();
+        }
+        let what = config.map_or("settings".to_string(), |p| {
+            format!("--config {}", p.display())
+        });
+        s.validate(&what)?;
+        Ok(s)
+    }
+
+    fn overrides_settings(&self) -> bool {
+        self.ablate
+    }
+
+    fn jobs(&self, s: &P3Settings) -> Vec<Vec<String>> {
+        let mut runs: Vec<String> = Method::ALL.iter().map(|m| m.name().to_string()).collect();
+        for (name, _) in s.ablation() {
+            if !runs.contains(&name) {
+                runs.push(name);
+            }
+        }
+        runs.into_iter().map(|r| vec![r]).collect()
+    }
+
+    fn length(&self, s: &P3Settings, _run: &str) -> u64 {
+        s.p3.base.real_steps
+    }
+
+    fn run(
+        &self,
+        s: &P3Settings,
+        run_name: &str,
+        seed: u64,
+        store: &mut dyn Checkpoints,
+        progress: &mut dyn FnMut(u64),
+    ) -> std::result::Result<RunRecord, JobError> {
+        let problem = leg2r_problem_with("Leg2R-real-v0", &s.leg)?;
+        let mut cfg = s.p3.clone();
+        let method = match Method::ALL.iter().find(|m| m.name() == run_name) {
+            Some(&m) => m,
+            None => {
+                let (_, f) = s
+                    .ablation()
+                    .into_iter()
+                    .find(|(n, _)| n == run_name)
+                    .ok_or_else(|| JobError::Failed(format!("unknown run {run_name}")))?;
+                if let Utility::CemElite { elite_fraction, .. } = &mut cfg.mpc.utility {
+                    *elite_fraction = f;
+                }
+                Method::MDemorl
+            }
+        };
+        let mut r = run(method, &problem, &cfg, seed, store, &mut |e| {
+            if let Event::Step { real_steps } = e {
+                if real_steps % 100 == 0 {
+                    progress(real_steps);
+                }
+            }
+        })?;
+        r.method = run_name.to_string();
+        Ok(r)
+    }
+
+    fn curve(&self, r: &RunRecord) -> (Vec<&'static str>, Vec<Vec<f64>>) {
+        let rows = r
+            .curve
+            .iter()
+            .map(|p| vec![p.true_samples as f64, p.eval_return])
+            .collect();
+        (vec!["real_steps", "eval_return"], rows)
+    }
+
+    fn report_files(&self) -> &'static [&'static str] {
+        &["table.json", "table.md", "fig4.svg", "fig3.svg"]
+    }
+
+    fn report(
+        &self,
+        dir: &RunDir,
+        s: &P3Settings,
+        records: &[RunRecord],
+        wall: f64,
+    ) -> Result<String> {
+        let t = table(records, s);
+        let md = markdown(&t, s, records, wall);
+        let w = |name: &str, text: &str| {
+            dir.write(name, text)
+                .map(drop)
+                .map_err(|source| CliError::Io {
+                    path: dir.path().join(name),
+                    source,
+                })
+        };
+        w(
+            "table.json",
+            &t.to_json()
+                .map_err(|e| CliError::Other(format!("table.json: {e}")))?,
+        )?;
+        w("table.md", &md)?;
+        let main: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+        w(
+            "fig4.svg",
+            &figure(
+                records,
+                &main,
+                "p3 Fig. 4: the 2R leg, SAC, MBPO and M-DeMoRL",
+            )
+            .svg(),
+        )?;
+        let ablation: Vec<String> = s.ablation().into_iter().map(|(n, _)| n).collect();
+        if !ablation.is_empty() {
+            let names: Vec<&str> = ablation.iter().map(String::as_str).collect();
+            w(
+                "fig3.svg",
+                &figure(records, &names, "p3 Fig. 3: M-DeMoRL's elite fraction").svg(),
+            )?;
+        }
+        Ok(md)
+    }
+}
+
+/// How the sample ratios are taken.
+const RATIO_NOTE: &str =
+    "per-seed real steps to the target, a seed that never reached it counted at the steps it used";
+
+/// The runs' names in table order: the three methods, then the ablation.
+fn names(records: &[RunRecord]) -> Vec<String> {
+    let mut names: Vec<String> = Method::ALL.iter().map(|m| m.name().to_string()).collect();
+    for r in records {
+        if !names.contains(&r.method) {
+            names.push(r.method.clone());
+        }
+    }
+    names
+}
+
+/// Per run name: the return at the budget and the real steps to the target; SAC and MBPO over
+/// M-DeMoRL.
+pub fn table(records: &[RunRecord], s: &P3Settings) -> Table {
+    let budget = s.p3.base.real_steps;
+    let mut t = Table::default();
+    let mut used = Vec::new();
+    for name in names(records) {
+        let seeds: Vec<SeedRun> = records
+            .iter()
+            .filter(|r| r.method == name)
+            .map(|r| SeedRun {
+                seed: r.seed,
+                samples: r.real_steps,
+                return_at_budget: r.return_at(budget).unwrap_or(f64::NAN),
+                samples_to_target: r.steps_to(s.target_return),
+            })
+            .collect();
+        if seeds.is_empty() {
+            continue;
+        }
+        let (figures, mean, short) = MethodFigures::from_runs(budget, s.target_return, &seeds);
+        used.push((name.clone(), mean, short));
+        t.methods.insert(name, figures);
+    }
+    let ours = Method::MDemorl.name();
+    if let Some((_, m_mean, m_short)) = used.iter().find(|u| u.0 == ours) {
+        for base in [Method::Sac.name(), Method::Mbpo.name()] {
+            if let Some((_, b_mean, b_short)) = used.iter().find(|u| u.0 == base) {
+                t.comparisons.push(Comparison::new(
+                    (base, *b_mean, *b_short),
+                    (ours, *m_mean, *m_short),
+                    RATIO_NOTE,
+                ));
+            }
+        }
+    }
+    t
+}
+
+/// The table as Markdown with p3's words, the settings that matter and the wall time.
+pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> String {
+    let labels: Vec<(String, String)> = names(records)
+        .into_iter()
+        .map(|n| {
+            let label = match n.as_str() {
+                "sac" => "SAC".to_string(),
+                "mbpo" => "MBPO".to_string(),
+                "m_demorl" => match s.elite_fraction() {
+                    Some(f) => format!("M-DeMoRL ({} % elites)", percent(f)),
+                    None => "M-DeMoRL".to_string(),
+                },
+                other => match s.ablation().into_iter().find(|(a, _)| a == other) {
+                    Some((_, f)) => format!("M-DeMoRL ({} % elites)", percent(f)),
+                    None => other.to_string(),
+                },
+            };
+            (n, label)
+        })
+        .collect();
+    let labels: Vec<(&str, &str)> = labels
+        .iter()
+        .map(|(n, l)| (n.as_str(), l.as_str()))
+        .collect();
+    let n_seeds = t.methods.values().map(|m| m.seeds.len()).max().unwrap_or(0);
+    let b = &s.p3.base;
+    let rate = |name: &str| {
+        let (u, sec) = records
+            .iter()
+            .filter(|r| r.method == name)
+            .fold((0u64, 0.0), |(u, s), r| {
+                (u + r.updates, s + r.update_seconds)
+            });
+        (sec > 0.0).then(|| u as f64 / sec)
+    };
+    let closing = vec![
+        format!(
+            "All methods take {} real steps ({} epochs of {}), evaluated every {} with {} \
+             deterministic episodes (not counted); SAC {:?} hidden units, {} random steps, {} \
+             updates per real step; the model an ensemble of {} ({} elites) of {:?}, refit \
+             every {} real steps; MBPO {} rollouts per real step; M-DeMoRL {} sampled \
+             sequences, H {} → {} over epochs {}–{}, up to {} MPC transitions an epoch. Reward \
+             (15) with errors in units of {} m and {} m/s on the true leg.",
+            b.real_steps,
+            b.real_steps / b.epoch_length,
+            b.epoch_length,
+            b.eval_every,
+            b.eval_episodes,
+            b.sac.hidden,
+            b.sac.learning_starts,
+            b.updates_per_step,
+            b.ensemble.members,
+            b.ensemble.elites,
+            b.ensemble.hidden,
+            b.model_train_freq,
+            b.rollouts_per_step,
+            s.p3.mpc.samples,
+            s.p3.horizon.start,
+            s.p3.horizon.end,
+            s.p3.horizon.from_epoch,
+            s.p3.horizon.to_epoch,
+            s.p3.transitions_per_epoch.max(),
+            s.leg.position_scale,
+            s.leg.velocity_scale,
+        ),
+        format!(
+            "p3 reports M-DeMoRL at about twice SAC's reward on the hardware leg by 80 epochs. \
+             SAC update rate {}. Wall time {wall:.0} s.",
+            rate("sac").map_or("n/a".to_string(), |r| format!("{r:.0} updates/s")),
+        ),
+    ];
+    t.markdown(&MarkdownText {
+        title: format!("p3 on the 2R leg ({n_seeds} seeds)"),
+        intro: format!(
+            "Mean return of the deterministic policy over {}-step episodes of the true leg \
+             (reward (15), at most 1 a step). Real steps are counted exactly; model and MPC \
+             transitions cost none. Mean ± standard error over seeds.",
+            s.leg.max_episode_steps
+        ),
+        labels: &labels,
+        comparison_intro: "Real steps to the target relative to M-DeMoRL (means over seeds; a \
+                           seed that never reached it counts at the steps it used)"
+            .into(),
+        comparison_order: &["sac", "mbpo"],
+        closing,
+    })
+}
+
+/// The mean return against real steps of the runs `names`, ± standard error.
+pub fn figure(records: &[RunRecord], names: &[&str], title: &str) -> Figure {
+    let curves = names
+        .iter()
+        .filter_map(|&name| {
+            let seeds: Vec<Vec<(u64, f64)>> = records
+                .iter()
+                .filter(|r| r.method == name)
+                .map(|r| {
+                    r.curve
+                        .iter()
+                        .map(|p| (p.true_samples, p.eval_return))
+                        .collect()
+                })
+                .collect();
+            (!seeds.is_empty()).then(|| Curve::mean_over_seeds(name, &seeds))
+        })
+        .collect();
+    Figure {
+        title: title.into(),
+        x_label: "real steps".into(),
+        y_label: "return per episode".into(),
+        curves,
+    }
+}

@@ -1,0 +1,154 @@
+//! `tandem reproduce p3-leg`: the quick study's files, seeds run apart and merged, the elite
+//! ablation, and a resume that asks for other settings.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+fn tandem(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tandem"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok(o: &Output) {
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+fn json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn root(name: &str) -> PathBuf {
+    let r = std::env::temp_dir().join(format!("tandem-p3-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&r);
+    r
+}
+
+/// Two seeds in one process equal the same seeds run apart and merged: table, figure, curves;
+/// the table has p3's three methods with one figure per seed and the ratios over M-DeMoRL.
+#[test]
+fn seeds_run_apart_and_merged_equal_one_study_of_all_seeds() {
+    let root = root("merge");
+    let p = |name: &str| root.join(name).to_str().unwrap().to_string();
+    let quick = ["reproduce", "p3-leg", "--quick", "--quiet"];
+    for (out, extra) in [
+        ("all", &["--seeds", "2"][..]),
+        ("s0", &["--seeds", "1", "--jobs", "1"][..]),
+        ("s1", &["--seeds", "1", "--first-seed", "1"][..]),
+    ] {
+        ok(&tandem(&[&quick[..], extra, &["--out", &p(out)]].concat()));
+    }
+    ok(&tandem(&[
+        "reproduce",
+        "merge",
+        &p("s1"),
+        &p("s0"),
+        "--out",
+        &p("merged"),
+    ]));
+    for f in ["table.json", "fig4.svg", "runs/m_demorl__seed1/curve.csv"] {
+        let a = std::fs::read(root.join("all").join(f)).unwrap();
+        assert!(
+            a == std::fs::read(root.join("merged").join(f)).unwrap(),
+            "{f}"
+        );
+    }
+    let table = json(&root.join("all/table.json"));
+    for m in ["sac", "mbpo", "m_demorl"] {
+        let r = &table[m]["return_at_budget"];
+        assert_eq!(r["budget"], 900, "{m}");
+        assert_eq!(r["per_seed"].as_array().unwrap().len(), 2, "{m}");
+        assert_eq!(table[m]["seeds"], serde_json::json!([0, 1]));
+        let curve = std::fs::read_to_string(root.join(format!("all/runs/{m}__seed0/curve.csv")));
+        // The initial evaluation and one per 300-step epoch.
+        assert_eq!(curve.unwrap().lines().count(), 1 + 4, "{m}");
+    }
+    for base in ["sac", "mbpo"] {
+        assert!(table[format!("{base}_over_m_demorl")]["ratio"].is_number());
+    }
+    let config = json(&root.join("merged/config.json"));
+    assert_eq!(config["study"], "p3-leg");
+    assert_eq!(config["seeds"], serde_json::json!([0, 1]));
+    // A p0 directory does not merge with a p3 one.
+    ok(&tandem(&[
+        "reproduce",
+        "p0-pendulum",
+        "--quick",
+        "--quiet",
+        "--seeds",
+        "1",
+        "--first-seed",
+        "2",
+        "--out",
+        &p("p0"),
+    ]));
+    let o = tandem(&["reproduce", "merge", &p("s0"), &p("p0"), "--out", &p("m2")]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("p0-pendulum study, not p3-leg"), "{err}");
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// `--ablate-elites` adds M-DeMoRL with p3's other elite fractions (10 % is the main run) and
+/// Fig. 3; resuming it without the flag's settings, or a finished study of another kind, is
+/// refused.
+#[test]
+fn the_elite_ablation_adds_runs_and_a_figure() {
+    let root = root("ablate");
+    let out = root.join("a");
+    let o = out.to_str().unwrap();
+    ok(&tandem(&[
+        "reproduce",
+        "p3-leg",
+        "--quick",
+        "--quiet",
+        "--seeds",
+        "1",
+        "--ablate-elites",
+        "--out",
+        o,
+    ]));
+    let table = json(&out.join("table.json"));
+    for m in [
+        "m_demorl",
+        "m_demorl_elites_1",
+        "m_demorl_elites_5",
+        "m_demorl_elites_20",
+    ] {
+        assert!(table[m]["return_at_budget"]["mean"].is_number(), "{m}");
+    }
+    assert!(table.get("m_demorl_elites_10").is_none());
+    let svg = std::fs::read_to_string(out.join("fig3.svg")).unwrap();
+    assert!(svg.contains("m_demorl_elites_100"));
+    let md = std::fs::read_to_string(out.join("table.md")).unwrap();
+    assert!(md.contains("M-DeMoRL (50 % elites)"), "{md}");
+    // Another elite count is another study: the recorded settings win, the conflict is named.
+    let cfg = root.join("other.toml");
+    std::fs::write(&cfg, "ablate_elites = [0.3]\n").unwrap();
+    let o = tandem(&[
+        "reproduce",
+        "p3-leg",
+        "--resume",
+        o,
+        "--config",
+        cfg.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("conflicts with the run being resumed"),
+        "{err}"
+    );
+    let o = tandem(&[
+        "reproduce",
+        "p0-pendulum",
+        "--resume",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("holds a p3-leg study"), "{err}");
+    let _ = std::fs::remove_dir_all(&root);
+}
