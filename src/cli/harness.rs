@@ -28,8 +28,9 @@ use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use tandem::interrupt::{Stop, EXIT_SIGINT};
+use tandem::pipelines::p0::CurvePoint;
 use tandem::pipelines::{Checkpoints, PipelineError, Result as PipelineResult};
-use tandem::report::{ensure_finite, to_json_pretty};
+use tandem::report::{ensure_finite, to_json_pretty, Curve, Table};
 use tandem::run::{Existing, Layout, RunDir};
 use tandem_nn::Checkpoint;
 
@@ -214,9 +215,44 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CliError + '_ {
 
 fn write_json(dir: &RunDir, name: &str, value: &impl Serialize) -> Result<()> {
     let text = to_json_pretty(value).map_err(|e| CliError::Other(format!("{name}: {e}")))?;
-    dir.write(name, &text)
+    write(dir, name, &text)
+}
+
+/// Writes the file `name` of `dir` (atomically).
+pub fn write(dir: &RunDir, name: &str, text: &str) -> Result<()> {
+    dir.write(name, text)
         .map(drop)
         .map_err(io(&dir.path().join(name)))
+}
+
+/// Writes a study's `table.json` and its Markdown rendering `table.md`.
+pub fn write_table(dir: &RunDir, table: &Table, markdown: &str) -> Result<()> {
+    let json = table
+        .to_json()
+        .map_err(|e| CliError::Other(format!("table.json: {e}")))?;
+    write(dir, "table.json", &json)?;
+    write(dir, "table.md", markdown)
+}
+
+/// Per name in `names` with any run: the mean learning curve (± standard error) over the runs
+/// `run` gives that name, each run's curve as (samples, return) points.
+pub fn mean_curves<R>(
+    records: &[R],
+    names: &[&str],
+    run: impl Fn(&R) -> (&str, &[CurvePoint]),
+) -> Vec<Curve> {
+    names
+        .iter()
+        .filter_map(|&name| {
+            let seeds: Vec<Vec<(u64, f64)>> = records
+                .iter()
+                .map(&run)
+                .filter(|(n, _)| *n == name)
+                .map(|(_, c)| c.iter().map(|p| (p.true_samples, p.eval_return)).collect())
+                .collect();
+            (!seeds.is_empty()).then(|| Curve::mean_over_seeds(name, &seeds))
+        })
+        .collect()
 }
 
 /// `dir/config.json`, which must be `study`'s (`what` names the directory in errors).

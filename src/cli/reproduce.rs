@@ -33,7 +33,7 @@ use tandem::pipelines::p0::{
 };
 use tandem::pipelines::Checkpoints;
 use tandem::report::{
-    mean_stderr, Comparison, Curve, Figure, MarkdownText, MethodFigures, Reference, SeedRun, Table,
+    mean_stderr, Comparison, Figure, MarkdownText, MethodFigures, Reference, SeedRun, Table,
 };
 use tandem::run::RunDir;
 
@@ -280,22 +280,8 @@ pub fn markdown(t: &Table, cfg: &P0Config, wall: f64) -> String {
 /// Fig. 5: the mean return on the true system against true samples, per method, with ± standard
 /// error bands over the seeds that have a point at that sample count.
 pub fn fig5(records: &[RunRecord]) -> Figure {
-    let curves = Method::ALL
-        .iter()
-        .filter_map(|&m| {
-            let seeds: Vec<Vec<(u64, f64)>> = records
-                .iter()
-                .filter(|r| r.method == m)
-                .map(|r| {
-                    r.curve
-                        .iter()
-                        .map(|p| (p.true_samples, p.eval_return))
-                        .collect()
-                })
-                .collect();
-            (!seeds.is_empty()).then(|| Curve::mean_over_seeds(m.name(), &seeds))
-        })
-        .collect();
+    let names = Method::ALL.map(Method::name);
+    let curves = harness::mean_curves(records, &names, |r| (r.method.name(), &r.curve));
     Figure {
         title: "p0 Fig. 5: DC-motor pendulum, policies evaluated on the true system".into(),
         x_label: "true-system training samples".into(),
@@ -401,22 +387,8 @@ impl Study for P0Pendulum {
     ) -> Result<String> {
         let table = table(records, cfg);
         let md = markdown(&table, cfg, wall);
-        let w = |name: &str, text: &str| {
-            dir.write(name, text)
-                .map(drop)
-                .map_err(|source| CliError::Io {
-                    path: dir.path().join(name),
-                    source,
-                })
-        };
-        w(
-            "table.json",
-            &table
-                .to_json()
-                .map_err(|e| CliError::Other(format!("table.json: {e}")))?,
-        )?;
-        w("table.md", &md)?;
-        w("fig5.svg", &fig5(records).svg())?;
+        harness::write_table(dir, &table, &md)?;
+        harness::write(dir, "fig5.svg", &fig5(records).svg())?;
         Ok(md)
     }
 }

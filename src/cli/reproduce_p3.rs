@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 use tandem::pipelines::mbpo::{leg2r_problem_with, Event, LinearSchedule, RunRecord};
 use tandem::pipelines::p3::{run, Method, P3Config};
 use tandem::pipelines::Checkpoints;
-use tandem::report::{Comparison, Curve, Figure, MarkdownText, MethodFigures, SeedRun, Table};
+use tandem::report::{Comparison, Figure, MarkdownText, MethodFigures, SeedRun, Table};
 use tandem::run::RunDir;
 use tandem_envs::{Leg2RConfig, Leg2RModel};
 use tandem_planners::Utility;
@@ -279,22 +279,10 @@ impl Study for P3Leg {
     ) -> Result<String> {
         let t = table(records, s);
         let md = markdown(&t, s, records, wall);
-        let w = |name: &str, text: &str| {
-            dir.write(name, text)
-                .map(drop)
-                .map_err(|source| CliError::Io {
-                    path: dir.path().join(name),
-                    source,
-                })
-        };
-        w(
-            "table.json",
-            &t.to_json()
-                .map_err(|e| CliError::Other(format!("table.json: {e}")))?,
-        )?;
-        w("table.md", &md)?;
+        harness::write_table(dir, &t, &md)?;
         let main: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
-        w(
+        harness::write(
+            dir,
             "fig4.svg",
             &figure(
                 records,
@@ -306,7 +294,8 @@ impl Study for P3Leg {
         let ablation: Vec<String> = s.ablation().into_iter().map(|(n, _)| n).collect();
         if !ablation.is_empty() {
             let names: Vec<&str> = ablation.iter().map(String::as_str).collect();
-            w(
+            harness::write(
+                dir,
                 "fig3.svg",
                 &figure(records, &names, "p3 Fig. 3: M-DeMoRL's elite fraction").svg(),
             )?;
@@ -459,22 +448,7 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
 
 /// The mean return against real steps of the runs `names`, ± standard error.
 pub fn figure(records: &[RunRecord], names: &[&str], title: &str) -> Figure {
-    let curves = names
-        .iter()
-        .filter_map(|&name| {
-            let seeds: Vec<Vec<(u64, f64)>> = records
-                .iter()
-                .filter(|r| r.method == name)
-                .map(|r| {
-                    r.curve
-                        .iter()
-                        .map(|p| (p.true_samples, p.eval_return))
-                        .collect()
-                })
-                .collect();
-            (!seeds.is_empty()).then(|| Curve::mean_over_seeds(name, &seeds))
-        })
-        .collect();
+    let curves = harness::mean_curves(records, names, |r| (r.method.as_str(), &r.curve));
     Figure {
         title: title.into(),
         x_label: "real steps".into(),
