@@ -174,3 +174,48 @@ fn replay_runs_any_mjcf_file() {
     ]);
     assert!(!both.status.success());
 }
+
+/// `tandem reproduce p3-mujoco`: with the feature, a quick HalfCheetah study writes p3's table
+/// (three methods) and Fig. 2; without it, the study refuses before writing anything. An
+/// unsupported task is refused either way.
+#[test]
+fn p3_mujoco_runs_with_the_feature_only() {
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("mujoco-cli-p3");
+    let _ = std::fs::remove_dir_all(&out);
+    let o = tandem(&[
+        "reproduce",
+        "p3-mujoco",
+        "--quick",
+        "--quiet",
+        "--seeds",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    if cfg!(feature = "mujoco") {
+        assert!(o.status.success(), "{}", err_text(&o));
+        let table = std::fs::read_to_string(out.join("table.json")).unwrap();
+        let table: serde_json::Value = serde_json::from_str(&table).unwrap();
+        for m in ["sac", "mbpo", "m_demorl"] {
+            assert!(table[m]["return_at_budget"]["mean"].is_number(), "{m}");
+        }
+        let svg = std::fs::read_to_string(out.join("fig2.svg")).unwrap();
+        assert!(svg.contains("HalfCheetah-v5"));
+    } else {
+        assert_eq!(o.status.code(), Some(1));
+        assert!(
+            err_text(&o).contains("--features mujoco"),
+            "{}",
+            err_text(&o)
+        );
+        assert!(!out.exists());
+    }
+    let o = tandem(&["reproduce", "p3-mujoco", "--env", "Ant-v5", "--quick"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        err_text(&o).contains("p3-mujoco runs HalfCheetah-v5"),
+        "{}",
+        err_text(&o)
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}

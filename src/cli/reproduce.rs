@@ -38,7 +38,7 @@ use tandem::report::{
 use tandem::run::RunDir;
 
 use super::harness::{self, JobError, Study, StudyArgs};
-use super::reproduce_p3::P3Leg;
+use super::reproduce_p3::P3Study;
 use super::{CliError, Result};
 
 /// The reproductions.
@@ -55,7 +55,11 @@ pub enum ReproduceCommand {
     /// p3 (M-DeMoRL) on the 2R leg: SAC, MBPO and M-DeMoRL on the same seeds and real-step
     /// budget; p3 Fig. 4, and Fig. 3's elite-fraction ablation with `--ablate-elites`.
     P3Leg(super::reproduce_p3::P3Args),
-    /// Combine p0-pendulum or p3-leg reproductions of disjoint seeds (e.g. one process per seed,
+    /// p3 (M-DeMoRL) on a gymnasium MuJoCo task (`--env`, needs `--features mujoco`): SAC, MBPO
+    /// and M-DeMoRL with MBPO's settings for the task; p3 Fig. 2, and Fig. 3 with
+    /// `--ablate-elites`.
+    P3Mujoco(super::reproduce_p3::P3MujocoArgs),
+    /// Combine p0-pendulum, p3-leg or p3-mujoco reproductions of disjoint seeds (e.g. one process per seed,
     /// `--first-seed`) into one table and figure; their settings must be equal.
     Merge(MergeArgs),
 }
@@ -93,7 +97,13 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
         ReproduceCommand::P2Maze(args) => {
             super::reproduce_p2::p2(super::reproduce_p2::Experiment::Maze, &args)
         }
-        ReproduceCommand::P3Leg(args) => harness::run(&P3Leg::new(args.ablate_elites), &args.study),
+        ReproduceCommand::P3Leg(args) => {
+            harness::run(&P3Study::leg(args.ablate_elites), &args.study)
+        }
+        ReproduceCommand::P3Mujoco(args) => harness::run(
+            &P3Study::mujoco(args.env, args.p3.ablate_elites),
+            &args.p3.study,
+        ),
         ReproduceCommand::Merge(args) => {
             let Some(first) = args.dirs.first() else {
                 return Err(CliError::input("merge", "no directories given"));
@@ -102,8 +112,12 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
                 "p0-pendulum" => {
                     harness::merge(&P0Pendulum, &args.dirs, args.out.as_deref(), args.overwrite)
                 }
-                "p3-leg" => harness::merge(
-                    &P3Leg::new(false),
+                name @ ("p3-leg" | "p3-mujoco") => harness::merge(
+                    &if name == "p3-leg" {
+                        P3Study::leg(false)
+                    } else {
+                        P3Study::mujoco(None, false)
+                    },
                     &args.dirs,
                     args.out.as_deref(),
                     args.overwrite,

@@ -1,13 +1,14 @@
-//! `tandem reproduce p3-leg`: p3's comparison of SAC, MBPO and M-DeMoRL on the 2R leg, on the
-//! same seeds and real-step budget, through the shared [`super::harness`] (resume, separate
-//! processes per seed, merge).
+//! `tandem reproduce p3-leg` and `p3-mujoco`: p3's comparison of SAC, MBPO and M-DeMoRL on the 2R
+//! leg or a gymnasium MuJoCo task, on the same seeds and real-step budget, through the shared
+//! [`super::harness`] (resume, separate processes per seed, merge).
 //!
 //! Writes, besides the harness' `config.json`, `runs/` and `state/`:
 //!
 //! - `table.md`, `table.json`: per method the return at the budget and the real steps to the
 //!   stated return (p0's table layout, methods keyed `sac`, `mbpo`, `m_demorl`), and how many
 //!   times more real steps SAC and MBPO needed than M-DeMoRL;
-//! - `fig4.svg`: the mean return against real steps with ± standard error bands (p3 Fig. 4);
+//! - `fig4.svg` (the leg) or `fig2.svg` (MuJoCo): the mean return against real steps with ±
+//!   standard error bands (p3 Fig. 4 and Fig. 2);
 //! - with `--ablate-elites`, `fig3.svg`: M-DeMoRL's curves for elite fractions 1, 5, 10, 20, 50
 //!   and 100 % (p3 Fig. 3), whose runs are in the table as `m_demorl_elites_<percent>`.
 
@@ -15,12 +16,15 @@ use std::path::Path;
 
 use clap::Args;
 use serde::{Deserialize, Serialize};
-use tandem::pipelines::mbpo::{leg2r_problem_with, Event, LinearSchedule, RunRecord};
+use tandem::mujoco::TaskKind;
+use tandem::pipelines::mbpo::{
+    leg2r_problem_with, mujoco_problem, Event, LinearSchedule, Problem, RunRecord,
+};
 use tandem::pipelines::p3::{run, Method, P3Config};
 use tandem::pipelines::Checkpoints;
 use tandem::report::{Comparison, Figure, MarkdownText, MethodFigures, SeedRun, Table};
 use tandem::run::RunDir;
-use tandem_envs::{Leg2RConfig, Leg2RModel};
+use tandem_envs::{Env, EnvError, Leg2RConfig, Leg2RModel, Task};
 use tandem_planners::Utility;
 
 use super::harness::{self, JobError, Study, StudyArgs};
@@ -40,16 +44,32 @@ pub struct P3Args {
     pub ablate_elites: bool,
 }
 
+/// Arguments of `tandem reproduce p3-mujoco`.
+#[derive(Debug, Clone, Args)]
+pub struct P3MujocoArgs {
+    /// The p3-leg arguments.
+    #[command(flatten)]
+    pub p3: P3Args,
+    /// The task: HalfCheetah-v5, Hopper-v5, Walker2d-v5 or InvertedPendulum-v5 [default:
+    /// HalfCheetah-v5; on `--resume`, the recorded one].
+    #[arg(long)]
+    pub env: Option<String>,
+}
+
 /// Everything that decides a p3-leg study's numbers.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct P3Settings {
-    /// The loop all methods share and M-DeMoRL's inner loop ([`P3Config::leg2r`]).
+    /// The environment: `Leg2R-real-v0` (the leg, built from `leg`) or a gymnasium MuJoCo task.
+    pub env: String,
+    /// The loop all methods share and M-DeMoRL's inner loop ([`P3Config::leg2r`] on the leg).
     pub p3: P3Config,
-    /// The leg the methods train on: the true leg (30 % heavier shank, joint friction), its
-    /// reward (15) with errors in units of 2 cm and 0.2 m/s (ours: in metres the reward is flat,
-    /// random torques score 0.80 of a perfect step, so no method could double another's).
-    pub leg: Leg2RConfig,
+    /// The leg the methods train on (the leg only): the true leg (30 % heavier shank, joint
+    /// friction), its reward (15) with errors in units of 2 cm and 0.2 m/s (ours: in metres the
+    /// reward is flat, random torques score 0.80 of a perfect step, so no method could double
+    /// another's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub leg: Option<Leg2RConfig>,
     /// The return (per episode) whose first evaluation at or above it counts as
     /// reached.
     pub target_return: f64,
@@ -60,22 +80,96 @@ pub struct P3Settings {
 impl Default for P3Settings {
     fn default() -> Self {
         Self {
+            env: LEG.into(),
             p3: P3Config::leg2r(),
-            leg: Leg2RConfig {
+            leg: Some(Leg2RConfig {
                 position_scale: 0.02,
                 velocity_scale: 0.2,
                 ..Leg2RConfig::for_model(Leg2RModel::Real)
-            },
+            }),
             target_return: 500.0,
             ablate_elites: Vec::new(),
         }
     }
 }
 
+/// The leg's id.
+const LEG: &str = "Leg2R-real-v0";
+
+/// MBPO's settings for a MuJoCo task (Janner et al., Appendix C) and the return whose reaching
+/// is counted.
+struct MujocoPreset {
+    id: &'static str,
+    epochs: u64,
+    updates_per_step: usize,
+    /// The rollout length `k` by epoch (`None`: 1 throughout).
+    rollout_length: Option<LinearSchedule>,
+    target_return: f64,
+}
+
+/// The MuJoCo tasks `p3-mujoco` runs (targets: HalfCheetah p3 Fig. 3's 10 000, the others ours).
+const MUJOCO: [MujocoPreset; 4] = [
+    MujocoPreset {
+        id: "HalfCheetah-v5",
+        epochs: 400,
+        updates_per_step: 40,
+        rollout_length: None,
+        target_return: 10_000.0,
+    },
+    MujocoPreset {
+        id: "Hopper-v5",
+        epochs: 125,
+        updates_per_step: 20,
+        rollout_length: Some(LinearSchedule {
+            from_epoch: 20,
+            to_epoch: 100,
+            start: 1,
+            end: 15,
+        }),
+        target_return: 3000.0,
+    },
+    MujocoPreset {
+        id: "Walker2d-v5",
+        epochs: 300,
+        updates_per_step: 20,
+        rollout_length: None,
+        target_return: 3500.0,
+    },
+    MujocoPreset {
+        id: "InvertedPendulum-v5",
+        epochs: 15,
+        updates_per_step: 20,
+        rollout_length: None,
+        target_return: 1000.0,
+    },
+];
+
+/// The ids `p3-mujoco` runs, for messages.
+fn mujoco_ids() -> String {
+    MUJOCO.iter().map(|m| m.id).collect::<Vec<_>>().join(", ")
+}
+
 impl P3Settings {
+    /// p3's settings on the MuJoCo task `env` (MBPO's loop for it, p3's inner loop); `None` for
+    /// a task `p3-mujoco` does not run.
+    pub fn mujoco(env: &str) -> Option<Self> {
+        let m = MUJOCO.iter().find(|m| m.id == env)?;
+        let mut p3 = P3Config::default();
+        p3.base.real_steps = m.epochs * p3.base.epoch_length;
+        p3.base.updates_per_step = m.updates_per_step;
+        p3.base.rollout_length = m.rollout_length.unwrap_or(LinearSchedule::constant(1));
+        Some(Self {
+            env: m.id.into(),
+            p3,
+            leg: None,
+            target_return: m.target_return,
+            ablate_elites: Vec::new(),
+        })
+    }
+
     /// The `--quick` settings: p3's loop at toy sizes (3 epochs of 300 steps, tiny networks).
-    pub fn quick() -> Self {
-        let mut s = Self::default();
+    pub fn quick(self) -> Self {
+        let mut s = self;
         let b = &mut s.p3.base;
         b.sac.hidden = vec![16, 16];
         b.sac.batch_size = 32;
@@ -101,9 +195,20 @@ impl P3Settings {
             end: 4,
         };
         s.p3.transitions_per_epoch = LinearSchedule::constant(60);
-        s.leg.max_episode_steps = 300;
-        s.target_return = 30.0;
+        if let Some(leg) = &mut s.leg {
+            leg.max_episode_steps = 300;
+            s.target_return = 30.0;
+        }
         s
+    }
+
+    /// The episode length of the environment.
+    fn episode_steps(&self) -> usize {
+        match (&self.leg, TaskKind::from_id(&self.env)) {
+            (Some(leg), _) => leg.max_episode_steps,
+            (None, Some(kind)) => kind.spec().max_episode_steps,
+            (None, None) => 0,
+        }
     }
 
     /// Checks what the runs rely on.
@@ -112,8 +217,24 @@ impl P3Settings {
         self.p3
             .validate()
             .map_err(|e| CliError::input(what, e.to_string()))?;
-        if let Err(e) = leg2r_problem_with("Leg2R-real-v0", &self.leg) {
-            return bad(format!("leg: {e}"));
+        match &self.leg {
+            Some(leg) => {
+                if let Err(e) = leg2r_problem_with(&self.env, leg) {
+                    return bad(format!("leg: {e}"));
+                }
+            }
+            None => {
+                if !MUJOCO.iter().any(|m| m.id == self.env) {
+                    return bad(format!(
+                        "env {}: p3-mujoco runs {} (a leg needs its `leg` settings)",
+                        self.env,
+                        mujoco_ids()
+                    ));
+                }
+                if let Err(e) = mujoco_problem(&self.env) {
+                    return bad(e.to_string());
+                }
+            }
         }
         if !self.target_return.is_finite() {
             return bad(format!(
@@ -167,32 +288,53 @@ fn percent(f: f64) -> String {
     format!("{p}")
 }
 
-/// The p3-leg study.
-pub struct P3Leg {
+/// The p3 studies: on the leg, or on a MuJoCo task.
+pub struct P3Study {
+    mujoco: Option<Option<String>>,
     ablate: bool,
 }
 
-impl P3Leg {
-    /// The study; `ablate` adds p3's elite fractions to the settings.
-    pub fn new(ablate: bool) -> Self {
-        Self { ablate }
+impl P3Study {
+    /// `p3-leg`; `ablate` adds p3's elite fractions to the settings.
+    pub fn leg(ablate: bool) -> Self {
+        Self {
+            mujoco: None,
+            ablate,
+        }
+    }
+
+    /// `p3-mujoco` on `env` (default HalfCheetah-v5).
+    pub fn mujoco(env: Option<String>, ablate: bool) -> Self {
+        Self {
+            mujoco: Some(env),
+            ablate,
+        }
     }
 }
 
-impl Study for P3Leg {
+impl Study for P3Study {
     type Settings = P3Settings;
     type Record = RunRecord;
 
     fn name(&self) -> &str {
-        "p3-leg"
+        if self.mujoco.is_some() {
+            "p3-mujoco"
+        } else {
+            "p3-leg"
+        }
     }
 
     fn settings(&self, quick: bool, config: Option<&Path>) -> Result<P3Settings> {
-        let base = if quick {
-            P3Settings::quick()
-        } else {
-            P3Settings::default()
+        let base = match &self.mujoco {
+            None => P3Settings::default(),
+            Some(env) => {
+                let env = env.as_deref().unwrap_or(MUJOCO[0].id);
+                P3Settings::mujoco(env).ok_or_else(|| {
+                    CliError::input("--env", format!("{env}: p3-mujoco runs {}", mujoco_ids()))
+                })?
+            }
         };
+        let base = if quick { base.quick() } else { base };
         let mut s = harness::read_overrides(base, config)?;
         if self.ablate && s.ablate_elites.is_empty() {
             s.ablate_elites = ELITE_FRACTIONS.to_vec();
@@ -205,7 +347,7 @@ impl Study for P3Leg {
     }
 
     fn overrides_settings(&self) -> bool {
-        self.ablate
+        self.ablate || matches!(self.mujoco, Some(Some(_)))
     }
 
     fn jobs(&self, s: &P3Settings) -> Vec<Vec<String>> {
@@ -230,29 +372,17 @@ impl Study for P3Leg {
         store: &mut dyn Checkpoints,
         progress: &mut dyn FnMut(u64),
     ) -> std::result::Result<RunRecord, JobError> {
-        let problem = leg2r_problem_with("Leg2R-real-v0", &s.leg)?;
-        let mut cfg = s.p3.clone();
-        let method = match Method::ALL.iter().find(|m| m.name() == run_name) {
-            Some(&m) => m,
-            None => {
-                let (_, f) = s
-                    .ablation()
-                    .into_iter()
-                    .find(|(n, _)| n == run_name)
-                    .ok_or_else(|| JobError::Failed(format!("unknown run {run_name}")))?;
-                if let Utility::CemElite { elite_fraction, .. } = &mut cfg.mpc.utility {
-                    *elite_fraction = f;
-                }
-                Method::MDemorl
-            }
-        };
-        let mut r = run(method, &problem, &cfg, seed, store, &mut |e| {
-            if let Event::Step { real_steps } = e {
-                if real_steps % 100 == 0 {
-                    progress(real_steps);
-                }
-            }
-        })?;
+        let mut r = match &s.leg {
+            Some(leg) => run_on(
+                &leg2r_problem_with(&s.env, leg)?,
+                s,
+                run_name,
+                seed,
+                store,
+                progress,
+            ),
+            None => run_on(&mujoco_problem(&s.env)?, s, run_name, seed, store, progress),
+        }?;
         r.method = run_name.to_string();
         Ok(r)
     }
@@ -267,7 +397,7 @@ impl Study for P3Leg {
     }
 
     fn report_files(&self) -> &'static [&'static str] {
-        &["table.json", "table.md", "fig4.svg", "fig3.svg"]
+        &["table.json", "table.md", "fig2.svg", "fig4.svg", "fig3.svg"]
     }
 
     fn report(
@@ -281,27 +411,71 @@ impl Study for P3Leg {
         let md = markdown(&t, s, records, wall);
         harness::write_table(dir, &t, &md)?;
         let main: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
-        harness::write(
-            dir,
-            "fig4.svg",
-            &figure(
-                records,
-                &main,
-                "p3 Fig. 4: the 2R leg, SAC, MBPO and M-DeMoRL",
-            )
-            .svg(),
-        )?;
+        let (file, title) = match s.leg {
+            Some(_) => (
+                "fig4.svg",
+                "p3 Fig. 4: the 2R leg, SAC, MBPO and M-DeMoRL".to_string(),
+            ),
+            None => (
+                "fig2.svg",
+                format!("p3 Fig. 2: {}, SAC, MBPO and M-DeMoRL", s.env),
+            ),
+        };
+        harness::write(dir, file, &figure(records, &main, &title).svg())?;
         let ablation: Vec<String> = s.ablation().into_iter().map(|(n, _)| n).collect();
         if !ablation.is_empty() {
             let names: Vec<&str> = ablation.iter().map(String::as_str).collect();
             harness::write(
                 dir,
                 "fig3.svg",
-                &figure(records, &names, "p3 Fig. 3: M-DeMoRL's elite fraction").svg(),
+                &figure(
+                    records,
+                    &names,
+                    &format!("p3 Fig. 3: M-DeMoRL's elite fraction on {}", s.env),
+                )
+                .svg(),
             )?;
         }
         Ok(md)
     }
+}
+
+/// Runs `run_name` (a method, or an ablation's M-DeMoRL) for `seed` on `problem`.
+fn run_on<T, F>(
+    problem: &Problem<T, F>,
+    s: &P3Settings,
+    run_name: &str,
+    seed: u64,
+    store: &mut dyn Checkpoints,
+    progress: &mut dyn FnMut(u64),
+) -> std::result::Result<RunRecord, JobError>
+where
+    T: Task + Clone + Send + Sync + 'static,
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    let mut cfg = s.p3.clone();
+    let method = match Method::ALL.iter().find(|m| m.name() == run_name) {
+        Some(&m) => m,
+        None => {
+            let (_, f) = s
+                .ablation()
+                .into_iter()
+                .find(|(n, _)| n == run_name)
+                .ok_or_else(|| JobError::Failed(format!("unknown run {run_name}")))?;
+            if let Utility::CemElite { elite_fraction, .. } = &mut cfg.mpc.utility {
+                *elite_fraction = f;
+            }
+            Method::MDemorl
+        }
+    };
+    let r = run(method, problem, &cfg, seed, store, &mut |e| {
+        if let Event::Step { real_steps } = e {
+            if real_steps % 100 == 0 {
+                progress(real_steps);
+            }
+        }
+    })?;
+    Ok(r)
 }
 
 /// How the sample ratios are taken.
@@ -399,8 +573,7 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
              deterministic episodes (not counted); SAC {:?} hidden units, {} random steps, {} \
              updates per real step; the model an ensemble of {} ({} elites) of {:?}, refit \
              every {} real steps; MBPO {} rollouts per real step; M-DeMoRL {} sampled \
-             sequences, H {} → {} over epochs {}–{}, up to {} MPC transitions an epoch. Reward \
-             (15) with errors in units of {} m and {} m/s on the true leg.",
+             sequences, H {} → {} over epochs {}–{}, up to {} MPC transitions an epoch.{}",
             b.real_steps,
             b.real_steps / b.epoch_length,
             b.epoch_length,
@@ -420,22 +593,33 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
             s.p3.horizon.from_epoch,
             s.p3.horizon.to_epoch,
             s.p3.transitions_per_epoch.max(),
-            s.leg.position_scale,
-            s.leg.velocity_scale,
+            s.leg.as_ref().map_or(String::new(), |l| format!(
+                " Reward (15) with errors in units of {} m and {} m/s on the true leg.",
+                l.position_scale, l.velocity_scale
+            )),
         ),
         format!(
-            "p3 reports M-DeMoRL at about twice SAC's reward on the hardware leg by 80 epochs. \
-             SAC update rate {}. Wall time {wall:.0} s.",
+            "{} SAC update rate {}. Wall time {wall:.0} s.",
+            if s.leg.is_some() {
+                "p3 reports M-DeMoRL at about twice SAC's reward on the hardware leg by 80 epochs."
+            } else {
+                "p3 reports M-DeMoRL about 30 % faster than MBPO to the same final return."
+            },
             rate("sac").map_or("n/a".to_string(), |r| format!("{r:.0} updates/s")),
         ),
     ];
     t.markdown(&MarkdownText {
-        title: format!("p3 on the 2R leg ({n_seeds} seeds)"),
+        title: format!("p3 on {} ({n_seeds} seeds)", s.env),
         intro: format!(
-            "Mean return of the deterministic policy over {}-step episodes of the true leg \
-             (reward (15), at most 1 a step). Real steps are counted exactly; model and MPC \
-             transitions cost none. Mean ± standard error over seeds.",
-            s.leg.max_episode_steps
+            "Mean return of the deterministic policy over {}-step episodes of {}. Real steps \
+             are counted exactly; model and MPC transitions cost none. Mean ± standard error \
+             over seeds.",
+            s.episode_steps(),
+            if s.leg.is_some() {
+                "the true leg (reward (15), at most 1 a step)"
+            } else {
+                "the task"
+            }
         ),
         labels: &labels,
         comparison_intro: "Real steps to the target relative to M-DeMoRL (means over seeds; a \

@@ -328,6 +328,27 @@ pub fn leg2r_problem_with(
     })
 }
 
+/// A gymnasium MuJoCo task (`HalfCheetah-v5`, `Hopper-v5`, `Walker2d-v5`,
+/// `InvertedPendulum-v5`) with [`tandem_mujoco::GymTask`] as its task, its model's `qpos0` read
+/// from the MJCF. Needs the feature `mujoco`; without it, an error saying so.
+pub fn mujoco_problem(id: &str) -> Result<Problem<tandem_mujoco::GymTask, MakeEnvWith>> {
+    #[cfg(feature = "mujoco")]
+    {
+        let task = tandem_mujoco::gym_task(id)?;
+        let id = id.to_string();
+        Ok(Problem {
+            task,
+            env: Box::new(move || tandem_mujoco::make(&id)),
+        })
+    }
+    #[cfg(not(feature = "mujoco"))]
+    {
+        Err(PipelineError::Config(format!(
+            "{id} needs a build with `--features mujoco` after scripts/setup-mujoco.sh"
+        )))
+    }
+}
+
 /// What a run reports as it goes.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Event {

@@ -12,6 +12,7 @@
 //! | item | feature | what |
 //! |---|---|---|
 //! | [`TaskKind`], [`TaskSpec`], [`Readout`], [`Outcome`] | always | the tasks' observation layouts, rewards (with gymnasium's float32 control costs and NumPy's summation order, [`numpy`]), reward terms, health, reset noise: pure functions, tested without the library |
+//! | [`GymTask`] | always | a locomotion task as a `tandem_envs::Task` over `qpos ++ qvel`, for learned models (with the feature, `gym_task(id)` reads the model's `qpos0` from its MJCF) |
 //! | [`make`], [`registered`], [`AVAILABLE`] | always | the registry: with the feature, `make("HalfCheetah-v5")` is the task with its time limit; without it, an error saying how to enable it |
 //! | `Scene`, `MujocoEnv`, `MujocoPlant` | `mujoco` | a loaded MJCF model; an environment (gymnasium's task, or any scene); a plant (state `qpos ++ qvel`, batch step, finite-difference linearization) |
 //!
@@ -24,6 +25,7 @@
 //! `tandem-envs` (the `Env` trait, `TimeLimit`), `nalgebra` (plant vectors), `rand` and
 //! `rand_distr` (reset noise), `thiserror` (errors), optional `mujoco-rs` (MuJoCo).
 
+mod gym_task;
 pub mod numpy;
 mod registry;
 #[cfg(feature = "mujoco")]
@@ -32,6 +34,9 @@ mod task;
 
 use std::path::PathBuf;
 
+pub use gym_task::GymTask;
+#[cfg(feature = "mujoco")]
+pub use registry::gym_task;
 pub use registry::{assets_dir, make, registered, AVAILABLE};
 #[cfg(feature = "mujoco")]
 pub use sim::{MujocoEnv, MujocoPlant, Scene};

@@ -52,6 +52,18 @@ fn make_task(kind: TaskKind) -> Result<Box<dyn Env>, EnvError> {
     )))
 }
 
+/// The task registered as `id` as a [`crate::GymTask`], its `qpos0` read from its MJCF; an error
+/// for an unknown id, missing assets or a task that is not a function of `qpos`/`qvel`.
+#[cfg(feature = "mujoco")]
+pub fn gym_task(id: &str) -> Result<crate::GymTask, EnvError> {
+    let kind = TaskKind::from_id(id).ok_or_else(|| EnvError::Unknown(id.to_string()))?;
+    let env = crate::MujocoEnv::task(kind, &assets_dir()).map_err(|e| EnvError::Unsupported {
+        env: id.to_string(),
+        reason: format!("{e} (gymnasium's assets: run scripts/setup-mujoco.sh)"),
+    })?;
+    crate::GymTask::new(kind, env.scene_ref().qpos0().to_vec())
+}
+
 #[cfg(not(feature = "mujoco"))]
 fn make_task(kind: TaskKind) -> Result<Box<dyn Env>, EnvError> {
     Err(EnvError::Unsupported {

@@ -4,7 +4,8 @@
 
 mod common;
 
-use tandem_mujoco::{Readout, TaskKind};
+use tandem_envs::{Action, Task};
+use tandem_mujoco::{GymTask, Readout, TaskKind};
 
 fn check(kind: TaskKind) {
     let fx = common::load(kind.spec().id);
@@ -70,4 +71,61 @@ fn walker2d_formulas_match_gymnasium() {
 #[test]
 fn inverted_pendulum_formulas_match_gymnasium() {
     check(TaskKind::InvertedPendulum);
+}
+
+/// `GymTask` over the recorded states gives gymnasium's observations, rewards and terminations
+/// for every task that is a function of `qpos`/`qvel`, and refuses the others.
+#[test]
+fn the_gym_task_over_recorded_states_matches_gymnasium() {
+    for kind in [
+        TaskKind::HalfCheetah,
+        TaskKind::Hopper,
+        TaskKind::Walker2d,
+        TaskKind::InvertedPendulum,
+    ] {
+        let fx = common::load(kind.spec().id);
+        let task = GymTask::new(kind, fx.init_qpos.clone()).unwrap();
+        assert_eq!(task.observation_space().flat_dim(), kind.spec().obs_dim);
+        for ep in &fx.episodes {
+            let mut x: Vec<f64> = ep.init_qpos.iter().chain(&ep.init_qvel).copied().collect();
+            assert_eq!(task.observe(&x), ep.reset_obs);
+            for (t, s) in ep.steps.iter().enumerate() {
+                let at = format!("{} seed {} step {t}", kind.spec().id, ep.seed);
+                let next: Vec<f64> = s.qpos.iter().chain(&s.qvel).copied().collect();
+                let u = task.control(&Action::Continuous(s.action.clone()));
+                if s.action.iter().all(|a| a.abs() <= kind.spec().action_bound) {
+                    assert_eq!(task.reward(&x, &u, &next), s.reward, "{at}: reward");
+                }
+                assert_eq!(task.terminated(&next), s.terminated, "{at}: terminated");
+                assert_eq!(task.observe(&next), s.obs, "{at}: observation");
+                // The canonical pair keeps the reward: x moves to 0, its change stays.
+                let (c, c1) = tandem_models::canonical_pair(&task, &x, &next);
+                let r = task.reward(&c, &u, &c1);
+                assert!((r - task.reward(&x, &u, &next)).abs() < 1e-9, "{at}");
+                x = next;
+            }
+        }
+    }
+    for kind in [TaskKind::Ant, TaskKind::Reacher, TaskKind::Pusher] {
+        let err = GymTask::new(kind, vec![0.0; kind.spec().nq]).unwrap_err();
+        assert!(err.to_string().contains("more than qpos and qvel"), "{err}");
+    }
+    let err = GymTask::new(TaskKind::Hopper, vec![0.0; 3]).unwrap_err();
+    assert!(err.to_string().contains("init_qpos must be 6"), "{err}");
+}
+
+/// Episodes start around `qpos0` with gymnasium's noise (Hopper: ±0.005) and the step length.
+#[test]
+fn the_gym_task_starts_near_qpos0() {
+    let q0 = vec![0.0, 1.25, 0.0, 0.0, 0.0, 0.0];
+    let task = GymTask::new(TaskKind::Hopper, q0.clone()).unwrap();
+    let mut rng = tandem_core::seeding::rng_from_seed(3);
+    let x = task.initial_state(&mut rng);
+    assert_eq!(x.len(), task.state_dim());
+    assert!(x
+        .iter()
+        .zip(q0.iter().chain(&[0.0; 6]))
+        .all(|(a, b)| (a - b).abs() <= 0.005));
+    assert!(!task.terminated(&x));
+    assert_eq!(task.max_episode_steps(), Some(1000));
 }
