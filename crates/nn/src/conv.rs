@@ -73,7 +73,6 @@
 //! assert_eq!(grads.get(x.as_tensor()).unwrap().dims(), &[2, 3, 8, 8]);
 //! ```
 
-use std::cell::RefCell;
 use std::ops::Range;
 
 use candle_core::backend::BackendStorage;
@@ -183,182 +182,135 @@ impl Geom {
         self.c_in * self.k_h * self.k_w
     }
 
-    /// Rows of the patch matrix: `n · out_h · out_w`.
-    fn rows(&self) -> usize {
+    /// Output positions of the batch: `n · out_h · out_w` (the patch matrix's rows).
+    fn outputs(&self) -> usize {
         self.n * self.out_h * self.out_w
     }
 
-    /// The patch matrix's columns: `n · out_h · out_w` (one per output position).
-    fn positions(&self) -> usize {
-        self.out_h * self.out_w
+    /// For output column `ox`, the kernel columns `v` whose image column `s·ox + v − p` lies in
+    /// the image, and that column for `v = 0` (possibly negative).
+    fn cols_inside(&self, ox: usize) -> (Range<usize>, isize) {
+        let ix0 = (ox * self.stride) as isize - self.padding as isize;
+        let lo = (-ix0).max(0) as usize;
+        let hi = (self.w as isize - ix0).clamp(0, self.k_w as isize) as usize;
+        (lo.min(hi)..hi, ix0)
     }
 
-    /// Calls `f(patch index, b, c, u, v)` for every kernel entry `(c, u, v)` (row of the patch
-    /// matrix, in the kernel's order) and image `b` of the batch.
-    fn for_each_block(&self, mut f: impl FnMut(usize, usize, usize, usize, usize)) {
-        for c in 0..self.c_in {
-            for u in 0..self.k_h {
-                for v in 0..self.k_w {
-                    let k = (c * self.k_h + u) * self.k_w + v;
-                    for b in 0..self.n {
-                        f(k, b, c, u, v);
-                    }
-                }
-            }
-        }
-    }
-}
-
-/// The output indices `o < out` whose input index `o·s + t − p` lies in `0..len`.
-fn inside(out: usize, len: usize, s: usize, t: usize, p: usize) -> Range<usize> {
-    let lo = if p > t { (p - t).div_ceil(s) } else { 0 };
-    let hi = if len + p > t {
-        (len + p - t).div_ceil(s).min(out)
-    } else {
-        0
-    };
-    lo.min(hi)..hi
-}
-
-/// im2col: writes the patch matrix of the image `x` to `cols`, `patch × rows` (one row per
-/// kernel entry `(c, u, v)`, one column per output position `(b, i, j)`: row `(c, u, v)` holds
-/// `x[b, c, s·i + u − p, s·j + v − p]`, zero outside the image). Every value is written, so a
-/// reused buffer needs no clearing. Per kernel entry and image, the pixels inside form one
-/// rectangle of output positions, copied without per-pixel bounds checks.
-fn im2col(g: &Geom, x: &[f32], cols: &mut Vec<f32>) {
-    let (plane, pos, rows) = (g.h * g.w, g.positions(), g.rows());
-    cols.resize(g.patch() * rows, 0.0);
-    g.for_each_block(|k, b, c, u, v| {
-        let dst = &mut cols[k * rows + b * pos..][..pos];
-        let src = &x[(b * g.c_in + c) * plane..][..plane];
-        let (ys, xs) = (
-            inside(g.out_h, g.h, g.stride, u, g.padding),
-            inside(g.out_w, g.w, g.stride, v, g.padding),
-        );
-        dst[..ys.start * g.out_w].fill(0.0);
-        dst[ys.end * g.out_w..].fill(0.0);
-        for i in ys {
-            let row = &mut dst[i * g.out_w..][..g.out_w];
-            let iy = i * g.stride + u - g.padding;
-            row[..xs.start].fill(0.0);
-            row[xs.end..].fill(0.0);
-            if xs.is_empty() {
+    /// Calls `f(patch offset, image offset, len)` for every stretch of a patch row that lies
+    /// inside the image: per output position (the patch matrix's rows, in order), per channel `c`
+    /// and kernel row `u` whose image row is inside, the kernel columns inside (see
+    /// [`Geom::cols_inside`]). Everything else is outside the image: zero in the patch matrix,
+    /// nothing to add back in the image.
+    fn for_each_segment(&self, mut f: impl FnMut(usize, usize, usize)) {
+        let (plane, patch) = (self.h * self.w, self.patch());
+        for r in 0..self.outputs() {
+            let b = r / (self.out_h * self.out_w);
+            let oy = (r / self.out_w) % self.out_h;
+            let (inside, ix0) = self.cols_inside(r % self.out_w);
+            if inside.is_empty() {
                 continue;
             }
-            let src_row = &src[iy * g.w..][..g.w];
-            let ix0 = xs.start * g.stride + v - g.padding;
-            if g.stride == 1 {
-                row[xs.clone()].copy_from_slice(&src_row[ix0..ix0 + xs.len()]);
-            } else {
-                for (d, s) in row[xs.clone()]
-                    .iter_mut()
-                    .zip(src_row[ix0..].iter().step_by(g.stride))
-                {
-                    *d = *s;
+            let ix = (ix0 + inside.start as isize) as usize;
+            for c in 0..self.c_in {
+                for u in 0..self.k_h {
+                    let iy = (oy * self.stride + u) as isize - self.padding as isize;
+                    if iy < 0 || iy >= self.h as isize {
+                        continue;
+                    }
+                    let col = r * patch + (c * self.k_h + u) * self.k_w + inside.start;
+                    let img = (b * self.c_in + c) * plane + iy as usize * self.w + ix;
+                    f(col, img, inside.len());
                 }
             }
         }
-    });
+    }
+}
+
+/// im2col: the patch matrix `rows × patch` of the image `x` (zeros outside the image).
+fn im2col(g: &Geom, x: &[f32]) -> Vec<f32> {
+    let mut cols = vec![0f32; g.outputs() * g.patch()];
+    g.for_each_segment(|col, img, len| copy_short(&mut cols[col..col + len], &x[img..img + len]));
+    cols
+}
+
+/// `dst.copy_from_slice(src)` for the short stretches of im2col (a kernel row: 3 or 4 values in
+/// the pixel model) as inline moves: the general copy is a `memcpy` call, which made up a third
+/// of im2col's time.
+#[inline(always)]
+fn copy_short(dst: &mut [f32], src: &[f32]) {
+    macro_rules! fixed {
+        ($($n:literal)*) => {
+            match src.len() {
+                $($n => dst[..$n].copy_from_slice(&src[..$n]),)*
+                _ => dst.copy_from_slice(src),
+            }
+        };
+    }
+    fixed!(1 2 3 4 5 6 7 8);
 }
 
 /// col2im: the image whose patches sum to `cols` (the adjoint of [`im2col`]).
 fn col2im(g: &Geom, cols: &[f32]) -> Vec<f32> {
-    let (plane, pos, rows) = (g.h * g.w, g.positions(), g.rows());
     let mut x = vec![0f32; g.image_dims().iter().product()];
-    g.for_each_block(|k, b, c, u, v| {
-        let src = &cols[k * rows + b * pos..][..pos];
-        let dst = &mut x[(b * g.c_in + c) * plane..][..plane];
-        let (ys, xs) = (
-            inside(g.out_h, g.h, g.stride, u, g.padding),
-            inside(g.out_w, g.w, g.stride, v, g.padding),
-        );
-        if xs.is_empty() {
-            return;
-        }
-        for i in ys {
-            let row = &src[i * g.out_w..][..g.out_w];
-            let iy = i * g.stride + u - g.padding;
-            let ix0 = xs.start * g.stride + v - g.padding;
-            let dst_row = &mut dst[iy * g.w..][..g.w];
-            for (d, s) in dst_row[ix0..]
-                .iter_mut()
-                .step_by(g.stride)
-                .zip(&row[xs.clone()])
-            {
-                *d += *s;
-            }
+    g.for_each_segment(|col, img, len| {
+        for (d, s) in x[img..img + len].iter_mut().zip(&cols[col..col + len]) {
+            *d += s;
         }
     });
     x
 }
 
-/// Writes `t` `[n, c, p]` to `out` as `[c, n·p]` (channels major, the patch matrix's column
-/// order).
-fn to_channels_major(t: &[f32], n: usize, c: usize, p: usize, out: &mut Vec<f32>) {
-    out.resize(n * c * p, 0.0);
-    for (i, plane) in t.chunks_exact(p.max(1)).enumerate().take(n * c) {
-        let (b, ch) = (i / c, i % c);
-        out[(ch * n + b) * p..][..p].copy_from_slice(plane);
-    }
-}
-
-/// `[c, n·p]` → `[n, c, p]` (the inverse of [`to_channels_major`]).
-fn from_channels_major(t: &[f32], n: usize, c: usize, p: usize) -> Vec<f32> {
+/// `[n, c, p]` → `[n·p, c]` (channels last).
+fn to_rows(t: &[f32], n: usize, c: usize, p: usize) -> Vec<f32> {
     let mut out = vec![0f32; n * c * p];
-    for (i, plane) in out.chunks_exact_mut(p.max(1)).enumerate().take(n * c) {
-        let (b, ch) = (i / c, i % c);
-        plane.copy_from_slice(&t[(ch * n + b) * p..][..p]);
+    for b in 0..n {
+        let (src, dst) = (&t[b * c * p..][..c * p], &mut out[b * c * p..][..c * p]);
+        for ch in 0..c {
+            for (i, &v) in src[ch * p..][..p].iter().enumerate() {
+                dst[i * c + ch] = v;
+            }
+        }
     }
     out
 }
 
-thread_local! {
-    /// Two scratch matrices per thread (patch matrix, channels-major output), reused across calls:
-    /// fresh megabyte-sized buffers cost page faults on every call with the system allocator.
-    /// They keep the largest size used (a few MB for the pixel model's minibatches).
-    static SCRATCH: RefCell<(Vec<f32>, Vec<f32>)> = const { RefCell::new((Vec::new(), Vec::new())) };
-}
-
-/// Runs `f` with this thread's two scratch buffers (fresh ones if they are in use).
-fn with_scratch<R>(f: impl FnOnce(&mut Vec<f32>, &mut Vec<f32>) -> R) -> R {
-    SCRATCH.with(|s| match s.try_borrow_mut() {
-        Ok(mut s) => {
-            let (a, b) = &mut *s;
-            f(a, b)
+/// `[n·p, c]` → `[n, c, p]` (the inverse of [`to_rows`]).
+fn from_rows(t: &[f32], n: usize, c: usize, p: usize) -> Vec<f32> {
+    let mut out = vec![0f32; n * c * p];
+    for b in 0..n {
+        let (src, dst) = (&t[b * c * p..][..c * p], &mut out[b * c * p..][..c * p]);
+        for (i, row) in src.chunks_exact(c).enumerate() {
+            for (ch, &v) in row.iter().enumerate() {
+                dst[ch * p + i] = v;
+            }
         }
-        Err(_) => f(&mut Vec::new(), &mut Vec::new()),
-    })
+    }
+    out
 }
 
 /// The convolution `C(x, k)`: `[n, c_out, out_h, out_w]`.
 fn conv_forward(g: &Geom, x: &[f32], k: &[f32]) -> Vec<f32> {
-    with_scratch(|cols, ys| {
-        im2col(g, x, cols);
-        ys.resize(g.c_out * g.rows(), 0.0);
-        gemm_nn(g.c_out, g.rows(), g.patch(), k, cols, ys, false);
-        from_channels_major(ys, g.n, g.c_out, g.positions())
-    })
+    let cols = im2col(g, x);
+    let mut rows = vec![0f32; g.outputs() * g.c_out];
+    gemm_nt(g.outputs(), g.c_out, g.patch(), &cols, k, &mut rows, false);
+    from_rows(&rows, g.n, g.c_out, g.out_h * g.out_w)
 }
 
 /// The adjoint in the image `A(y, k)`: `[n, c_in, h, w]` (the transposed convolution).
 fn conv_adjoint(g: &Geom, y: &[f32], k: &[f32]) -> Vec<f32> {
-    with_scratch(|cols, ys| {
-        to_channels_major(y, g.n, g.c_out, g.positions(), ys);
-        cols.resize(g.patch() * g.rows(), 0.0);
-        gemm_tn(g.patch(), g.rows(), g.c_out, k, ys, cols, false);
-        col2im(g, cols)
-    })
+    let rows = to_rows(y, g.n, g.c_out, g.out_h * g.out_w);
+    let mut cols = vec![0f32; g.outputs() * g.patch()];
+    gemm_nn(g.outputs(), g.patch(), g.c_out, &rows, k, &mut cols, false);
+    col2im(g, &cols)
 }
 
 /// The adjoint in the kernel `G(x, y)`: `[c_out, c_in, k_h, k_w]` (the kernel gradient).
 fn conv_kernel_grad(g: &Geom, x: &[f32], y: &[f32]) -> Vec<f32> {
-    with_scratch(|cols, ys| {
-        im2col(g, x, cols);
-        to_channels_major(y, g.n, g.c_out, g.positions(), ys);
-        let mut k = vec![0f32; g.c_out * g.patch()];
-        gemm_nt(g.c_out, g.patch(), g.rows(), ys, cols, &mut k, false);
-        k
-    })
+    let cols = im2col(g, x);
+    let rows = to_rows(y, g.n, g.c_out, g.out_h * g.out_w);
+    let mut k = vec![0f32; g.c_out * g.patch()];
+    gemm_tn(g.c_out, g.patch(), g.outputs(), &rows, &cols, &mut k, false);
+    k
 }
 
 /// Which of the three bilinear maps of a convolution, by its two arguments.
