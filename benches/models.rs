@@ -1,5 +1,5 @@
-//! Hot paths of `tandem-models`: batched prediction for a planner's population (500 states) and
-//! one TVLG fit with its GMM prior.
+//! Hot paths of `tandem-models`: batched prediction for a planner's population (500 states), one
+//! TVLG fit with its GMM prior, and one training minibatch (32) of p2's pixel model.
 //!
 //! Run: `cargo bench --bench models` (medians are what reports quote).
 
@@ -7,10 +7,13 @@ use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use ndarray::{Array2, Array3};
 use rand::Rng as _;
 use tandem_core::seeding::{rng_from_seed, Rng};
+use tandem_core::Action;
 use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
+use tandem_envs::{Env, PixelMazeEnv};
 use tandem_models::{
-    DynamicsModel, EnsembleConfig, ModelInput, ProbabilisticEnsemble, Propagation, ResidualModel,
-    ResidualModelConfig, TvlgConfig, TvlgFit,
+    DynamicsModel, EnsembleConfig, ModelInput, PixelEpisodes, PixelFit, PixelModel,
+    PixelModelConfig, ProbabilisticEnsemble, Propagation, ResidualModel, ResidualModelConfig,
+    TvlgConfig, TvlgFit,
 };
 
 fn uniform(rows: usize, cols: usize, rng: &mut Rng) -> Array2<f64> {
@@ -86,5 +89,44 @@ fn tvlg(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, predictions, tvlg);
+/// One optimizer step of p2's pixel model (default settings: 4 stacked 16×16 RGB frames, batch
+/// normalization) on a minibatch of 32 maze transitions (random-policy episodes): forward,
+/// backward, Adam. One thread, as the reproductions run one job per core.
+fn pixel_model(c: &mut Criterion) {
+    tandem_nn::set_gemm_threads(1);
+    let mut data = PixelEpisodes::new(16 * 16 * 3);
+    let mut env = PixelMazeEnv::new();
+    let mut rng = rng_from_seed(2);
+    for k in 0..10 {
+        let mut frames = vec![env.reset(Some(k))];
+        let (mut actions, mut rewards) = (vec![], vec![]);
+        let terminated = loop {
+            let a = rng.random_range(0..5);
+            let st = env.step(&Action::Discrete(a)).unwrap();
+            frames.push(st.observation);
+            actions.push(a);
+            rewards.push(st.reward);
+            if st.terminated || actions.len() == 50 {
+                break st.terminated;
+            }
+        };
+        data.push_episode(&frames, &actions, &rewards, terminated)
+            .unwrap();
+    }
+    let mut model = PixelModel::new(PixelModelConfig::default()).unwrap();
+    let mut seed = 0;
+    c.bench_function("pixel model (p2 maze) fit step, batch 32", |b| {
+        b.iter(|| {
+            seed += 1;
+            let fit = PixelFit {
+                steps: 1,
+                batch_size: 32,
+                seed,
+            };
+            black_box(model.fit(&data, &fit).unwrap())
+        })
+    });
+}
+
+criterion_group!(benches, predictions, tvlg, pixel_model);
 criterion_main!(benches);

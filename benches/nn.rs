@@ -2,6 +2,9 @@
 //! against PyTorch (issue 4: critic update, dynamics-model step, batched prediction; issue 5: one
 //! full SAC update with stable-baselines3's defaults).
 //!
+//! Also (`conv`): each convolution of p2's pixel model (batch 32, forward and backward) through
+//! `tandem_nn::conv` and through candle's own ops.
+//!
 //! Run: `cargo bench --bench nn` (medians are what the notes quote).
 
 #![allow(clippy::needless_range_loop)]
@@ -536,11 +539,85 @@ fn sac_update(c: &mut Criterion) {
     );
 }
 
+/// One forward and backward pass (`Σ y` as the loss, gradients for input and kernel) of each
+/// convolution of p2's pixel model at batch 32, through `tandem_nn::conv` and through candle.
+fn conv(c: &mut Criterion) {
+    use candle_core::{Device, Tensor, Var};
+    type Conv = fn(&Tensor, &Tensor, usize) -> candle_core::Result<Tensor>;
+    let ours: Conv = |x, k, s| tandem_nn::conv::conv2d(x, k, s, 1);
+    let candle: Conv = |x, k, s| x.conv2d(k, 1, s, 1, 1);
+    let ours_t: Conv = |x, k, s| tandem_nn::conv::conv_transpose2d(x, k, s, 1, 0);
+    let candle_t: Conv = |x, k, s| x.conv_transpose2d(k, 1, 0, s, 1);
+    let mut rng = rng_from_seed(11);
+    let mut var = |dims: [usize; 4]| {
+        let t = Tensor::from_vec(random(dims.iter().product(), &mut rng), &dims, &Device::Cpu);
+        Var::from_tensor(&t.unwrap()).unwrap()
+    };
+    let mut group = c.benchmark_group("conv");
+    let layers: [(&str, [usize; 4], [usize; 4], usize, [(&str, Conv); 2]); 6] = [
+        (
+            "enc0",
+            [32, 12, 16, 16],
+            [32, 12, 4, 4],
+            2,
+            [("ours", ours), ("candle", candle)],
+        ),
+        (
+            "enc1",
+            [32, 32, 8, 8],
+            [64, 32, 4, 4],
+            2,
+            [("ours", ours), ("candle", candle)],
+        ),
+        (
+            "enc2",
+            [32, 64, 4, 4],
+            [64, 64, 3, 3],
+            1,
+            [("ours", ours), ("candle", candle)],
+        ),
+        (
+            "dec0 (transposed)",
+            [32, 64, 4, 4],
+            [64, 64, 3, 3],
+            1,
+            [("ours", ours_t), ("candle", candle_t)],
+        ),
+        (
+            "dec1 (transposed)",
+            [32, 64, 4, 4],
+            [64, 32, 4, 4],
+            2,
+            [("ours", ours_t), ("candle", candle_t)],
+        ),
+        (
+            "dec2 (transposed)",
+            [32, 32, 8, 8],
+            [32, 3, 4, 4],
+            2,
+            [("ours", ours_t), ("candle", candle_t)],
+        ),
+    ];
+    for (layer, xd, kd, stride, impls) in layers {
+        let (x, k) = (var(xd), var(kd));
+        for (name, f) in impls {
+            group.bench_function(format!("{layer} {xd:?} * {kd:?} fwd+bwd, {name}"), |b| {
+                b.iter(|| {
+                    let y = f(x.as_tensor(), k.as_tensor(), stride).unwrap();
+                    black_box(y.sum_all().unwrap().backward().unwrap())
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
 criterion_group!(
     benches,
     critic_update,
     dynamics_step,
     actor_forward,
-    sac_update
+    sac_update,
+    conv
 );
 criterion_main!(benches);
