@@ -11,10 +11,10 @@
 //! * [`conv_transpose2d`]: `x` `[n, c_in, h, w]` and `kernel` `[c_in, c_out, k_h, k_w]` (PyTorch's
 //!   and candle's layout) give `[n, c_out, (h − 1)·s − 2p + k_h + output_padding, …]`: the adjoint
 //!   of the convolution with the same kernel, PyTorch's `conv_transpose2d` without bias.
-//! * [`conv2d_layer`] and [`conv_transpose2d_layer`]: a `candle_nn` layer's weight, settings and
-//!   bias (a broadcast add in candle, as `candle_nn` does it) through the two functions above, so
-//!   a network keeps its `candle_nn` layers (and so its parameter names and shapes) and swaps only
-//!   the forward call.
+//! * [`conv2d_layer`] and [`conv_transpose2d_layer`]: a `candle_nn` layer's weight and settings
+//!   through the two functions above and its bias through [`add_channel_bias`], so a network
+//!   keeps its `candle_nn` layers (and so its parameter names and shapes) and swaps only the
+//!   forward call.
 //!
 //! Both are candle custom ops ([`candle_core::CustomOp2`] on `(input, kernel)`), so they compose
 //! with candle's autograd (`Var`, `backward()`): everything around them (batch normalization,
