@@ -554,52 +554,22 @@ fn conv(c: &mut Criterion) {
         Var::from_tensor(&t.unwrap()).unwrap()
     };
     let mut group = c.benchmark_group("conv");
-    let layers: [(&str, [usize; 4], [usize; 4], usize, [(&str, Conv); 2]); 6] = [
-        (
-            "enc0",
-            [32, 12, 16, 16],
-            [32, 12, 4, 4],
-            2,
-            [("ours", ours), ("candle", candle)],
-        ),
-        (
-            "enc1",
-            [32, 32, 8, 8],
-            [64, 32, 4, 4],
-            2,
-            [("ours", ours), ("candle", candle)],
-        ),
-        (
-            "enc2",
-            [32, 64, 4, 4],
-            [64, 64, 3, 3],
-            1,
-            [("ours", ours), ("candle", candle)],
-        ),
-        (
-            "dec0 (transposed)",
-            [32, 64, 4, 4],
-            [64, 64, 3, 3],
-            1,
-            [("ours", ours_t), ("candle", candle_t)],
-        ),
-        (
-            "dec1 (transposed)",
-            [32, 64, 4, 4],
-            [64, 32, 4, 4],
-            2,
-            [("ours", ours_t), ("candle", candle_t)],
-        ),
-        (
-            "dec2 (transposed)",
-            [32, 32, 8, 8],
-            [32, 3, 4, 4],
-            2,
-            [("ours", ours_t), ("candle", candle_t)],
-        ),
+    // (layer, input, kernel, stride, transposed)
+    let layers = [
+        ("enc0", [32, 12, 16, 16], [32, 12, 4, 4], 2, false),
+        ("enc1", [32, 32, 8, 8], [64, 32, 4, 4], 2, false),
+        ("enc2", [32, 64, 4, 4], [64, 64, 3, 3], 1, false),
+        ("dec0 (transposed)", [32, 64, 4, 4], [64, 64, 3, 3], 1, true),
+        ("dec1 (transposed)", [32, 64, 4, 4], [64, 32, 4, 4], 2, true),
+        ("dec2 (transposed)", [32, 32, 8, 8], [32, 3, 4, 4], 2, true),
     ];
-    for (layer, xd, kd, stride, impls) in layers {
+    for (layer, xd, kd, stride, transposed) in layers {
         let (x, k) = (var(xd), var(kd));
+        let impls = if transposed {
+            [("ours", ours_t), ("candle", candle_t)]
+        } else {
+            [("ours", ours), ("candle", candle)]
+        };
         for (name, f) in impls {
             group.bench_function(format!("{layer} {xd:?} * {kd:?} fwd+bwd, {name}"), |b| {
                 b.iter(|| {

@@ -25,7 +25,9 @@
 //! transposed convolution, which its convolution's gradient also uses, is a direct loop), and the
 //! batch normalizations lay activations out channels first so that candle's reductions take
 //! their fast path. Both cut one training step of the default model on a minibatch of 32 from
-//! about 70 ms to about 20 ms (one thread; `benches/models.rs`).
+//! about 65 ms to about 22–25 ms (one thread, measured side by side on a busy 2-core machine;
+//! `benches/models.rs` has the step). The losses are candle's up to float rounding (the first
+//! step's loss agrees to 7 digits).
 //!
 //! Data: [`PixelEpisodes`] keeps whole episodes as frames of bytes and builds the stacks on
 //! demand (the first frame repeated before an episode's start), so a run's real data costs one
