@@ -234,6 +234,15 @@ pub fn write_table(dir: &RunDir, table: &Table, markdown: &str) -> Result<()> {
     write(dir, "table.md", markdown)
 }
 
+/// `curve.csv`'s header and rows of a learning curve: `x` (the samples' name) and the return.
+pub fn curve_rows(x: &'static str, curve: &[CurvePoint]) -> (Vec<&'static str>, Vec<Vec<f64>>) {
+    let rows = curve
+        .iter()
+        .map(|p| vec![p.true_samples as f64, p.eval_return])
+        .collect();
+    (vec![x, "eval_return"], rows)
+}
+
 /// Per name in `names` with any run: the mean learning curve (± standard error) over the runs
 /// `run` gives that name, each run's curve as (samples, return) points.
 pub fn mean_curves<R>(

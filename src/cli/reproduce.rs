@@ -380,12 +380,7 @@ impl Study for P0Pendulum {
     }
 
     fn curve(&self, r: &RunRecord) -> (Vec<&'static str>, Vec<Vec<f64>>) {
-        let rows = r
-            .curve
-            .iter()
-            .map(|p| vec![p.true_samples as f64, p.eval_return])
-            .collect();
-        (vec!["true_samples", "eval_return"], rows)
+        harness::curve_rows("true_samples", &r.curve)
     }
 
     fn report_files(&self) -> &'static [&'static str] {

@@ -388,12 +388,7 @@ impl Study for P3Study {
     }
 
     fn curve(&self, r: &RunRecord) -> (Vec<&'static str>, Vec<Vec<f64>>) {
-        let rows = r
-            .curve
-            .iter()
-            .map(|p| vec![p.true_samples as f64, p.eval_return])
-            .collect();
-        (vec!["real_steps", "eval_return"], rows)
+        harness::curve_rows("real_steps", &r.curve)
     }
 
     fn report_files(&self) -> &'static [&'static str] {
