@@ -502,30 +502,21 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
                 let (seed, runs) = &jobs[k];
                 let state = job_state(dir.path(), *seed, runs);
                 let mut store = SeedState::new(state.clone(), stop.clone());
-                let mut done = true;
-                for run in runs {
-                    let r = run_one(
+                let done = runs.iter().try_for_each(|run| {
+                    run_one(
                         study, &dir, settings, run, *seed, &mut store, &multi, &style,
-                    );
-                    match r {
-                        Ok(()) => {}
-                        Err(e) => {
-                            if let JobError::Failed(e) = e {
-                                errors
-                                    .lock()
-                                    .expect("no panics while holding the lock")
-                                    .push((*seed, format!("{run}: {e}")));
-                            }
-                            done = false;
-                            break;
-                        }
-                    }
-                }
-                if done {
-                    if let Err(e) = remove_dir(&state) {
-                        let mut errors = errors.lock().expect("no panics while holding the lock");
-                        errors.push((*seed, e.to_string()));
-                    }
+                    )
+                    .map_err(|e| (run, e))
+                });
+                let failed = match done {
+                    // A stopped job keeps its checkpoints for `--resume`.
+                    Err((_, JobError::Stopped)) => None,
+                    Err((run, JobError::Failed(e))) => Some(format!("{run}: {e}")),
+                    Ok(()) => remove_dir(&state).err().map(|e| e.to_string()),
+                };
+                if let Some(e) = failed {
+                    let mut errors = errors.lock().expect("no panics while holding the lock");
+                    errors.push((*seed, e));
                 }
             });
         }

@@ -112,12 +112,14 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
                 "p0-pendulum" => {
                     harness::merge(&P0Pendulum, &args.dirs, args.out.as_deref(), args.overwrite)
                 }
-                name @ ("p3-leg" | "p3-mujoco") => harness::merge(
-                    &if name == "p3-leg" {
-                        P3Study::leg(false)
-                    } else {
-                        P3Study::mujoco(None, false)
-                    },
+                "p3-leg" => harness::merge(
+                    &P3Study::leg(false),
+                    &args.dirs,
+                    args.out.as_deref(),
+                    args.overwrite,
+                ),
+                "p3-mujoco" => harness::merge(
+                    &P3Study::mujoco(None, false),
                     &args.dirs,
                     args.out.as_deref(),
                     args.overwrite,

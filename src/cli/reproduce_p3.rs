@@ -290,15 +290,23 @@ fn percent(f: f64) -> String {
 
 /// The p3 studies: on the leg, or on a MuJoCo task.
 pub struct P3Study {
-    mujoco: Option<Option<String>>,
+    target: Target,
     ablate: bool,
+}
+
+/// Where a p3 study runs.
+enum Target {
+    /// `p3-leg`.
+    Leg,
+    /// `p3-mujoco` on `--env` (`None`: HalfCheetah-v5, or the recorded task on `--resume`).
+    Mujoco(Option<String>),
 }
 
 impl P3Study {
     /// `p3-leg`; `ablate` adds p3's elite fractions to the settings.
     pub fn leg(ablate: bool) -> Self {
         Self {
-            mujoco: None,
+            target: Target::Leg,
             ablate,
         }
     }
@@ -306,7 +314,7 @@ impl P3Study {
     /// `p3-mujoco` on `env` (default HalfCheetah-v5).
     pub fn mujoco(env: Option<String>, ablate: bool) -> Self {
         Self {
-            mujoco: Some(env),
+            target: Target::Mujoco(env),
             ablate,
         }
     }
@@ -317,17 +325,16 @@ impl Study for P3Study {
     type Record = RunRecord;
 
     fn name(&self) -> &str {
-        if self.mujoco.is_some() {
-            "p3-mujoco"
-        } else {
-            "p3-leg"
+        match self.target {
+            Target::Leg => "p3-leg",
+            Target::Mujoco(_) => "p3-mujoco",
         }
     }
 
     fn settings(&self, quick: bool, config: Option<&Path>) -> Result<P3Settings> {
-        let base = match &self.mujoco {
-            None => P3Settings::default(),
-            Some(env) => {
+        let base = match &self.target {
+            Target::Leg => P3Settings::default(),
+            Target::Mujoco(env) => {
                 let env = env.as_deref().unwrap_or(MUJOCO[0].id);
                 P3Settings::mujoco(env).ok_or_else(|| {
                     CliError::input("--env", format!("{env}: p3-mujoco runs {}", mujoco_ids()))
@@ -347,7 +354,7 @@ impl Study for P3Study {
     }
 
     fn overrides_settings(&self) -> bool {
-        self.ablate || matches!(self.mujoco, Some(Some(_)))
+        self.ablate || matches!(self.target, Target::Mujoco(Some(_)))
     }
 
     fn jobs(&self, s: &P3Settings) -> Vec<Vec<String>> {
