@@ -69,6 +69,8 @@ fn run(method: Method, cfg: &P3Config, seed: u64, events: &mut Vec<Event>) -> Ru
 fn strip(mut r: RunRecord) -> RunRecord {
     r.wall_seconds = 0.0;
     r.update_seconds = 0.0;
+    r.fit_seconds = 0.0;
+    r.imagine_seconds = 0.0;
     r
 }
 
@@ -90,12 +92,25 @@ fn linear_schedules_and_derived_counts_match_hand_computation() {
     assert_eq!(p.plans_per_refit(0), 500);
     assert_eq!(p.plans_per_refit(40), 250);
     assert_eq!(p.plans_per_refit(80), 167); // ceil(2500 / 15)
-                                            // A refit on 1000 transitions: 800 train rows, 4 minibatches of 256 an epoch, so 50 epochs
-                                            // for 200 minibatches; on 100 000, 313 an epoch, so MBPO's 5.
-    let m = MbpoConfig::default();
+
+    // A refit on 1000 transitions: 800 train rows, 4 minibatches of 256 an epoch, so 50 epochs
+    // for 200 minibatches; on 100 000, 313 an epoch, so MBPO's 5.
+    let mut m = MbpoConfig::default();
     assert_eq!(m.fit_for(1000, 3).epochs, 50);
     assert_eq!(m.fit_for(100_000, 3).epochs, 5);
     assert_eq!(m.fit_for(100_000, 3).seed, 3);
+    // A cap of 400 minibatches: 100 epochs of 4 on 1000 transitions is capped at 100 → the 50
+    // stand; on 10 000 (32 an epoch, 7 needed, MBPO's 5 → 7) 12 allowed; on 100 000 one epoch
+    // of 313 is more than the cap, and one epoch is the least a refit trains.
+    m.model_max_updates = Some(400);
+    assert_eq!(m.fit_for(1000, 3).epochs, 50);
+    assert_eq!(m.fit_for(10_000, 3).epochs, 7);
+    m.model_max_updates = Some(100);
+    assert_eq!(m.fit_for(1000, 3).epochs, 25);
+    assert_eq!(m.fit_for(10_000, 3).epochs, 3);
+    assert_eq!(m.fit_for(100_000, 3).epochs, 1);
+    m.model_max_updates = Some(0);
+    assert!(m.validate().is_err());
     assert_eq!(
         (m.epoch_of(1), m.epoch_of(1000), m.epoch_of(1001)),
         (0, 0, 1)

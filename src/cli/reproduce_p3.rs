@@ -607,7 +607,19 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
             } else {
                 "p3 reports M-DeMoRL about 30 % faster than MBPO to the same final return."
             },
-            rate("sac").map_or("n/a".to_string(), |r| format!("{r:.0} updates/s")),
+            labels
+                .iter()
+                .filter_map(|(n, l)| rate(n).map(|r| format!("{r:.0} updates/s ({l})")))
+                .collect::<Vec<_>>()
+                .join(", "),
+        ),
+        format!(
+            "Seconds per seed of one thread (mean): {}.",
+            labels
+                .iter()
+                .filter_map(|(n, l)| time_split(records, n).map(|t| format!("{l} {t}")))
+                .collect::<Vec<_>>()
+                .join("; ")
         ),
     ];
     t.markdown(&MarkdownText {
@@ -630,6 +642,31 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
         comparison_order: &["sac", "mbpo"],
         closing,
     })
+}
+
+/// The mean seconds per seed of the runs `name`: the total, and its SAC updates, model fits and
+/// imagination (rollouts or plans) where they took any; `None` without runs.
+fn time_split(records: &[RunRecord], name: &str) -> Option<String> {
+    let runs: Vec<&RunRecord> = records.iter().filter(|r| r.method == name).collect();
+    if runs.is_empty() {
+        return None;
+    }
+    let mean =
+        |f: fn(&RunRecord) -> f64| runs.iter().map(|r| f(r)).sum::<f64>() / runs.len() as f64;
+    let parts: Vec<String> = [
+        ("SAC updates", mean(|r| r.update_seconds)),
+        ("model fits", mean(|r| r.fit_seconds)),
+        ("imagination", mean(|r| r.imagine_seconds)),
+    ]
+    .into_iter()
+    .filter(|(_, t)| *t > 0.0)
+    .map(|(what, t)| format!("{what} {t:.0}"))
+    .collect();
+    Some(format!(
+        "{:.0} ({})",
+        mean(|r| r.wall_seconds),
+        parts.join(", ")
+    ))
 }
 
 /// The mean return against real steps of the runs `names`, ± standard error.

@@ -126,6 +126,11 @@ pub struct MbpoConfig {
     /// At least this many minibatches per member per refit (ours: 200): on little data an
     /// epoch is a few steps, where MBPO's early stopping would train on.
     pub model_min_updates: usize,
+    /// At most this many minibatches per member per refit, in whole epochs and at least one
+    /// (`None`: no cap, as MBPO). Ours, for runs where refitting on all data every time would
+    /// dominate the cost: the weights carry over from refit to refit.
+    #[serde(default)]
+    pub model_max_updates: Option<usize>,
     /// Real steps per epoch (MBPO: 1000); schedules count epochs.
     pub epoch_length: u64,
     /// Real steps of the run (the budget; MBPO's HalfCheetah: 400 epochs).
@@ -171,6 +176,7 @@ impl Default for MbpoConfig {
                 seed: 0,
             },
             model_min_updates: 200,
+            model_max_updates: None,
             epoch_length: 1000,
             real_steps: 400_000,
             model_train_freq: 250,
@@ -237,6 +243,9 @@ impl MbpoConfig {
         if self.rollouts_per_step == 0 || self.retain_epochs == 0 || self.updates_per_step == 0 {
             return bad("rollouts_per_step, retain_epochs and updates_per_step must be >= 1");
         }
+        if self.model_max_updates == Some(0) {
+            return bad("model_max_updates must be >= 1");
+        }
         if !(0.0..=1.0).contains(&self.real_ratio) {
             return bad("real_ratio must lie in [0, 1]");
         }
@@ -260,15 +269,20 @@ impl MbpoConfig {
     }
 
     /// The model fit at a refit on `n` transitions: `model_fit` with enough epochs for
-    /// `model_min_updates` minibatches per member, and the seed `seed`.
+    /// `model_min_updates` minibatches per member, no more than `model_max_updates` allows,
+    /// and the seed `seed`.
     pub fn fit_for(&self, n: usize, seed: u64) -> FitConfig {
         let train = ((n as f64) * (1.0 - self.model_fit.holdout_fraction)).ceil() as usize;
         let per_epoch = train.div_ceil(self.model_fit.batch_size).max(1);
+        let epochs = self
+            .model_fit
+            .epochs
+            .max(self.model_min_updates.div_ceil(per_epoch));
+        let cap = self
+            .model_max_updates
+            .map_or(usize::MAX, |m| (m / per_epoch).max(1));
         FitConfig {
-            epochs: self
-                .model_fit
-                .epochs
-                .max(self.model_min_updates.div_ceil(per_epoch)),
+            epochs: epochs.min(cap),
             seed,
             ..self.model_fit.clone()
         }
@@ -391,7 +405,13 @@ pub struct RunRecord {
     pub updates: u64,
     /// Seconds spent in SAC updates (their rate: `updates / update_seconds`).
     pub update_seconds: f64,
-    /// Wall time, seconds (this process's share, if resumed).
+    /// Seconds spent fitting the model (0 for SAC alone).
+    #[serde(default)]
+    pub fit_seconds: f64,
+    /// Seconds spent filling the secondary buffer: model rollouts or MPC plans.
+    #[serde(default)]
+    pub imagine_seconds: f64,
+    /// Wall time, seconds (over all the processes that ran it, if resumed).
     pub wall_seconds: f64,
 }
 
@@ -549,6 +569,18 @@ struct Progress {
     runner: EpisodeRunner,
     env_state: Option<Vec<f64>>,
     rng: Rng,
+    /// Time spent up to this checkpoint, so a resumed run reports its whole cost.
+    #[serde(default)]
+    seconds: Seconds,
+}
+
+/// Seconds a run spent, in total and in its parts.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+struct Seconds {
+    wall: f64,
+    updates: f64,
+    fit: f64,
+    imagine: f64,
 }
 
 const PROGRESS: &str = "mbpo.progress";
@@ -658,6 +690,7 @@ where
             runner: EpisodeRunner::new(seeds.derive("episodes"), "episode-"),
             env_state: None,
             rng: seeds.rng("imagination"),
+            seconds: Seconds::default(),
         },
     };
     let (mut env, count) = SampleCounter::starting_at((problem.env)()?, p.real_steps);
@@ -665,7 +698,8 @@ where
         env.set_state(state)?;
     }
     let mut pending = TransitionsBuilder::new(s_dim, u_dim);
-    let mut update_seconds = 0.0;
+    // Time before this process: what the checkpoint recorded.
+    let before = p.seconds;
     let opts = StepOptions::real().recording_states().without_updates();
     while count.get() < cfg.real_steps {
         if store.stop_requested() {
@@ -682,7 +716,9 @@ where
                 flush(&mut all, &mut pending, (s_dim, u_dim))?;
                 let epoch = cfg.epoch_of(t);
                 let fit = cfg.fit_for(all.len(), seeds.derive(&format!("fit-{}", p.refits)));
+                let f0 = Instant::now();
                 let report = model.fit(&all, &fit)?;
+                p.seconds.fit += f0.elapsed().as_secs_f64();
                 let loss = report.holdout_loss.last().copied().unwrap_or(f64::NAN);
                 let capacity = imagination.capacity(cfg, epoch);
                 if capacity != p.capacity {
@@ -690,8 +726,10 @@ where
                     p.capacity = capacity;
                 }
                 let plan_seed = seeds.derive(&format!("imagine-{}", p.refits));
+                let i0 = Instant::now();
                 let n = imagination
                     .imagine(&mut lp, model, task, &all, epoch, plan_seed, &mut p.rng)?;
+                p.seconds.imagine += i0.elapsed().as_secs_f64();
                 p.refits += 1;
                 p.imagined += n as u64;
                 p.fit_losses.push(loss);
@@ -706,7 +744,7 @@ where
         if lp.primary().len() > cfg.sac.learning_starts {
             let u0 = Instant::now();
             lp.update(cfg.updates_per_step)?;
-            update_seconds += u0.elapsed().as_secs_f64();
+            p.seconds.updates += u0.elapsed().as_secs_f64();
         }
         if t % cfg.eval_every == 0 {
             let point = CurvePoint {
@@ -719,6 +757,7 @@ where
         if t % cfg.checkpoint_every == 0 {
             flush(&mut all, &mut pending, (s_dim, u_dim))?;
             p.real_steps = t;
+            p.seconds.wall = before.wall + t0.elapsed().as_secs_f64();
             p.env_state = p.runner.in_episode().then(|| env.state());
             let mut ckpt = Checkpoint::new();
             lp.agent.save(&mut ckpt)?;
@@ -740,8 +779,10 @@ where
         horizons: p.horizons,
         fit_holdout_loss: p.fit_losses,
         updates: lp.counts().updates,
-        update_seconds,
-        wall_seconds: t0.elapsed().as_secs_f64(),
+        update_seconds: p.seconds.updates,
+        fit_seconds: p.seconds.fit,
+        imagine_seconds: p.seconds.imagine,
+        wall_seconds: before.wall + t0.elapsed().as_secs_f64(),
     })
 }
 

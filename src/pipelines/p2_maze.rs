@@ -56,7 +56,9 @@ pub struct MazeConfig {
     pub imagined_per_cycle: u64,
     /// Refit the model after every this many real episodes (p2: each).
     pub fit_every: u64,
-    /// Each refit: minibatches drawn from all real transitions so far (ours).
+    /// Each refit: minibatches drawn from all real transitions so far (ours: 32 of 32; 16
+    /// left the model behind p2's F1 after 100 episodes, agent 0.81 and obstacles 0.79 against
+    /// 32's 0.90 and 0.83, and 32 keeps the 10-seed reproduction under 30 minutes).
     pub fit: PixelFit,
     /// The run ends after this many real episodes if not solved before.
     pub max_real_episodes: u64,
@@ -79,7 +81,7 @@ impl Default for MazeConfig {
             imagined_per_cycle: 1,
             fit_every: 1,
             fit: PixelFit {
-                steps: 16,
+                steps: 32,
                 batch_size: 32,
                 seed: 0,
             },

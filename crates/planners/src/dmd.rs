@@ -19,14 +19,14 @@
 //! [`Plan::transitions`] are what p3 adds to the MPC replay buffer (line 15). A terminal value
 //! `−V` enters through the [`Objective`].
 
-use ndarray::{s, Array1, Array2, Array3, ArrayView2, ArrayViewMut2};
+use ndarray::{s, Array1, Array2, Array3, ArrayView1, ArrayView2, ArrayView3, ArrayViewMut2, Axis};
 use tandem_core::{seeding::rng_from_seed, Rng};
 use tandem_models::DynamicsModel;
 
 use crate::error::{check_len, PlanError, Result};
 use crate::mpc::{
-    add_noise, check_problem, clamp_opt, fraction, lowest_k, nonzero, plan_from_actions, positive,
-    rollout_population, warm_start, Bounds, Knots, Noise, Plan, Planner,
+    add_noise, check_problem, clamp_opt, fraction, lowest_k, nonzero, one_row, plans_from_actions,
+    positive, rollout_starts, warm_start, Bounds, Knots, Noise, Plan, Planner,
 };
 use crate::objective::Objective;
 
@@ -186,10 +186,47 @@ impl DmdMpc {
         objective: &Objective,
         proposal: ProposalFn<'_>,
     ) -> Result<Plan> {
-        self.plan_impl(x0, prev_action, model, objective, Some(proposal))
+        self.plan_one(x0, prev_action, model, objective, Some(proposal))
     }
 
-    fn plan_impl(
+    /// Plans from every row of `starts` (`P x S`) at once, as `P` independent calls of
+    /// [`DmdMpc::plan_with_proposal`] would, each with its own samples, but in one population of
+    /// `P × samples` rows: each model, proposal and terminal-value call is one batch for all
+    /// starts instead of one per start (the plans differ from sequential calls only in the
+    /// random numbers drawn). `prev_actions`, when given, is `P x A`. The plans neither use nor
+    /// replace the stored warm start, which belongs to one state: without a proposal each
+    /// start's first centre is the middle of the bounds (zero without bounds).
+    pub fn plan_batch_with_proposal(
+        &mut self,
+        starts: ArrayView2<'_, f64>,
+        prev_actions: Option<ArrayView2<'_, f64>>,
+        model: &dyn DynamicsModel,
+        objective: &Objective,
+        proposal: ProposalFn<'_>,
+    ) -> Result<Vec<Plan>> {
+        let (h, a) = (self.cfg.horizon, model.action_dim());
+        if let Some(pa) = &prev_actions {
+            check_len("previous actions (rows)", starts.nrows(), pa.nrows())?;
+        }
+        for (i, x0) in starts.rows().into_iter().enumerate() {
+            let x0 = x0.to_vec();
+            let prev = prev_actions.map(|pa| pa.row(i).to_vec());
+            check_problem(&x0, prev.as_deref(), model, objective)?;
+        }
+        let means = vec![warm_start(None, h, a, self.cfg.bounds.as_ref()); starts.nrows()];
+        let (plans, _) = self.plan_impl(
+            starts,
+            prev_actions,
+            model,
+            objective,
+            Some(proposal),
+            means,
+        )?;
+        Ok(plans)
+    }
+
+    /// One start: the stored warm start in, the new mean stored.
+    fn plan_one(
         &mut self,
         x0: &[f64],
         prev_action: Option<&[f64]>,
@@ -198,17 +235,46 @@ impl DmdMpc {
         proposal: Option<ProposalFn<'_>>,
     ) -> Result<Plan> {
         let (_, a) = check_problem(x0, prev_action, model, objective)?;
+        let mean = warm_start(
+            self.mean.take(),
+            self.cfg.horizon,
+            a,
+            self.cfg.bounds.as_ref(),
+        );
+        let (mut plans, mut means) = self.plan_impl(
+            one_row(x0),
+            prev_action.map(one_row),
+            model,
+            objective,
+            proposal,
+            vec![mean],
+        )?;
+        self.mean = means.pop();
+        Ok(plans.pop().expect("one start, one plan"))
+    }
+
+    /// The rounds for `P` starts (`starts` checked by the caller) from their first means
+    /// (`H x A` each); returns the plans and the final means.
+    fn plan_impl(
+        &mut self,
+        starts: ArrayView2<'_, f64>,
+        prev_actions: Option<ArrayView2<'_, f64>>,
+        model: &dyn DynamicsModel,
+        objective: &Objective,
+        proposal: Option<ProposalFn<'_>>,
+        mut means: Vec<Array2<f64>>,
+    ) -> Result<(Vec<Plan>, Vec<Array2<f64>>)> {
+        let a = model.action_dim();
         if let Some(b) = &self.cfg.bounds {
             b.validate(a)?;
         }
         let l = self.cfg.noise.cholesky(a)?;
-        let (h, n) = (self.cfg.horizon, self.cfg.samples);
-        let mut mean = warm_start(self.mean.take(), h, a, self.cfg.bounds.as_ref());
+        let (h, n, p) = (self.cfg.horizon, self.cfg.samples, starts.nrows());
         let std0: Vec<f64> = (0..a).map(|j| l.row(j).norm()).collect();
-        let mut std = Array2::from_shape_fn((h, a), |(_, j)| std0[j]);
+        let mut stds = vec![Array2::from_shape_fn((h, a), |(_, j)| std0[j]); p];
         let adapt = self.cfg.adapt_covariance;
-        let mut z = Array3::zeros((h, n, a));
-        let mut acts = Array3::zeros((h, n, a));
+        let mut z = Array3::zeros((h, n * p, a));
+        let mut acts = Array3::zeros((h, n * p, a));
         for it in 0..self.cfg.iterations {
             crate::mpc::fill_knot_noise(
                 &mut self.rng,
@@ -216,16 +282,17 @@ impl DmdMpc {
                 self.cfg.correlation,
                 &self.cfg.knots,
             );
-            // Sample 0 carries no noise: it is the shifted mean μ̃ itself.
-            z.slice_mut(s![.., 0, ..]).fill(0.0);
+            // Sample 0 of each start carries no noise: it is the shifted mean μ̃ itself.
+            for k in 0..p {
+                z.slice_mut(s![.., k * n, ..]).fill(0.0);
+            }
             let bounds = self.cfg.bounds.clone();
             let policy = if it == 0 { proposal } else { None };
-            let mean_ref = &mean;
-            let std_ref = &std;
+            let (means_ref, stds_ref) = (&means, &stds);
             let act = |t: usize, states: ArrayView2<'_, f64>, mut u: ArrayViewMut2<'_, f64>| {
                 let centre: Array2<f64> = match policy {
-                    Some(p) => {
-                        let c = p(states);
+                    Some(pf) => {
+                        let c = pf(states);
                         check_len("proposal rows", states.nrows(), c.nrows())?;
                         check_len("proposal columns", a, c.ncols())?;
                         if c.iter().any(|v| !v.is_finite()) {
@@ -233,17 +300,17 @@ impl DmdMpc {
                         }
                         c
                     }
-                    None => {
-                        let row = mean_ref.row(t);
-                        Array2::from_shape_fn((states.nrows(), a), |(_, j)| row[j])
-                    }
+                    None => Array2::from_shape_fn((states.nrows(), a), |(i, j)| {
+                        means_ref[i / n][(t, j)]
+                    }),
                 };
                 if adapt {
                     let zt = z.slice(s![t, .., ..]);
                     u.zip_mut_with(&centre, |o, c| *o = *c);
                     for i in 0..u.nrows() {
+                        let sd = &stds_ref[i / n];
                         for j in 0..a {
-                            u[(i, j)] += std_ref[(t, j)] * zt[(i, j)];
+                            u[(i, j)] += sd[(t, j)] * zt[(i, j)];
                         }
                     }
                 } else {
@@ -252,9 +319,9 @@ impl DmdMpc {
                 clamp_opt(&bounds, u);
                 Ok(())
             };
-            let (costs, _) = rollout_population(
-                x0,
-                prev_action,
+            let (costs, _) = rollout_starts(
+                starts,
+                prev_actions,
                 model,
                 objective,
                 &mut self.rng,
@@ -263,33 +330,50 @@ impl DmdMpc {
                 None,
                 None,
             )?;
-            // μ̃: the noise-free sample (the shifted plan, or the policy's own rollout).
-            let shifted = acts.slice(s![.., 0, ..]).to_owned();
-            let (g, g2) = self.weighted_moments(&acts, &costs)?;
             let al = self.cfg.step_size;
-            mean = &shifted * (1.0 - al) + &g * al;
-            if adapt {
-                for t in 0..h {
-                    for j in 0..a {
-                        let (mt, st) = (shifted[(t, j)], std[(t, j)]);
-                        let m2 = (1.0 - al) * (st * st + mt * mt) + al * g2[(t, j)];
-                        let var = m2 - mean[(t, j)] * mean[(t, j)];
-                        std[(t, j)] = var.max(0.0).sqrt().max(self.cfg.min_std);
+            for k in 0..p {
+                let rows = s![.., k * n..(k + 1) * n, ..];
+                let acts_k = acts.slice(rows);
+                let costs_k = costs.slice(s![k * n..(k + 1) * n]);
+                // μ̃: the noise-free sample (the shifted plan, or the policy's own rollout).
+                let shifted = acts_k.index_axis(Axis(1), 0).to_owned();
+                let (g, g2) = self.weighted_moments(acts_k, costs_k)?;
+                let mean = &shifted * (1.0 - al) + &g * al;
+                if adapt {
+                    let std = &mut stds[k];
+                    for t in 0..h {
+                        for j in 0..a {
+                            let (mt, st) = (shifted[(t, j)], std[(t, j)]);
+                            let m2 = (1.0 - al) * (st * st + mt * mt) + al * g2[(t, j)];
+                            let var = m2 - mean[(t, j)] * mean[(t, j)];
+                            std[(t, j)] = var.max(0.0).sqrt().max(self.cfg.min_std);
+                        }
                     }
                 }
+                means[k] = mean;
             }
         }
-        clamp_opt(&self.cfg.bounds, mean.view_mut());
-        let plan = plan_from_actions(x0, prev_action, model, objective, &mut self.rng, &mean)?;
-        self.mean = Some(mean);
-        Ok(plan)
+        let mut chosen = Array3::zeros((h, p, a));
+        for (k, mean) in means.iter_mut().enumerate() {
+            clamp_opt(&self.cfg.bounds, mean.view_mut());
+            chosen.index_axis_mut(Axis(1), k).assign(mean);
+        }
+        let plans = plans_from_actions(
+            starts,
+            prev_actions,
+            model,
+            objective,
+            &mut self.rng,
+            chosen,
+        )?;
+        Ok((plans, means))
     }
 
     /// `g` of eq. 9, the utility-weighted mean sequence (`H x A`), and the weighted second moment.
     fn weighted_moments(
         &self,
-        acts: &Array3<f64>,
-        costs: &Array1<f64>,
+        acts: ArrayView3<'_, f64>,
+        costs: ArrayView1<'_, f64>,
     ) -> Result<(Array2<f64>, Array2<f64>)> {
         let (h, n, a) = acts.dim();
         let mut w = Array1::zeros(n);
@@ -299,7 +383,7 @@ impl DmdMpc {
                 reward_weighted,
             } => {
                 let k = ((elite_fraction * n as f64).round() as usize).clamp(1, n);
-                let el = lowest_k(costs, k);
+                let el = lowest_k(&costs.to_owned(), k);
                 let cmax = costs[el[k - 1]];
                 let scale = 1e-9 * (1.0 + cmax.abs());
                 for &i in &el {
@@ -345,7 +429,7 @@ impl Planner for DmdMpc {
         objective: &Objective,
     ) -> Result<Plan> {
         let proposal = self.proposal.take();
-        let r = self.plan_impl(
+        let r = self.plan_one(
             x0,
             prev_action,
             model,

@@ -13,7 +13,7 @@
 //! do not read it); planning through a model that needs it without one is an error.
 
 use nalgebra::DMatrix;
-use ndarray::{s, Array1, Array2, Array3, ArrayView2, ArrayViewMut2};
+use ndarray::{s, Array1, Array2, Array3, ArrayView2, ArrayViewMut2, Axis};
 use rand::Rng as _;
 use rand_distr::StandardNormal;
 use tandem_core::Rng;
@@ -515,22 +515,58 @@ pub(crate) fn rollout_population(
     objective: &Objective,
     rng: &mut Rng,
     actions: &mut Array3<f64>,
+    act: impl FnMut(usize, ArrayView2<'_, f64>, ArrayViewMut2<'_, f64>) -> Result<()>,
+    states_out: Option<&mut Array3<f64>>,
+    running_out: Option<&mut Array2<f64>>,
+) -> Result<(Array1<f64>, Vec<f64>)> {
+    rollout_starts(
+        one_row(x0),
+        prev_action.map(one_row),
+        model,
+        objective,
+        rng,
+        actions,
+        act,
+        states_out,
+        running_out,
+    )
+}
+
+/// A slice as a `1 x len` matrix.
+pub(crate) fn one_row(x: &[f64]) -> ArrayView2<'_, f64> {
+    ArrayView2::from_shape((1, x.len()), x).expect("a slice is one row")
+}
+
+/// [`rollout_population`] from `P` start states at once (`starts`, `P x S`, and the actions
+/// applied before them, `P x A`): the `N` samples of `actions` (`H x N x A`, `N` a multiple of
+/// `P`) are start-major, rows `p·N/P .. (p+1)·N/P` starting at `starts[p]`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn rollout_starts(
+    starts: ArrayView2<'_, f64>,
+    prev_actions: Option<ArrayView2<'_, f64>>,
+    model: &dyn DynamicsModel,
+    objective: &Objective,
+    rng: &mut Rng,
+    actions: &mut Array3<f64>,
     mut act: impl FnMut(usize, ArrayView2<'_, f64>, ArrayViewMut2<'_, f64>) -> Result<()>,
     mut states_out: Option<&mut Array3<f64>>,
     running_out: Option<&mut Array2<f64>>,
 ) -> Result<(Array1<f64>, Vec<f64>)> {
     let (h_len, n, a_dim) = actions.dim();
-    let s_dim = x0.len();
-    let mut states = Array2::zeros((n, s_dim));
-    for mut r in states.rows_mut() {
-        r.assign(&ndarray::ArrayView1::from(x0));
+    let (p, s_dim) = starts.dim();
+    if p == 0 || n % p != 0 {
+        return Err(PlanError::Config(format!(
+            "{n} samples do not split evenly over {p} start states"
+        )));
     }
+    let per = n / p;
+    let mut states = Array2::from_shape_fn((n, s_dim), |(i, j)| starts[(i / per, j)]);
     let mut total = Array1::zeros(n);
     let mut step_cost = vec![0.0; n];
     let gamma = objective.discount();
     let mut disc = 1.0;
     let mut running_out = running_out;
-    let prev0 = prev_action.map(|p| Array2::from_shape_fn((n, a_dim), |(_, j)| p[j]));
+    let prev0 = prev_actions.map(|pa| Array2::from_shape_fn((n, a_dim), |(i, j)| pa[(i / per, j)]));
     if let Some(so) = states_out.as_deref_mut() {
         so.slice_mut(s![0, .., ..]).assign(&states);
     }
@@ -597,31 +633,55 @@ pub(crate) fn plan_from_actions(
     actions: &Array2<f64>,
 ) -> Result<Plan> {
     let (h, a) = actions.dim();
-    let mut acts = actions
+    let acts = actions
         .clone()
         .into_shape_with_order((h, 1, a))
         .expect("same size");
-    let mut states = Array3::zeros((h + 1, 1, x0.len()));
-    let mut running = Array2::zeros((h, 1));
-    let (total, term) = rollout_population(
-        x0,
-        prev_action,
+    let mut plans = plans_from_actions(
+        one_row(x0),
+        prev_action.map(one_row),
         model,
         objective,
         rng,
-        &mut acts,
+        acts,
+    )?;
+    Ok(plans.pop().expect("one start, one plan"))
+}
+
+/// Rolls out one action sequence per start state (`actions` `H x P x A`, `starts` `P x S`) in
+/// one population and packages each as a [`Plan`].
+pub(crate) fn plans_from_actions(
+    starts: ArrayView2<'_, f64>,
+    prev_actions: Option<ArrayView2<'_, f64>>,
+    model: &dyn DynamicsModel,
+    objective: &Objective,
+    rng: &mut Rng,
+    mut actions: Array3<f64>,
+) -> Result<Vec<Plan>> {
+    let (h, p, _) = actions.dim();
+    let mut states = Array3::zeros((h + 1, p, starts.ncols()));
+    let mut running = Array2::zeros((h, p));
+    let (total, term) = rollout_starts(
+        starts,
+        prev_actions,
+        model,
+        objective,
+        rng,
+        &mut actions,
         |_, _, _| Ok(()),
         Some(&mut states),
         Some(&mut running),
     )?;
-    Ok(Plan {
-        actions: actions.clone(),
-        states: states.index_axis_move(ndarray::Axis(1), 0),
-        costs: running.column(0).to_owned(),
-        terminal_cost: term[0],
-        total_cost: total[0],
-        prev_action: prev_action.map(<[f64]>::to_vec),
-    })
+    Ok((0..p)
+        .map(|i| Plan {
+            actions: actions.index_axis(Axis(1), i).to_owned(),
+            states: states.index_axis(Axis(1), i).to_owned(),
+            costs: running.column(i).to_owned(),
+            terminal_cost: term[i],
+            total_cost: total[i],
+            prev_action: prev_actions.map(|pa| pa.row(i).to_vec()),
+        })
+        .collect())
 }
 
 /// Indices of the `k` lowest costs, cheapest first (ties broken by index, so results are

@@ -506,6 +506,84 @@ fn dmd_policy_proposal_and_transitions() {
     assert!(better.total_cost <= pol_cost + 1e-12 && better.total_cost >= jstar - 1e-9);
 }
 
+/// Planning from several starts at once: one start is bit for bit the single call of a fresh
+/// planner; with a vanishing step each plan is the policy's rollout from its own start; with
+/// a full step every start's plan improves on its policy rollout, as its single call does.
+#[test]
+fn dmd_batch_plans_are_independent_plans() {
+    let (m, obj, _, _) = lqr_problem();
+    // A deliberately poor linear policy, so the planner has something to improve.
+    let policy = |s: ndarray::ArrayView2<'_, f64>| {
+        Array2::from_shape_fn((s.nrows(), 1), |(i, _)| {
+            -(0.3 * s[(i, 0)] + 0.2 * s[(i, 1)])
+        })
+    };
+    let planner = |step_size: f64, seed: u64| {
+        DmdMpc::new(DmdMpcConfig {
+            horizon: H,
+            samples: 64,
+            step_size,
+            noise: Noise::Isotropic(0.5),
+            seed,
+            ..Default::default()
+        })
+        .unwrap()
+    };
+    let starts = ndarray::arr2(&[[1.0, 0.0], [-0.5, 0.3], [0.2, -1.0]]);
+
+    let one = planner(0.8, 4)
+        .plan_with_proposal(&[-0.5, 0.3], None, &m, &obj, &policy)
+        .unwrap();
+    let batch = planner(0.8, 4)
+        .plan_batch_with_proposal(starts.slice(ndarray::s![1..2, ..]), None, &m, &obj, &policy)
+        .unwrap();
+    assert_eq!(batch.len(), 1);
+    assert_eq!(batch[0].actions, one.actions);
+    assert_eq!(batch[0].states, one.states);
+    assert_eq!(batch[0].total_cost, one.total_cost);
+
+    let tiny = planner(1e-9, 5)
+        .plan_batch_with_proposal(starts.view(), None, &m, &obj, &policy)
+        .unwrap();
+    let full = planner(1.0, 6)
+        .plan_batch_with_proposal(starts.view(), None, &m, &obj, &policy)
+        .unwrap();
+    assert_eq!((tiny.len(), full.len()), (3, 3));
+    for (k, x0) in starts.rows().into_iter().enumerate() {
+        let mut x = DVector::from_vec(x0.to_vec());
+        assert_eq!(tiny[k].states.row(0), x0);
+        for h in 0..H {
+            let u = -(0.3 * x[0] + 0.2 * x[1]);
+            assert!(
+                (tiny[k].actions[(h, 0)] - u).abs() < 1e-6,
+                "start {k} step {h}"
+            );
+            x = m.step(&x, &DVector::from_vec(vec![u]));
+        }
+        // The elite mean of 64 samples beats the policy's own rollout from every start.
+        assert!(
+            full[k].total_cost < tiny[k].total_cost,
+            "start {k}: {} vs the policy's {}",
+            full[k].total_cost,
+            tiny[k].total_cost
+        );
+        let single = planner(1.0, 6)
+            .plan_with_proposal(&x0.to_vec(), None, &m, &obj, &policy)
+            .unwrap();
+        assert!(single.total_cost < tiny[k].total_cost);
+    }
+
+    // Bad shapes are errors, not panics.
+    let bad = ndarray::arr2(&[[1.0, 0.0, 0.0]]);
+    assert!(planner(0.8, 4)
+        .plan_batch_with_proposal(bad.view(), None, &m, &obj, &policy)
+        .is_err());
+    let prev = ndarray::arr2(&[[0.0]]);
+    assert!(planner(0.8, 4)
+        .plan_batch_with_proposal(starts.view(), Some(prev.view()), &m, &obj, &policy)
+        .is_err());
+}
+
 /// Swing-up of a torque-limited pendulum (|u| <= 2, gravity torque up to 9.81): every planner
 /// brings it from hanging to upright and holds it, with small populations.
 #[test]
