@@ -152,3 +152,51 @@ fn the_elite_ablation_adds_runs_and_a_figure() {
     assert!(err.contains("holds a p3-leg study"), "{err}");
     let _ = std::fs::remove_dir_all(&root);
 }
+
+/// `--oracle` adds MBPO with the true leg as its model to the table and Fig. 4; p3-mujoco
+/// refuses it (no true model there) before writing anything.
+#[test]
+fn the_oracle_adds_mbpo_with_the_true_leg() {
+    let root = root("oracle");
+    let out = root.join("a");
+    let o = out.to_str().unwrap();
+    ok(&tandem(&[
+        "reproduce",
+        "p3-leg",
+        "--quick",
+        "--quiet",
+        "--seeds",
+        "1",
+        "--oracle",
+        "--out",
+        o,
+    ]));
+    let table = json(&out.join("table.json"));
+    for m in ["sac", "mbpo", "m_demorl", "mbpo_oracle"] {
+        assert!(table[m]["return_at_budget"]["mean"].is_number(), "{m}");
+    }
+    let record = json(&out.join("runs/mbpo_oracle__seed0/record.json"));
+    assert_eq!(record["fit_holdout_loss"], serde_json::json!([]));
+    assert!(record["imagined"].as_u64().unwrap() > 0);
+    let svg = std::fs::read_to_string(out.join("fig4.svg")).unwrap();
+    assert!(svg.contains("mbpo_oracle"));
+    let md = std::fs::read_to_string(out.join("table.md")).unwrap();
+    assert!(md.contains("MBPO, true leg as model"), "{md}");
+
+    let m = root.join("m");
+    let o = tandem(&[
+        "reproduce",
+        "p3-mujoco",
+        "--env",
+        "InvertedPendulum-v5",
+        "--quick",
+        "--oracle",
+        "--out",
+        m.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("oracle"), "{err}");
+    assert!(!m.join("config.json").exists());
+    let _ = std::fs::remove_dir_all(&root);
+}

@@ -384,3 +384,114 @@ fn settings_read_from_toml_with_defaults_for_what_is_left_out() {
     assert_eq!(back, c);
     assert!(toml::from_str::<P3Config>("[base]\nreal_stepz = 1\n").is_err());
 }
+
+/// MBPO with the true leg as its model (`OracleRollouts`): every imagined transition is the one
+/// the real leg gives for the same state and action (observation, reward, no termination), and
+/// the loop fits no model, so such a run's gap to SAC cannot come from model error.
+#[test]
+fn oracle_rollouts_on_the_leg_are_the_real_legs_own_steps() {
+    use tandem::dynamics::leg2r::leg2r_plant;
+    use tandem::dynamics::Clocked;
+    use tandem::envs::{Action, Leg2RConfig, Leg2RModel, Task};
+    use tandem::models::{EnsembleConfig, ProbabilisticEnsemble, TransitionsBuilder};
+    use tandem::pipelines::mbpo::{leg2r_problem_with, Imagination, Imagine, OracleRollouts};
+    use tandem_agents::{OffPolicyLoop, Sac, SacConfig};
+
+    let leg = Leg2RConfig {
+        position_scale: 0.02,
+        velocity_scale: 0.2,
+        ..Leg2RConfig::for_model(Leg2RModel::Real)
+    };
+    let problem = leg2r_problem_with("Leg2R-real-v0", &leg).unwrap();
+    let task = &problem.task;
+    // 20 real steps of a swinging leg as the rollouts' starts.
+    let mut env = (problem.env)().unwrap();
+    env.reset(Some(3));
+    let mut data = TransitionsBuilder::new(6, 2);
+    for t in 0..20 {
+        let x = env.state();
+        let a = Action::Continuous(vec![(t as f64 * 0.7).sin(), (t as f64 * 1.3).cos()]);
+        let step = env.step(&a).unwrap();
+        data.push(&x, &task.control(&a), &env.state(), step.reward, false)
+            .unwrap();
+    }
+    let data = data.build();
+
+    let mut cfg = small().base;
+    cfg.rollouts_per_step = 3;
+    cfg.model_train_freq = 10;
+    let plant = Clocked::new(leg2r_plant(&leg.plant).unwrap(), leg.trajectory.period).unwrap();
+    let mut oracle = OracleRollouts::of(&cfg, PlantModel::new(plant));
+    assert!(!oracle.fits_model());
+    assert_eq!(Imagination::name(&oracle), "mbpo_oracle");
+    let sac_cfg = SacConfig {
+        hidden: vec![8],
+        ..SacConfig::default()
+    };
+    let (o, a) = (task.observation_space(), task.action_space());
+    let sac = Sac::new(sac_cfg.clone(), o, a, 0).unwrap();
+    let mut lp = OffPolicyLoop::new(sac, sac_cfg.schedule(), o, a, rng_from_seed(1))
+        .unwrap()
+        .with_secondary(100, 0.5)
+        .unwrap();
+    let unused = EnsembleConfig {
+        members: 1,
+        elites: 1,
+        hidden: vec![4],
+        ..EnsembleConfig::default()
+    };
+    let mut ensemble = ProbabilisticEnsemble::new(6, 2, unused).unwrap();
+    let n = oracle
+        .imagine(
+            &mut lp,
+            &mut ensemble,
+            task,
+            &data,
+            0,
+            0,
+            &mut rng_from_seed(2),
+        )
+        .unwrap();
+    // 3 rollouts per real step x 10 real steps per refit, one step each.
+    assert_eq!(n, 30);
+    let buffer = lp.secondary().unwrap();
+    assert_eq!(buffer.len(), 30);
+    for k in 0..n {
+        let row = buffer.get(k).unwrap();
+        // The observation starts with the state (joints, phase); the buffer keeps f32.
+        let x: Vec<f64> = (0..6).map(|j| f64::from(row.obs[[0, j]])).collect();
+        let action: Vec<f64> = row.actions.row(0).iter().map(|v| f64::from(*v)).collect();
+        env.set_state(&x).unwrap();
+        let step = env.step(&Action::Continuous(action)).unwrap();
+        assert!(!step.terminated && row.terminated[0] == 0.0);
+        assert!(
+            (step.reward - f64::from(row.rewards[0])).abs() < 1e-4,
+            "row {k}: reward {} vs the leg's {}",
+            row.rewards[0],
+            step.reward
+        );
+        for (j, v) in step.observation.iter().enumerate() {
+            let got = f64::from(row.next_obs[[0, j]]);
+            assert!(
+                (v - got).abs() < 1e-4 * (1.0 + v.abs()),
+                "row {k}, component {j}: {got} vs the leg's {v}"
+            );
+        }
+    }
+}
+
+/// The oracle run goes through the whole loop: MBPO's counts, no fit, no fit loss.
+#[test]
+fn mbpo_with_the_true_pendulum_counts_as_mbpo_and_fits_nothing() {
+    use tandem::pipelines::mbpo::run_oracle;
+    let cfg = small();
+    let problem = pendulum_problem();
+    let model = PlantModel::new(GymPendulum::default());
+    let r = run_oracle(&problem, &cfg.base, model, 0, &mut Ephemeral, &mut |_| {}).unwrap();
+    assert_eq!(r.method, "mbpo_oracle");
+    assert_eq!((r.real_steps, r.updates), (600, 1000));
+    assert_eq!(r.horizons, [1, 1, 2, 2, 3, 3]);
+    assert_eq!(r.imagined, 200 * (1 + 1 + 2 + 2 + 3 + 3));
+    assert!(r.fit_holdout_loss.is_empty());
+    assert_eq!(r.fit_seconds, 0.0);
+}

@@ -98,10 +98,10 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
             super::reproduce_p2::p2(super::reproduce_p2::Experiment::Maze, &args)
         }
         ReproduceCommand::P3Leg(args) => {
-            harness::run(&P3Study::leg(args.ablate_elites), &args.study)
+            harness::run(&P3Study::leg(args.ablate_elites, args.oracle), &args.study)
         }
         ReproduceCommand::P3Mujoco(args) => harness::run(
-            &P3Study::mujoco(args.env, args.p3.ablate_elites),
+            &P3Study::mujoco(args.env, args.p3.ablate_elites, args.p3.oracle),
             &args.p3.study,
         ),
         ReproduceCommand::Merge(args) => {
@@ -113,13 +113,13 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
                     harness::merge(&P0Pendulum, &args.dirs, args.out.as_deref(), args.overwrite)
                 }
                 "p3-leg" => harness::merge(
-                    &P3Study::leg(false),
+                    &P3Study::leg(false, false),
                     &args.dirs,
                     args.out.as_deref(),
                     args.overwrite,
                 ),
                 "p3-mujoco" => harness::merge(
-                    &P3Study::mujoco(None, false),
+                    &P3Study::mujoco(None, false, false),
                     &args.dirs,
                     args.out.as_deref(),
                     args.overwrite,

@@ -18,13 +18,16 @@ use clap::Args;
 use serde::{Deserialize, Serialize};
 use tandem::mujoco::TaskKind;
 use tandem::pipelines::mbpo::{
-    leg2r_problem_with, mujoco_problem, Event, LinearSchedule, Problem, RunRecord,
+    leg2r_problem_with, mujoco_problem, run_oracle, Event, LinearSchedule, Problem, RunRecord,
 };
 use tandem::pipelines::p3::{run, Method, P3Config};
 use tandem::pipelines::Checkpoints;
 use tandem::report::{Comparison, Figure, MarkdownText, MethodFigures, SeedRun, Table};
 use tandem::run::RunDir;
+use tandem_dynamics::leg2r::leg2r_plant;
+use tandem_dynamics::Clocked;
 use tandem_envs::{Env, EnvError, Leg2RConfig, Leg2RModel, Task};
+use tandem_models::PlantModel;
 use tandem_planners::Utility;
 
 use super::harness::{self, JobError, Study, StudyArgs};
@@ -42,6 +45,10 @@ pub struct P3Args {
     /// Also run M-DeMoRL with elite fractions 1, 5, 10, 20, 50 and 100 % (p3 Fig. 3).
     #[arg(long)]
     pub ablate_elites: bool,
+    /// Also run MBPO with the true system as its model (`mbpo_oracle`; the leg only): what MBPO
+    /// would do with a perfect model, to tell model error from the loop's own limits.
+    #[arg(long)]
+    pub oracle: bool,
 }
 
 /// Arguments of `tandem reproduce p3-mujoco`.
@@ -75,6 +82,9 @@ pub struct P3Settings {
     pub target_return: f64,
     /// M-DeMoRL's elite fractions to ablate (p3 Fig. 3); empty: no ablation.
     pub ablate_elites: Vec<f64>,
+    /// Also run MBPO with the true system as its model (the run `mbpo_oracle`, the leg only):
+    /// its rollouts are exact, so its gap to SAC is the loop's, not the model's.
+    pub oracle: bool,
 }
 
 impl Default for P3Settings {
@@ -89,6 +99,7 @@ impl Default for P3Settings {
             }),
             target_return: 500.0,
             ablate_elites: Vec::new(),
+            oracle: false,
         }
     }
 }
@@ -164,6 +175,7 @@ impl P3Settings {
             leg: None,
             target_return: m.target_return,
             ablate_elites: Vec::new(),
+            oracle: false,
         })
     }
 
@@ -224,6 +236,9 @@ impl P3Settings {
                 }
             }
             None => {
+                if self.oracle {
+                    return bad("oracle: the true model is available for the leg only".into());
+                }
                 if !MUJOCO.iter().any(|m| m.id == self.env) {
                     return bad(format!(
                         "env {}: p3-mujoco runs {} (a leg needs its `leg` settings)",
@@ -288,10 +303,14 @@ fn percent(f: f64) -> String {
     format!("{p}")
 }
 
+/// The name of the MBPO run with the true system as its model.
+const ORACLE: &str = "mbpo_oracle";
+
 /// The p3 studies: on the leg, or on a MuJoCo task.
 pub struct P3Study {
     target: Target,
     ablate: bool,
+    oracle: bool,
 }
 
 /// Where a p3 study runs.
@@ -303,19 +322,22 @@ enum Target {
 }
 
 impl P3Study {
-    /// `p3-leg`; `ablate` adds p3's elite fractions to the settings.
-    pub fn leg(ablate: bool) -> Self {
+    /// `p3-leg`; `ablate` adds p3's elite fractions to the settings, `oracle` the MBPO run
+    /// with the true leg as its model.
+    pub fn leg(ablate: bool, oracle: bool) -> Self {
         Self {
             target: Target::Leg,
             ablate,
+            oracle,
         }
     }
 
     /// `p3-mujoco` on `env` (default HalfCheetah-v5).
-    pub fn mujoco(env: Option<String>, ablate: bool) -> Self {
+    pub fn mujoco(env: Option<String>, ablate: bool, oracle: bool) -> Self {
         Self {
             target: Target::Mujoco(env),
             ablate,
+            oracle,
         }
     }
 }
@@ -346,6 +368,7 @@ impl Study for P3Study {
         if self.ablate && s.ablate_elites.is_empty() {
             s.ablate_elites = ELITE_FRACTIONS.to_vec();
         }
+        s.oracle |= self.oracle;
         let what = config.map_or("settings".to_string(), |p| {
             format!("--config {}", p.display())
         });
@@ -354,11 +377,14 @@ impl Study for P3Study {
     }
 
     fn overrides_settings(&self) -> bool {
-        self.ablate || matches!(self.target, Target::Mujoco(Some(_)))
+        self.ablate || self.oracle || matches!(self.target, Target::Mujoco(Some(_)))
     }
 
     fn jobs(&self, s: &P3Settings) -> Vec<Vec<String>> {
         let mut runs: Vec<String> = Method::ALL.iter().map(|m| m.name().to_string()).collect();
+        if s.oracle {
+            runs.push(ORACLE.to_string());
+        }
         for (name, _) in s.ablation() {
             if !runs.contains(&name) {
                 runs.push(name);
@@ -380,6 +406,21 @@ impl Study for P3Study {
         progress: &mut dyn FnMut(u64),
     ) -> std::result::Result<RunRecord, JobError> {
         let mut r = match &s.leg {
+            Some(leg) if run_name == ORACLE => {
+                let problem = leg2r_problem_with(&s.env, leg)?;
+                let plant = leg2r_plant(&leg.plant).map_err(|e| JobError::Failed(e.to_string()))?;
+                let leg_model = Clocked::new(plant, leg.trajectory.period)
+                    .map_err(|e| JobError::Failed(e.to_string()))?;
+                run_oracle(
+                    &problem,
+                    &s.p3.base,
+                    PlantModel::new(leg_model),
+                    seed,
+                    store,
+                    &mut step_progress(progress),
+                )
+                .map_err(JobError::from)
+            }
             Some(leg) => run_on(
                 &leg2r_problem_with(&s.env, leg)?,
                 s,
@@ -412,7 +453,10 @@ impl Study for P3Study {
         let t = table(records, s);
         let md = markdown(&t, s, records, wall);
         harness::write_table(dir, &t, &md)?;
-        let main: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+        let mut main: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+        if s.oracle {
+            main.push(ORACLE);
+        }
         let (file, title) = match s.leg {
             Some(_) => (
                 "fig4.svg",
@@ -470,14 +514,26 @@ where
             Method::MDemorl
         }
     };
-    let r = run(method, problem, &cfg, seed, store, &mut |e| {
+    let r = run(
+        method,
+        problem,
+        &cfg,
+        seed,
+        store,
+        &mut step_progress(progress),
+    )?;
+    Ok(r)
+}
+
+/// The run's events as the harness' progress: the real steps, every 100.
+fn step_progress(progress: &mut dyn FnMut(u64)) -> impl FnMut(Event) + '_ {
+    move |e| {
         if let Event::Step { real_steps } = e {
             if real_steps % 100 == 0 {
                 progress(real_steps);
             }
         }
-    })?;
-    Ok(r)
+    }
 }
 
 /// How the sample ratios are taken.
@@ -542,6 +598,7 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
             let label = match n.as_str() {
                 "sac" => "SAC".to_string(),
                 "mbpo" => "MBPO".to_string(),
+                ORACLE => "MBPO, true leg as model".to_string(),
                 "m_demorl" => match s.elite_fraction() {
                     Some(f) => format!("M-DeMoRL ({} % elites)", percent(f)),
                     None => "M-DeMoRL".to_string(),

@@ -375,7 +375,8 @@ pub enum Event {
     Fit {
         /// Real steps so far.
         real_steps: u64,
-        /// The fit's last held-out loss (mean Gaussian NLL per element).
+        /// The fit's last held-out loss (mean Gaussian NLL per element; NaN where the loop fits
+        /// no model, [`OracleRollouts`]).
         holdout_loss: f64,
         /// Imagined transitions stored.
         imagined: u64,
@@ -399,7 +400,7 @@ pub struct RunRecord {
     pub imagined: u64,
     /// The schedule's value at each refit (MBPO's `k`, M-DeMoRL's `H`), one per refit.
     pub horizons: Vec<usize>,
-    /// Last held-out loss of each refit.
+    /// Last held-out loss of each refit (none where the loop fits no model).
     pub fit_holdout_loss: Vec<f64>,
     /// SAC updates.
     pub updates: u64,
@@ -438,6 +439,11 @@ pub trait Imagination {
     fn capacity(&self, cfg: &MbpoConfig, epoch: u64) -> usize;
     /// The schedule's value (`k` or `H`) at `epoch`.
     fn horizon(&self, epoch: u64) -> usize;
+    /// Whether the loop fits its ensemble before each filling (false for [`OracleRollouts`],
+    /// whose model is given).
+    fn fits_model(&self) -> bool {
+        true
+    }
 }
 
 /// Fills the loop's secondary buffer for a task `T`.
@@ -522,6 +528,90 @@ impl<T: Task> Imagine<T> for Rollouts {
         let k = self.length.at(epoch);
         imagine(lp, model, task, &self.judges, &starts, k, rng)
     }
+}
+
+/// MBPO's branched rollouts through a model the loop does not fit, with the task's reward and
+/// termination: given the true system as a [`tandem_models::PlantModel`], MBPO with oracle
+/// dynamics. Every imagined transition is then one the real system would produce, so what such
+/// a run still lacks against SAC alone is due to the loop (its data mix, its rollout starts),
+/// not to model error. Recorded and checkpointed as `"mbpo_oracle"`.
+#[derive(Debug, Clone)]
+pub struct OracleRollouts<M> {
+    /// The rollouts' sizes and schedule (their `judges` are replaced by the task's).
+    pub rollouts: Rollouts,
+    /// The model the rollouts step.
+    pub model: M,
+}
+
+impl<M> OracleRollouts<M> {
+    /// MBPO's rollouts as `cfg` sets them, through `model`.
+    pub fn of(cfg: &MbpoConfig, model: M) -> Self {
+        Self {
+            rollouts: Rollouts::of(cfg),
+            model,
+        }
+    }
+}
+
+impl<M> Imagination for OracleRollouts<M> {
+    fn name(&self) -> &'static str {
+        "mbpo_oracle"
+    }
+
+    fn capacity(&self, cfg: &MbpoConfig, epoch: u64) -> usize {
+        self.rollouts.capacity(cfg, epoch)
+    }
+
+    fn horizon(&self, epoch: u64) -> usize {
+        self.rollouts.horizon(epoch)
+    }
+
+    fn fits_model(&self) -> bool {
+        false
+    }
+}
+
+impl<T: Task, M: DynamicsModel> Imagine<T> for OracleRollouts<M> {
+    fn imagine(
+        &mut self,
+        lp: &mut OffPolicyLoop<Sac>,
+        _model: &mut ProbabilisticEnsemble,
+        task: &T,
+        data: &Transitions,
+        epoch: u64,
+        _seed: u64,
+        rng: &mut Rng,
+    ) -> Result<usize> {
+        let r = &self.rollouts;
+        let starts = sample_states(data, r.rollouts_per_step * r.per_refit as usize, rng)?;
+        let judges = Judges::default();
+        imagine(
+            lp,
+            &self.model,
+            task,
+            &judges,
+            &starts,
+            r.length.at(epoch),
+            rng,
+        )
+    }
+}
+
+/// MBPO with `model` in place of the fitted ensemble ([`OracleRollouts`]), checkpointed under
+/// `"mbpo_oracle"`.
+pub fn run_oracle<T: Task, F, M: DynamicsModel>(
+    problem: &Problem<T, F>,
+    cfg: &MbpoConfig,
+    model: M,
+    seed: u64,
+    store: &mut dyn Checkpoints,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<RunRecord>
+where
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    let mut rollouts = OracleRollouts::of(cfg, model);
+    run_with(problem, cfg, seed, Some(&mut rollouts), store, on_event)
 }
 
 /// Runs MBPO for `seed` on `problem` (from the checkpoint `store` holds under `"mbpo"`, if any).
@@ -715,11 +805,14 @@ where
             if t % cfg.model_train_freq == 0 && t >= cfg.sac.learning_starts as u64 {
                 flush(&mut all, &mut pending, (s_dim, u_dim))?;
                 let epoch = cfg.epoch_of(t);
-                let fit = cfg.fit_for(all.len(), seeds.derive(&format!("fit-{}", p.refits)));
-                let f0 = Instant::now();
-                let report = model.fit(&all, &fit)?;
-                p.seconds.fit += f0.elapsed().as_secs_f64();
-                let loss = report.holdout_loss.last().copied().unwrap_or(f64::NAN);
+                let mut loss = None;
+                if imagination.fits_model() {
+                    let fit = cfg.fit_for(all.len(), seeds.derive(&format!("fit-{}", p.refits)));
+                    let f0 = Instant::now();
+                    let report = model.fit(&all, &fit)?;
+                    p.seconds.fit += f0.elapsed().as_secs_f64();
+                    loss = Some(report.holdout_loss.last().copied().unwrap_or(f64::NAN));
+                }
                 let capacity = imagination.capacity(cfg, epoch);
                 if capacity != p.capacity {
                     lp.resize_secondary(capacity)?;
@@ -732,11 +825,11 @@ where
                 p.seconds.imagine += i0.elapsed().as_secs_f64();
                 p.refits += 1;
                 p.imagined += n as u64;
-                p.fit_losses.push(loss);
+                p.fit_losses.extend(loss);
                 p.horizons.push(imagination.horizon(epoch));
                 on_event(Event::Fit {
                     real_steps: t,
-                    holdout_loss: loss,
+                    holdout_loss: loss.unwrap_or(f64::NAN),
                     imagined: n as u64,
                 });
             }
