@@ -175,6 +175,14 @@ fn the_oracle_adds_mbpo_with_the_true_leg() {
     for m in ["sac", "mbpo", "m_demorl", "mbpo_oracle"] {
         assert!(table[m]["return_at_budget"]["mean"].is_number(), "{m}");
     }
+    // The leg's table has the return at each epoch (quick: 3 epochs of 300 steps).
+    let epochs = table["mbpo_oracle"]["return_at_epoch"].as_object().unwrap();
+    let keys: Vec<&str> = epochs.keys().map(String::as_str).collect();
+    assert_eq!(keys, ["0", "1", "2", "3"]);
+    assert_eq!(
+        epochs["3"], table["mbpo_oracle"]["return_at_budget"]["mean"],
+        "one seed: the last epoch's return is the return at the budget"
+    );
     let record = json(&out.join("runs/mbpo_oracle__seed0/record.json"));
     assert_eq!(record["fit_holdout_loss"], serde_json::json!([]));
     assert!(record["imagined"].as_u64().unwrap() > 0);

@@ -12,6 +12,7 @@
 //! - with `--ablate-elites`, `fig3.svg`: M-DeMoRL's curves for elite fractions 1, 5, 10, 20, 50
 //!   and 100 % (p3 Fig. 3), whose runs are in the table as `m_demorl_elites_<percent>`.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use clap::Args;
@@ -571,7 +572,10 @@ pub fn table(records: &[RunRecord], s: &P3Settings) -> Table {
         if seeds.is_empty() {
             continue;
         }
-        let (figures, mean, short) = MethodFigures::from_runs(budget, s.target_return, &seeds);
+        let (mut figures, mean, short) = MethodFigures::from_runs(budget, s.target_return, &seeds);
+        if s.leg.is_some() {
+            figures.return_at_epoch = return_at_epoch(records, &name, s.p3.base.epoch_length);
+        }
         used.push((name.clone(), mean, short));
         t.methods.insert(name, figures);
     }
@@ -588,6 +592,28 @@ pub fn table(records: &[RunRecord], s: &P3Settings) -> Table {
         }
     }
     t
+}
+
+/// The mean return of the runs `name` at each epoch (evaluations at whole multiples of
+/// `epoch_length` real steps) where every one of them was evaluated.
+fn return_at_epoch(records: &[RunRecord], name: &str, epoch_length: u64) -> BTreeMap<u64, f64> {
+    let runs: Vec<&RunRecord> = records.iter().filter(|r| r.method == name).collect();
+    let mut sums: BTreeMap<u64, (f64, usize)> = BTreeMap::new();
+    for r in &runs {
+        for p in r
+            .curve
+            .iter()
+            .filter(|p| p.true_samples % epoch_length == 0)
+        {
+            let e = sums.entry(p.true_samples / epoch_length).or_default();
+            e.0 += p.eval_return;
+            e.1 += 1;
+        }
+    }
+    sums.into_iter()
+        .filter(|(_, (_, n))| *n == runs.len())
+        .map(|(epoch, (sum, n))| (epoch, sum / n as f64))
+        .collect()
 }
 
 /// The table as Markdown with p3's words, the settings that matter and the wall time.

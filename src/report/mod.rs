@@ -123,6 +123,10 @@ pub struct MethodFigures {
     pub samples_to_target: SamplesToTarget,
     /// The seeds, in the order of the per-seed lists.
     pub seeds: Vec<u64>,
+    /// Mean return over the seeds at each epoch where every seed was evaluated (p3's leg:
+    /// return against epochs); empty, and left out of the JSON, where a study has no epochs.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub return_at_epoch: BTreeMap<u64, f64>,
 }
 
 /// What one seed's run of a method contributes to [`MethodFigures::from_runs`].
@@ -159,6 +163,7 @@ impl MethodFigures {
             ),
             samples_to_target: SamplesToTarget::from_seeds(target, to, searched),
             seeds: runs.iter().map(|r| r.seed).collect(),
+            return_at_epoch: BTreeMap::new(),
         };
         (figures, mean_used, short)
     }
