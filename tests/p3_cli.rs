@@ -208,3 +208,32 @@ fn the_oracle_adds_mbpo_with_the_true_leg() {
     assert!(!m.join("config.json").exists());
     let _ = std::fs::remove_dir_all(&root);
 }
+
+/// The committed leg results (`results/p3-leg/`) are one study's output: merging their recorded
+/// runs again writes the same table, with every method's return at each of the 81 epochs.
+#[test]
+fn the_committed_leg_results_render_again_from_their_records() {
+    let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("results/p3-leg");
+    let root = root("committed");
+    let out = root.join("again");
+    ok(&tandem(&[
+        "reproduce",
+        "merge",
+        committed.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    let again = std::fs::read_to_string(out.join("table.json")).unwrap();
+    let before = std::fs::read_to_string(committed.join("table.json")).unwrap();
+    assert_eq!(again, before);
+    let table = json(&committed.join("table.json"));
+    for m in ["sac", "mbpo", "m_demorl", "mbpo_oracle"] {
+        assert_eq!(
+            table[m]["return_at_epoch"].as_object().unwrap().len(),
+            81,
+            "{m}"
+        );
+        assert_eq!(table[m]["seeds"], serde_json::json!([0, 1, 2, 3, 4]), "{m}");
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
