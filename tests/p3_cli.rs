@@ -21,6 +21,21 @@ fn json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// `tandem reproduce p3-leg --quick --quiet --seeds 1 FLAG --out OUT`.
+fn quick_leg_seed(flag: &str, out: &str) -> Output {
+    tandem(&[
+        "reproduce",
+        "p3-leg",
+        "--quick",
+        "--quiet",
+        "--seeds",
+        "1",
+        flag,
+        "--out",
+        out,
+    ])
+}
+
 fn root(name: &str) -> PathBuf {
     let r = std::env::temp_dir().join(format!("tandem-p3-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&r);
@@ -100,17 +115,7 @@ fn the_elite_ablation_adds_runs_and_a_figure() {
     let root = root("ablate");
     let out = root.join("a");
     let o = out.to_str().unwrap();
-    ok(&tandem(&[
-        "reproduce",
-        "p3-leg",
-        "--quick",
-        "--quiet",
-        "--seeds",
-        "1",
-        "--ablate-elites",
-        "--out",
-        o,
-    ]));
+    ok(&quick_leg_seed("--ablate-elites", o));
     let table = json(&out.join("table.json"));
     for m in [
         "m_demorl",
@@ -160,17 +165,7 @@ fn the_oracle_adds_mbpo_with_the_true_leg() {
     let root = root("oracle");
     let out = root.join("a");
     let o = out.to_str().unwrap();
-    ok(&tandem(&[
-        "reproduce",
-        "p3-leg",
-        "--quick",
-        "--quiet",
-        "--seeds",
-        "1",
-        "--oracle",
-        "--out",
-        o,
-    ]));
+    ok(&quick_leg_seed("--oracle", o));
     let table = json(&out.join("table.json"));
     for m in ["sac", "mbpo", "m_demorl", "mbpo_oracle"] {
         assert!(table[m]["return_at_budget"]["mean"].is_number(), "{m}");

@@ -523,10 +523,27 @@ impl<T: Task> Imagine<T> for Rollouts {
         rng: &mut Rng,
     ) -> Result<usize> {
         model.set_propagation(Propagation::RandomMember);
+        self.through(&*model, &self.judges, lp, task, data, epoch, rng)
+    }
+}
+
+impl Rollouts {
+    /// `M × per_refit` rollouts of the epoch's length `k` through `model` from real states drawn
+    /// uniformly from `data`, acted by SAC, stored in the loop's secondary buffer.
+    #[allow(clippy::too_many_arguments)]
+    fn through<T: Task, M: DynamicsModel + ?Sized>(
+        &self,
+        model: &M,
+        judges: &Judges,
+        lp: &mut OffPolicyLoop<Sac>,
+        task: &T,
+        data: &Transitions,
+        epoch: u64,
+        rng: &mut Rng,
+    ) -> Result<usize> {
         let n = self.rollouts_per_step * self.per_refit as usize;
         let starts = sample_states(data, n, rng)?;
-        let k = self.length.at(epoch);
-        imagine(lp, model, task, &self.judges, &starts, k, rng)
+        imagine(lp, model, task, judges, &starts, self.length.at(epoch), rng)
     }
 }
 
@@ -582,18 +599,9 @@ impl<T: Task, M: DynamicsModel> Imagine<T> for OracleRollouts<M> {
         _seed: u64,
         rng: &mut Rng,
     ) -> Result<usize> {
-        let r = &self.rollouts;
-        let starts = sample_states(data, r.rollouts_per_step * r.per_refit as usize, rng)?;
-        let judges = Judges::default();
-        imagine(
-            lp,
-            &self.model,
-            task,
-            &judges,
-            &starts,
-            r.length.at(epoch),
-            rng,
-        )
+        let task_judges = Judges::default();
+        self.rollouts
+            .through(&self.model, &task_judges, lp, task, data, epoch, rng)
     }
 }
 
