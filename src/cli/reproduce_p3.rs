@@ -25,9 +25,7 @@ use tandem::pipelines::p3::{run, Method, P3Config};
 use tandem::pipelines::Checkpoints;
 use tandem::report::{Comparison, Figure, MarkdownText, MethodFigures, SeedRun, Table};
 use tandem::run::RunDir;
-use tandem_dynamics::leg2r::leg2r_plant;
-use tandem_dynamics::Clocked;
-use tandem_envs::{Env, EnvError, Leg2RConfig, Leg2RModel, Task};
+use tandem_envs::{Env, EnvError, Leg2RConfig, Leg2REnv, Leg2RModel, Task};
 use tandem_models::PlantModel;
 use tandem_planners::Utility;
 
@@ -409,13 +407,13 @@ impl Study for P3Study {
         let mut r = match &s.leg {
             Some(leg) if run_name == ORACLE => {
                 let problem = leg2r_problem_with(&s.env, leg)?;
-                let plant = leg2r_plant(&leg.plant).map_err(|e| JobError::Failed(e.to_string()))?;
-                let leg_model = Clocked::new(plant, leg.trajectory.period)
+                // The model steps a copy of the real system's own plant (the clocked leg).
+                let real = Leg2REnv::with_config(&s.env, leg.clone())
                     .map_err(|e| JobError::Failed(e.to_string()))?;
                 run_oracle(
                     &problem,
                     &s.p3.base,
-                    PlantModel::new(leg_model),
+                    PlantModel::new(real.plant().clone()),
                     seed,
                     store,
                     &mut step_progress(progress),
