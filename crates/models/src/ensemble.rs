@@ -6,11 +6,13 @@ use ndarray::{Array1, Array2};
 use rand::seq::SliceRandom;
 use rand::Rng as _;
 use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
+use std::sync::Mutex;
 use tandem_core::seeding::SeedStream;
 use tandem_core::Rng;
 use tandem_nn::{
     gaussian_nll, Activation, Checkpoint, Checkpointable, GaussianHead, GaussianOutput, Mlp,
-    MlpConfig, NnError,
+    MlpConfig, MlpWorkspace, NnError,
 };
 
 use crate::data::{check_input, holdout_indices};
@@ -154,6 +156,7 @@ pub struct ProbabilisticEnsemble {
     out_norm: Standardizer,
     propagation: Propagation,
     member_offset: usize,
+    scratch: Scratch,
 }
 
 impl ProbabilisticEnsemble {
@@ -206,6 +209,7 @@ impl ProbabilisticEnsemble {
             out_norm: Standardizer::identity(dim),
             propagation: cfg.propagation,
             member_offset: 0,
+            scratch: Scratch::default(),
             state_dim,
             action_dim,
             members,
@@ -258,14 +262,83 @@ impl ProbabilisticEnsemble {
         self.state_dim + usize::from(self.cfg.learn_reward)
     }
 
-    /// Standardized means and log-variances of member `k` for the standardized inputs `x`.
-    fn member_forward(&self, k: usize, x: &[f32], b: usize) -> Result<GaussianOutput, ModelError> {
-        let m = &self.members[k];
-        let mut ws = m.net.workspace();
-        let out = m.net.forward(x, b, &mut ws).map_err(nn_other)?;
-        let mut g = GaussianOutput::default();
-        m.head.forward(out, b, &mut g).map_err(nn_other)?;
-        Ok(g)
+    /// Runs every elite on its rows of the standardized inputs `x` (`b` rows of `din`): elite
+    /// slot `i` (member `self.elites[i]`) takes the rows `assign` gives it (all rows when `assign`
+    /// is `None`), its standardized means and log-variances left in `bufs[i].g` and its row
+    /// indices in `bufs[i].rows`. The members run side by side on rayon's threads when the work
+    /// is large enough to pay for it; each has its own buffers, so the numbers do not depend on
+    /// the scheduling.
+    fn elite_forwards(
+        &self,
+        x: &[f32],
+        b: usize,
+        assign: Option<&[usize]>,
+        bufs: &mut Vec<MemberScratch>,
+    ) -> Result<(), ModelError> {
+        let din = self.state_dim + self.action_dim;
+        let e = self.elites.len();
+        bufs.resize_with(e, MemberScratch::default);
+        let run = |(i, sc): (usize, &mut MemberScratch)| -> tandem_nn::Result<()> {
+            let m = &self.members[self.elites[i]];
+            let MemberScratch { x: xb, ws, g, rows } = sc;
+            rows.clear();
+            let input = match assign {
+                None => {
+                    rows.extend(0..b);
+                    x
+                }
+                Some(assign) => {
+                    rows.extend((0..b).filter(|&r| assign[r] == i));
+                    xb.clear();
+                    for &r in rows.iter() {
+                        xb.extend_from_slice(&x[r * din..(r + 1) * din]);
+                    }
+                    &xb[..]
+                }
+            };
+            if rows.is_empty() {
+                g.mean.clear();
+                g.log_var.clear();
+                return Ok(());
+            }
+            let out = m.net.forward(input, rows.len(), ws)?;
+            m.head.forward(out, rows.len(), g)
+        };
+        let macs = b * self.members[0].net.num_params();
+        let bufs = &mut bufs[..e];
+        if macs >= PARALLEL_MIN_MACS && rayon::current_num_threads() > 1 {
+            bufs.par_iter_mut().enumerate().try_for_each(run)
+        } else {
+            bufs.iter_mut().enumerate().try_for_each(run)
+        }
+        .map_err(nn_other)
+    }
+}
+
+/// Work (multiply-adds over all elites' rows) below which the elites run one after the other:
+/// handing a member to another thread costs a few microseconds.
+const PARALLEL_MIN_MACS: usize = 1 << 20;
+
+/// Reusable buffers of one elite's batched inference: its gathered inputs, network workspace,
+/// Gaussian outputs and row indices.
+#[derive(Debug, Default)]
+struct MemberScratch {
+    x: Vec<f32>,
+    ws: MlpWorkspace,
+    g: GaussianOutput,
+    rows: Vec<usize>,
+}
+
+/// The elites' inference buffers behind a mutex, so that `predict` through `&self` allocates only
+/// its result when called again at the same batch size (a planner's rollouts, MBPO's 100 000
+/// imagined rows). A contended lock falls back to fresh buffers, so concurrent callers never wait
+/// and get the same numbers. Cloning gives empty buffers.
+#[derive(Debug, Default)]
+struct Scratch(Mutex<Vec<MemberScratch>>);
+
+impl Clone for Scratch {
+    fn clone(&self) -> Self {
+        Self::default()
     }
 }
 
@@ -367,6 +440,20 @@ impl Batch<'_> {
     }
 }
 
+/// Reusable buffers of one member's training steps.
+#[derive(Default)]
+struct FitScratch {
+    ws: MlpWorkspace,
+    xb: Vec<f32>,
+    yb: Vec<f32>,
+    g: GaussianOutput,
+    d_mean: Vec<f32>,
+    d_lv: Vec<f32>,
+    d_out: Vec<f32>,
+    d_bounds: Vec<f32>,
+    grads: Vec<f32>,
+}
+
 /// Held-out `(nll per element, mse per element)` of one member.
 fn member_eval(
     m: &Member,
@@ -416,19 +503,25 @@ impl DynamicsModel for ProbabilisticEnsemble {
             ],
             b,
         );
-        let din = self.state_dim + self.action_dim;
         let mut next = input.states.to_owned();
         let mut var = Array2::zeros((b, s));
         let mut rewards = self.cfg.learn_reward.then(|| Array1::zeros(b));
         let e = self.elites.len();
+        let mut guard = self.scratch.0.try_lock();
+        let mut fresh = Vec::new();
+        let bufs = match guard.as_deref_mut() {
+            Ok(bufs) => bufs,
+            Err(_) => &mut fresh,
+        };
         match self.propagation {
             Propagation::Expectation => {
+                self.elite_forwards(&x, b, None, bufs)?;
                 // Mixture moments in original units.
                 let mut mean_acc = Array2::<f64>::zeros((b, dim));
                 let mut sq_acc = Array2::<f64>::zeros((b, dim));
                 let mut var_acc = Array2::<f64>::zeros((b, dim));
-                for &k in &self.elites {
-                    let g = self.member_forward(k, &x, b)?;
+                for sc in &bufs[..e] {
+                    let g = &sc.g;
                     for r in 0..b {
                         for j in 0..dim {
                             let mu = self.out_norm.invert(j, g.mean[r * dim + j]);
@@ -455,26 +548,17 @@ impl DynamicsModel for ProbabilisticEnsemble {
                 }
             }
             mode => {
+                // The elite slot of each row.
                 let assign: Vec<usize> = match mode {
-                    Propagation::RandomMember => (0..b)
-                        .map(|_| self.elites[rng.random_range(0..e)])
-                        .collect(),
-                    _ => (0..b)
-                        .map(|r| self.elites[(r + self.member_offset) % e])
-                        .collect(),
+                    Propagation::RandomMember => (0..b).map(|_| rng.random_range(0..e)).collect(),
+                    _ => (0..b).map(|r| (r + self.member_offset) % e).collect(),
                 };
-                let mut xb = Vec::new();
-                for &k in &self.elites {
-                    let rows: Vec<usize> = (0..b).filter(|&r| assign[r] == k).collect();
-                    if rows.is_empty() {
-                        continue;
-                    }
-                    xb.clear();
-                    for &r in &rows {
-                        xb.extend_from_slice(&x[r * din..(r + 1) * din]);
-                    }
-                    let g = self.member_forward(k, &xb, rows.len())?;
-                    for (q, &r) in rows.iter().enumerate() {
+                self.elite_forwards(&x, b, Some(&assign), bufs)?;
+                // Noise is drawn elite by elite, rows in order: the same stream whatever ran in
+                // parallel.
+                for sc in &bufs[..e] {
+                    let g = &sc.g;
+                    for (q, &r) in sc.rows.iter().enumerate() {
                         for j in 0..dim {
                             let mu = self.out_norm.invert(j, g.mean[q * dim + j]);
                             let sd = self.out_norm.std[j];
@@ -555,38 +639,47 @@ impl DynamicsModel for ProbabilisticEnsemble {
 
         let bs = cfg.batch_size.max(1);
         let mut report = FitReport::default();
-        let (mut xb, mut yb) = (Vec::new(), Vec::new());
-        let mut g = GaussianOutput::default();
-        let mut d_mean = Vec::new();
-        let mut d_lv = Vec::new();
-        let mut d_out = Vec::new();
-        let mut d_bounds = vec![0.0f32; 2 * dim];
-        let mut grads = Vec::new();
         let mut hold_mse = vec![f64::NAN; members.len()];
-        for epoch in 0..cfg.epochs {
-            let mut epoch_train = 0.0;
-            let mut epoch_hold = 0.0;
-            for (k, m) in members.iter_mut().enumerate() {
-                let mut order = member_rows[k].clone();
-                order.shuffle(&mut rngs[k]);
-                let mut ws = m.net.workspace();
+        let mut scratch: Vec<FitScratch> =
+            (0..members.len()).map(|_| FitScratch::default()).collect();
+        let learn_bounds = self.cfg.learn_log_var_bounds;
+        // One epoch of member `k`: (mean training NLL, held-out (NLL, MSE) when there is a
+        // holdout). Members share nothing, so they train side by side on rayon's threads with
+        // the numbers they would have one after the other.
+        let member_epoch =
+            |epoch: usize,
+             (((m, rng), rows), sc): (((&mut Member, &mut Rng), &Vec<usize>), &mut FitScratch)|
+             -> Result<(f64, Option<(f64, f64)>), ModelError> {
+                let mut order = rows.clone();
+                order.shuffle(rng);
+                let FitScratch {
+                    ws,
+                    xb,
+                    yb,
+                    g,
+                    d_mean,
+                    d_lv,
+                    d_out,
+                    d_bounds,
+                    grads,
+                } = sc;
                 grads.resize(m.net.num_params(), 0.0);
+                d_bounds.resize(2 * dim, 0.0);
                 let mut total = 0.0;
                 for (step, idx) in order.chunks(bs).enumerate() {
                     let nb = idx.len();
-                    batch_data.gather(idx, &mut xb, &mut yb);
+                    batch_data.gather(idx, xb, yb);
                     let out = m
                         .net
-                        .forward_train(&xb, nb, &mut ws, None)
+                        .forward_train(xb, nb, ws, None)
                         .map_err(|e| nn_train(e, epoch, step))?;
                     m.head
-                        .forward(out, nb, &mut g)
+                        .forward(out, nb, g)
                         .map_err(|e| nn_train(e, epoch, step))?;
                     d_mean.resize(nb * dim, 0.0);
                     d_lv.resize(nb * dim, 0.0);
-                    let nll =
-                        gaussian_nll(&g.mean, &g.log_var, &yb, Some(&mut d_mean), Some(&mut d_lv))
-                            .map_err(|e| nn_train(e, epoch, step))?;
+                    let nll = gaussian_nll(&g.mean, &g.log_var, yb, Some(d_mean), Some(d_lv))
+                        .map_err(|e| nn_train(e, epoch, step))?;
                     if !nll.is_finite() {
                         return Err(ModelError::Diverged { epoch, step });
                     }
@@ -597,31 +690,61 @@ impl DynamicsModel for ProbabilisticEnsemble {
                     d_lv.iter_mut().for_each(|v| *v *= scale);
                     d_out.resize(nb * 2 * dim, 0.0);
                     m.head
-                        .backward(&g, &d_mean, &d_lv, &mut d_out, Some(&mut d_bounds))
+                        .backward(g, d_mean, d_lv, d_out, Some(d_bounds))
                         .map_err(|e| nn_train(e, epoch, step))?;
                     m.net
-                        .backward(&mut ws, &d_out, Some(&mut grads), None)
+                        .backward(ws, d_out, Some(grads), None)
                         .map_err(|e| nn_train(e, epoch, step))?;
                     m.opt
-                        .step(m.net.params_mut(), &grads)
+                        .step(m.net.params_mut(), grads)
                         .map_err(|e| nn_train(e, epoch, step))?;
-                    if self.cfg.learn_log_var_bounds {
+                    if learn_bounds {
                         // PETS penalty 0.01 (Σ max − Σ min).
                         for (j, db) in d_bounds.iter_mut().enumerate() {
                             *db += if j < dim { -0.01 } else { 0.01 };
                         }
                         m.bounds_opt
-                            .step(m.head.bounds_mut(), &d_bounds)
+                            .step(m.head.bounds_mut(), d_bounds)
                             .map_err(|e| nn_train(e, epoch, step))?;
                     }
                 }
-                epoch_train += total / order.len().max(1) as f64;
-                if !holdout.is_empty() {
-                    let (nll, mse) =
-                        member_eval(m, &batch_data, &holdout).map_err(|e| nn_train(e, epoch, 0))?;
-                    if !nll.is_finite() {
-                        return Err(ModelError::Diverged { epoch, step: 0 });
-                    }
+                let train_nll = total / order.len().max(1) as f64;
+                if holdout.is_empty() {
+                    return Ok((train_nll, None));
+                }
+                let (nll, mse) =
+                    member_eval(m, &batch_data, &holdout).map_err(|e| nn_train(e, epoch, 0))?;
+                if !nll.is_finite() {
+                    return Err(ModelError::Diverged { epoch, step: 0 });
+                }
+                Ok((train_nll, Some((nll, mse))))
+            };
+        let parallel = members.len() > 1 && rayon::current_num_threads() > 1;
+        for epoch in 0..cfg.epochs {
+            let results: Vec<_> = if parallel {
+                members
+                    .par_iter_mut()
+                    .zip(rngs.par_iter_mut())
+                    .zip(member_rows.par_iter())
+                    .zip(scratch.par_iter_mut())
+                    .map(|item| member_epoch(epoch, item))
+                    .collect()
+            } else {
+                members
+                    .iter_mut()
+                    .zip(rngs.iter_mut())
+                    .zip(member_rows.iter())
+                    .zip(scratch.iter_mut())
+                    .map(|item| member_epoch(epoch, item))
+                    .collect()
+            };
+            // Summed in member order, as one member after the other would.
+            let mut epoch_train = 0.0;
+            let mut epoch_hold = 0.0;
+            for (k, r) in results.into_iter().enumerate() {
+                let (train_nll, hold) = r?;
+                epoch_train += train_nll;
+                if let Some((nll, mse)) = hold {
                     epoch_hold += nll;
                     hold_mse[k] = mse;
                 }
@@ -868,6 +991,58 @@ mod tests {
         let before = c.member_network(0).unwrap().params().to_vec();
         assert!(c.load_from("ens", &ckpt).is_err());
         assert_eq!(c.member_network(0).unwrap().params(), &before[..]);
+    }
+
+    /// Members fit and predict side by side on two threads with exactly the numbers they give
+    /// one after the other on one: losses, elites, weights and sampled predictions, in every
+    /// propagation mode.
+    #[test]
+    fn two_threads_give_the_numbers_of_one() {
+        let data = noisy(1500, 5);
+        let fit = FitConfig {
+            epochs: 3,
+            batch_size: 64,
+            holdout_fraction: 0.2,
+            seed: 3,
+        };
+        let (s, a) = (
+            Array2::from_shape_fn((1200, 1), |(i, _)| (i as f64 / 600.0) - 1.0),
+            Array2::from_shape_fn((1200, 1), |(i, _)| ((i * 7) % 13) as f64 / 6.5 - 1.0),
+        );
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut ens = ProbabilisticEnsemble::new(1, 1, small(9)).unwrap();
+                let report = ens.fit(&data, &fit).unwrap();
+                let mut out = vec![];
+                for mode in [
+                    Propagation::RandomMember,
+                    Propagation::FixedMember,
+                    Propagation::Expectation,
+                ] {
+                    ens.set_propagation(mode);
+                    let p = ens
+                        .predict(&ModelInput::new(s.view(), a.view()), &mut rng_from_seed(4))
+                        .unwrap();
+                    out.push((p.next_states, p.variance.unwrap(), p.rewards.unwrap()));
+                }
+                (
+                    report,
+                    ens.elites().to_vec(),
+                    ens.member_holdout_mse().to_vec(),
+                    out,
+                )
+            })
+        };
+        let (one, two) = (run(1), run(2));
+        assert_eq!(one.0.train_loss, two.0.train_loss);
+        assert_eq!(one.0.holdout_loss, two.0.holdout_loss);
+        assert_eq!(one.1, two.1);
+        assert_eq!(one.2, two.2);
+        assert_eq!(one.3, two.3);
     }
 
     #[test]

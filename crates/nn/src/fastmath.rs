@@ -17,13 +17,22 @@ const ROUND_MAGIC: f32 = 12_582_912.0;
 #[inline(always)]
 pub fn exp(x: f32) -> f32 {
     let x = x.clamp(-87.3, 88.0);
-    let n = (x * LOG2E + ROUND_MAGIC) - ROUND_MAGIC;
+    let t = x * LOG2E + ROUND_MAGIC;
+    let n = t - ROUND_MAGIC;
     let r = (x - n * LN2_HI) - n * LN2_LO;
     let p = 1.0
         + r * (1.0
             + r * (0.5
                 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0))))));
-    let scale = f32::from_bits((((n as i32) + 127) as u32) << 23);
+    // `t` lies in [2^23, 2^24), where one unit of the mantissa is 1: its bits are ROUND_MAGIC's
+    // plus `n` (|n| ≤ 127). Building 2^n from them, rather than through `n as i32`, keeps the
+    // function free of float-to-int conversions, whose NaN handling stops vectorization.
+    let scale = f32::from_bits(
+        t.to_bits()
+            .wrapping_sub(ROUND_MAGIC.to_bits())
+            .wrapping_add(127)
+            << 23,
+    );
     p * scale
 }
 
@@ -90,6 +99,24 @@ mod tests {
             assert!(((super::exp_m1(x) - x.exp_m1()) / x).abs() < 1e-6);
         }
         assert_eq!(super::exp(-1000.0), super::exp(-87.3));
+        // 2^n from the rounding constant's bits is exactly 2^n from `n as i32` (the form before
+        // it was made vectorizable): every result is bit for bit what it was.
+        let before = |x: f32| {
+            let x = x.clamp(-87.3, 88.0);
+            let n = (x * super::LOG2E + super::ROUND_MAGIC) - super::ROUND_MAGIC;
+            let r = (x - n * super::LN2_HI) - n * super::LN2_LO;
+            let p = 1.0
+                + r * (1.0
+                    + r * (0.5
+                        + r * (1.0 / 6.0
+                            + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0))))));
+            p * f32::from_bits((((n as i32) + 127) as u32) << 23)
+        };
+        for i in 0..=2_000_000 {
+            let x = -100.0 + 200.0 * i as f32 / 2_000_000.0;
+            assert_eq!(super::exp(x).to_bits(), before(x).to_bits(), "x = {x}");
+        }
+        assert!(super::exp(f32::NAN).is_nan());
         assert!(super::exp(1000.0).is_finite());
         assert_eq!(super::tanh(50.0), 1.0);
         assert_eq!(super::tanh(-50.0), -1.0);

@@ -433,6 +433,9 @@ impl Mlp {
             0.0
         };
         let dropout = DropoutSampler::new(drop_p);
+        // Row blocks are independent unless dropout draws masks in row order.
+        let split =
+            (!dropout.active() && split_rows(batch, self.num_params())).then_some(batch / 2);
         for l in 0..n_layers {
             let s = self.layers[l];
             let act = self.activation(l);
@@ -446,6 +449,26 @@ impl Mlp {
             let n = batch * s.fan_out;
             let w = &self.params[s.weight_offset..s.bias_offset];
             let b = &self.params[s.bias_offset..s.bias_offset + s.fan_out];
+            let keep_pre = train && act.needs_pre();
+            if let Some(h) = split {
+                // A large batch: the two row blocks side by side. Each row's numbers are the
+                // ones of the whole product (`gemm` reduces every row alike).
+                let (x1, x2) = x[..batch * s.fan_in].split_at(h * s.fan_in);
+                let (y1, y2) = cur.y[..n].split_at_mut(h * s.fan_out);
+                let (z1, z2) = if keep_pre {
+                    let (z1, z2) = cur.z[..n].split_at_mut(h * s.fan_out);
+                    (Some(z1), Some(z2))
+                } else {
+                    (None, None)
+                };
+                let layer = |rows: usize, x: &[f32], y: &mut [f32], z: Option<&mut [f32]>| {
+                    gemm_nt(rows, s.fan_out, s.fan_in, x, w, y, false);
+                    bias_activation(y, b, act, z);
+                };
+                rayon::join(|| layer(h, x1, y1, z1), || layer(batch - h, x2, y2, z2));
+                cur.dropped = false;
+                continue;
+            }
             gemm_nt(
                 batch,
                 s.fan_out,
@@ -455,7 +478,6 @@ impl Mlp {
                 &mut cur.y[..n],
                 false,
             );
-            let keep_pre = train && act.needs_pre();
             bias_activation(
                 &mut cur.y[..n],
                 b,
@@ -605,17 +627,44 @@ fn split_backward(macs: usize) -> bool {
     macs >= 1 << 21 && rayon::current_num_threads() > 1
 }
 
+/// Whether a forward pass over `batch` rows of a network with `params` parameters runs its two
+/// row halves on two threads (idle ones steal the second half; a busy pool runs both in turn): when rayon has a second thread, the pass has at least 2^22
+/// multiply-adds (a planner's 500 rows through two 200-wide layers, MBPO's 100 000 imagined rows)
+/// and each half at least 64 rows. `gemm` gives a row the same bits in products of any row count
+/// from about 22 rows up (measured: below that, and at one row, it may pick other kernels), so
+/// the halves keep the numbers of the whole pass.
+fn split_rows(batch: usize, params: usize) -> bool {
+    batch >= 128 && batch * params >= 1 << 22 && rayon::current_num_threads() > 1
+}
+
 multiversion! {
     /// `y[r, :] = act(y[r, :] + b)`, keeping `z = y + b` when asked (SiLU's backward needs it).
     fn bias_activation(y: &mut [f32], b: &[f32], act: Activation, z: Option<&mut [f32]>) {
         let width = b.len();
         if let Some(z) = z {
+            // Bias first (keeping z), then the activation over whole rows: a per-element match
+            // on the activation does not vectorize.
             for (yr, zr) in y.chunks_exact_mut(width).zip(z.chunks_exact_mut(width)) {
                 for ((yv, zv), bv) in yr.iter_mut().zip(zr.iter_mut()).zip(b) {
                     let v = *yv + bv;
                     *zv = v;
-                    *yv = act.apply(v);
+                    *yv = v;
                 }
+            }
+            macro_rules! all {
+                ($f:expr) => {
+                    for yv in y.iter_mut() {
+                        *yv = $f(*yv);
+                    }
+                };
+            }
+            match act {
+                Activation::Identity => {}
+                Activation::Relu => all!(|v: f32| v.max(0.0)),
+                Activation::Tanh => all!(fastmath::tanh),
+                Activation::Sigmoid => all!(fastmath::sigmoid),
+                Activation::Elu => all!(|v: f32| if v > 0.0 { v } else { fastmath::exp_m1(v) }),
+                Activation::Silu => all!(|v: f32| v * fastmath::sigmoid(v)),
             }
             return;
         }
@@ -1031,6 +1080,55 @@ mod tests {
             .to_vec1::<f64>()
             .unwrap();
         (flat, dx)
+    }
+
+    /// A large forward pass (inference or training) runs its two row halves on two threads with
+    /// the bits of the whole pass on one thread, and so do the gradients after it, for each
+    /// activation (an odd batch: halves of unequal size).
+    #[test]
+    fn split_passes_give_the_numbers_of_one_thread() {
+        let mut rng = rng_from_seed(11);
+        for act in [Activation::Relu, Activation::Silu, Activation::Tanh] {
+            let net = Mlp::new(
+                MlpConfig::new(&[23, 200, 200, 200, 36]).hidden(act),
+                &mut rng,
+            )
+            .unwrap();
+            let batch = 1001;
+            let x = random_vec(batch * 23, &mut rng);
+            let run = |threads: usize| {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                pool.install(|| {
+                    assert_eq!(split_rows(batch, net.num_params()), threads > 1);
+                    let mut ws = net.workspace();
+                    let out = net.forward(&x, batch, &mut ws).unwrap().to_vec();
+                    // A training pass and its gradients.
+                    let d_out: Vec<f32> = net
+                        .forward_train(&x, batch, &mut ws, None)
+                        .unwrap()
+                        .iter()
+                        .map(|v| v - 0.5)
+                        .collect();
+                    let mut grads = net.zero_grads();
+                    let mut d_in = vec![0.0; x.len()];
+                    net.backward(&mut ws, &d_out, Some(&mut grads), Some(&mut d_in))
+                        .unwrap();
+                    [out, grads, d_in]
+                })
+            };
+            let (one, two) = (run(1), run(2));
+            for (what, (a, b)) in ["output", "grads", "d_input"]
+                .iter()
+                .zip(one.iter().zip(&two))
+            {
+                for (i, (a, b)) in a.iter().zip(b).enumerate() {
+                    assert_eq!(a.to_bits(), b.to_bits(), "{act:?}, {what} element {i}");
+                }
+            }
+        }
     }
 
     fn assert_close(what: &str, got: &[f32], want: &[f64], tol: f64) {
