@@ -436,7 +436,7 @@ where
     };
     let o_dim = task.observation_space().flat_dim();
     let mut alive: Vec<usize> = (0..b).collect();
-    let mut out = Rows::default();
+    let mut out = Rows::with_capacity(b, (n, o_dim, a_dim, m));
     for _ in 0..horizon {
         if alive.is_empty() {
             break;
@@ -464,9 +464,10 @@ where
                 .assign(&Array1::from(task.control(&action)));
         }
         let input = ModelInput::new(state.view(), controls.view()).with_prev_actions(prev.view());
-        let pred = model.predict(&input, rng)?;
+        let mut pred = model.predict(&input, rng)?;
         crate::data::check_array("predicted next states", pred.next_states.view(), k, n)?;
-        let mut next = pred.next_states.clone();
+        // The judges read the predicted reward and termination, not the next states.
+        let mut next = std::mem::take(&mut pred.next_states);
         let mut keep = Vec::with_capacity(k);
         for (i, &origin) in alive.iter().enumerate() {
             let (s, u) = (state.row(i), controls.row(i));
@@ -525,6 +526,21 @@ struct Rows {
 }
 
 impl Rows {
+    /// Room for `rows` transitions of `(state, observation, action, control)` widths `dims`.
+    fn with_capacity(rows: usize, (n, o, a, m): (usize, usize, usize, usize)) -> Self {
+        Self {
+            states: Vec::with_capacity(rows * n),
+            obs: Vec::with_capacity(rows * o),
+            actions: Vec::with_capacity(rows * a),
+            controls: Vec::with_capacity(rows * m),
+            rewards: Vec::with_capacity(rows),
+            next: Vec::with_capacity(rows * n),
+            next_obs: Vec::with_capacity(rows * o),
+            terminated: Vec::with_capacity(rows),
+            origin: Vec::with_capacity(rows),
+        }
+    }
+
     fn push(&mut self, r: Row<'_>) {
         self.states.extend_from_slice(r.state);
         self.obs.extend_from_slice(r.obs);

@@ -627,14 +627,18 @@ fn split_backward(macs: usize) -> bool {
     macs >= 1 << 21 && rayon::current_num_threads() > 1
 }
 
+/// The fewest rows of either half of a split pass. `gemm` gives a row the same bits
+/// in products of any row count from about 22 rows up (measured: below that, and at one row, it
+/// may pick other kernels), so halves of at least this many rows keep the numbers of the whole
+/// pass.
+const MIN_BLOCK: usize = 64;
+
 /// Whether a forward pass over `batch` rows of a network with `params` parameters runs its two
 /// row halves on two threads (idle ones steal the second half; a busy pool runs both in turn): when rayon has a second thread, the pass has at least 2^22
 /// multiply-adds (a planner's 500 rows through two 200-wide layers, MBPO's 100 000 imagined rows)
-/// and each half at least 64 rows. `gemm` gives a row the same bits in products of any row count
-/// from about 22 rows up (measured: below that, and at one row, it may pick other kernels), so
-/// the halves keep the numbers of the whole pass.
+/// and each half at least [`MIN_BLOCK`] rows.
 fn split_rows(batch: usize, params: usize) -> bool {
-    batch >= 128 && batch * params >= 1 << 22 && rayon::current_num_threads() > 1
+    batch >= 2 * MIN_BLOCK && batch * params >= 1 << 22 && rayon::current_num_threads() > 1
 }
 
 multiversion! {
@@ -1105,28 +1109,33 @@ mod tests {
                     assert_eq!(split_rows(batch, net.num_params()), threads > 1);
                     let mut ws = net.workspace();
                     let out = net.forward(&x, batch, &mut ws).unwrap().to_vec();
-                    // A training pass and its gradients.
-                    let d_out: Vec<f32> = net
+                    // A training pass (whole-batch products: the reference) and its gradients.
+                    let train_out = net
                         .forward_train(&x, batch, &mut ws, None)
                         .unwrap()
-                        .iter()
-                        .map(|v| v - 0.5)
-                        .collect();
+                        .to_vec();
+                    let d_out: Vec<f32> = train_out.iter().map(|v| v - 0.5).collect();
                     let mut grads = net.zero_grads();
                     let mut d_in = vec![0.0; x.len()];
                     net.backward(&mut ws, &d_out, Some(&mut grads), Some(&mut d_in))
                         .unwrap();
-                    [out, grads, d_in]
+                    [out, train_out, grads, d_in]
                 })
             };
-            let (one, two) = (run(1), run(2));
-            for (what, (a, b)) in ["output", "grads", "d_input"]
-                .iter()
-                .zip(one.iter().zip(&two))
-            {
+            let same = |what: &str, a: &[f32], b: &[f32]| {
+                assert_eq!(a.len(), b.len());
                 for (i, (a, b)) in a.iter().zip(b).enumerate() {
                     assert_eq!(a.to_bits(), b.to_bits(), "{act:?}, {what} element {i}");
                 }
+            };
+            let (one, two) = (run(1), run(2));
+            // Inference and training passes agree.
+            same("inference", &one[0], &one[1]);
+            for (what, (a, b)) in ["output", "training output", "grads", "d_input"]
+                .iter()
+                .zip(one.iter().zip(&two))
+            {
+                same(what, a, b);
             }
         }
     }
