@@ -57,6 +57,16 @@ fn transitions(n: usize, s: usize, a: usize, rng: &mut Rng) -> tandem_models::Tr
     b.build()
 }
 
+/// One epoch of minibatches of 256, `holdout_fraction` of the rows held out.
+fn one_epoch(holdout_fraction: f64) -> FitConfig {
+    FitConfig {
+        epochs: 1,
+        batch_size: 256,
+        holdout_fraction,
+        seed: 0,
+    }
+}
+
 /// Pendulum-v1's cost of `(cos θ, sin θ, θ̇)` and torque.
 fn pendulum_objective() -> Objective {
     Objective::new(3, 1, |x, u| {
@@ -68,12 +78,7 @@ fn pendulum_objective() -> Objective {
 fn pendulum_models() -> Vec<(&'static str, Box<dyn DynamicsModel>)> {
     let mut rng = rng_from_seed(0);
     let data = transitions(1000, 3, 1, &mut rng);
-    let fit = FitConfig {
-        epochs: 1,
-        batch_size: 256,
-        holdout_fraction: 0.0,
-        seed: 0,
-    };
+    let fit = one_epoch(0.0);
     // One short fit gives both models real input and output standardizations.
     let mut mlp = MlpModel::new(
         3,
@@ -157,12 +162,7 @@ fn ensemble_fit(c: &mut Criterion) {
     let mut rng = rng_from_seed(1);
     // 20 minibatches of 256 per member after a 10% holdout.
     let data = transitions(5689, 17, 6, &mut rng);
-    let fit = FitConfig {
-        epochs: 1,
-        batch_size: 256,
-        holdout_fraction: 0.1,
-        seed: 0,
-    };
+    let fit = one_epoch(0.1);
     let mut ens = cheetah_ensemble();
     let mut g = c.benchmark_group("ensemble_fit");
     g.sample_size(10);
@@ -227,16 +227,7 @@ fn cheetah_parts() -> (ProbabilisticEnsemble, Sac, CheetahShaped) {
     let mut rng = rng_from_seed(2);
     let data = transitions(2000, 17, 6, &mut rng);
     let mut ens = cheetah_ensemble();
-    ens.fit(
-        &data,
-        &FitConfig {
-            epochs: 1,
-            batch_size: 256,
-            holdout_fraction: 0.1,
-            seed: 0,
-        },
-    )
-    .expect("fit");
+    ens.fit(&data, &one_epoch(0.1)).expect("fit");
     let task = CheetahShaped::new();
     let sac = Sac::new(
         SacConfig::default(),

@@ -97,8 +97,9 @@
 //! (networks and optimizers), `candle-core`/`candle-nn` (the pixel model's convolutions, transposed
 //! convolutions and autograd, through `tandem_nn::candle_ext::ParamSet`), `ndarray` (batched data), `nalgebra` (plant states and the small
 //! matrices of the TVLG fit and its GMM: at most `2 dX + dU` square, where faer has no advantage,
-//! so faer is not used), `rand`/`rand_distr` (seeded sampling), `rayon` (an ensemble's members forward and train on both
-//! cores; already in the tree through `tandem-nn` and `gemm`), `serde`, `thiserror`.
+//! so faer is not used), `rand`/`rand_distr` (seeded sampling), `rayon` (an ensemble's members
+//! forward and train on both cores; already in the tree through `tandem-nn` and `gemm`), `serde`,
+//! `thiserror`.
 
 mod data;
 mod ensemble;

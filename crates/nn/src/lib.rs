@@ -46,11 +46,11 @@
 //! products (e.g. a planner's batch of 500 through 400-wide layers) over threads instead.
 //! [`Mlp::backward`] runs a layer's weight-gradient and input-gradient products side by side when
 //! both are needed and each has at least 2^21 multiply-adds (e.g. SAC's actor step), whenever
-//! rayon has a second thread. [`Mlp::forward`] and [`Mlp::forward_train`] (without dropout) run the two row halves of a
-//! batch side by side when the pass has at least 2^22 multiply-adds and each half 64 rows (a
-//! planner's population, MBPO's imagined rows): `gemm` gives a row the same bits in any product of
-//! more than about 22 rows, so the numbers are the whole pass's. The element-wise loops (activations, bias gradients, Adam, polyak)
-//! are compiled twice, baseline and AVX2, and picked at run time (`simd.rs`), with bit-identical
+//! rayon has a second thread. [`Mlp::forward`] and [`Mlp::forward_train`] (without dropout) run
+//! the two row halves of a batch side by side when the pass has at least 2^22 multiply-adds and
+//! each half 64 rows (a planner's population, MBPO's imagined rows): `gemm` gives a row the same
+//! bits in any product of more than about 22 rows, so the numbers are the whole pass's. The
+//! element-wise loops (activations, bias gradients, Adam, polyak) are compiled twice, baseline and AVX2, and picked at run time (`simd.rs`), with bit-identical
 //! results. The ReLU backward writes a separate buffer through a select: the in-place conditional
 //! store compiled to branches (about 11% of a single-thread SAC update in `perf`) and, with AVX2,
 //! to masked stores (4.5%; slow on AMD cores); the select costs 2.3%.

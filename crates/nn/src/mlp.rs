@@ -449,45 +449,30 @@ impl Mlp {
             let n = batch * s.fan_out;
             let w = &self.params[s.weight_offset..s.bias_offset];
             let b = &self.params[s.bias_offset..s.bias_offset + s.fan_out];
-            let keep_pre = train && act.needs_pre();
-            if let Some(h) = split {
+            let x = &x[..batch * s.fan_in];
+            let y = &mut cur.y[..n];
+            let z = (train && act.needs_pre()).then(|| &mut cur.z[..n]);
+            let layer = |rows: usize, x: &[f32], y: &mut [f32], z: Option<&mut [f32]>| {
+                gemm_nt(rows, s.fan_out, s.fan_in, x, w, y, false);
+                bias_activation(y, b, act, z);
+            };
+            match split {
                 // A large batch: the two row blocks side by side. Each row's numbers are the
                 // ones of the whole product (`gemm` reduces every row alike).
-                let (x1, x2) = x[..batch * s.fan_in].split_at(h * s.fan_in);
-                let (y1, y2) = cur.y[..n].split_at_mut(h * s.fan_out);
-                let (z1, z2) = if keep_pre {
-                    let (z1, z2) = cur.z[..n].split_at_mut(h * s.fan_out);
-                    (Some(z1), Some(z2))
-                } else {
-                    (None, None)
-                };
-                let layer = |rows: usize, x: &[f32], y: &mut [f32], z: Option<&mut [f32]>| {
-                    gemm_nt(rows, s.fan_out, s.fan_in, x, w, y, false);
-                    bias_activation(y, b, act, z);
-                };
-                rayon::join(|| layer(h, x1, y1, z1), || layer(batch - h, x2, y2, z2));
-                cur.dropped = false;
-                continue;
+                Some(h) => {
+                    let (x1, x2) = x.split_at(h * s.fan_in);
+                    let (y1, y2) = y.split_at_mut(h * s.fan_out);
+                    let (z1, z2) = match z {
+                        Some(z) => {
+                            let (z1, z2) = z.split_at_mut(h * s.fan_out);
+                            (Some(z1), Some(z2))
+                        }
+                        None => (None, None),
+                    };
+                    rayon::join(|| layer(h, x1, y1, z1), || layer(batch - h, x2, y2, z2));
+                }
+                None => layer(batch, x, y, z),
             }
-            gemm_nt(
-                batch,
-                s.fan_out,
-                s.fan_in,
-                &x[..batch * s.fan_in],
-                w,
-                &mut cur.y[..n],
-                false,
-            );
-            bias_activation(
-                &mut cur.y[..n],
-                b,
-                act,
-                if keep_pre {
-                    Some(&mut cur.z[..n])
-                } else {
-                    None
-                },
-            );
             let hidden = l + 1 < n_layers;
             cur.dropped = false;
             if hidden && dropout.active() {
@@ -627,16 +612,16 @@ fn split_backward(macs: usize) -> bool {
     macs >= 1 << 21 && rayon::current_num_threads() > 1
 }
 
-/// The fewest rows of either half of a split pass. `gemm` gives a row the same bits
-/// in products of any row count from about 22 rows up (measured: below that, and at one row, it
-/// may pick other kernels), so halves of at least this many rows keep the numbers of the whole
-/// pass.
+/// The fewest rows of either half of a split pass. `gemm` gives a row the same bits in products
+/// of any row count from about 22 rows up (measured: below that, and at one row, it may pick
+/// other kernels), so halves of at least this many rows keep the numbers of the whole pass.
 const MIN_BLOCK: usize = 64;
 
 /// Whether a forward pass over `batch` rows of a network with `params` parameters runs its two
-/// row halves on two threads (idle ones steal the second half; a busy pool runs both in turn): when rayon has a second thread, the pass has at least 2^22
-/// multiply-adds (a planner's 500 rows through two 200-wide layers, MBPO's 100 000 imagined rows)
-/// and each half at least [`MIN_BLOCK`] rows.
+/// row halves on two threads (an idle thread steals the second half; a busy pool runs both in
+/// turn): when rayon has a second thread, the pass has at least 2^22 multiply-adds (a planner's
+/// 500 rows through two 200-wide layers, MBPO's 100 000 imagined rows) and each half at least
+/// [`MIN_BLOCK`] rows.
 fn split_rows(batch: usize, params: usize) -> bool {
     batch >= 2 * MIN_BLOCK && batch * params >= 1 << 22 && rayon::current_num_threads() > 1
 }
@@ -644,10 +629,24 @@ fn split_rows(batch: usize, params: usize) -> bool {
 multiversion! {
     /// `y[r, :] = act(y[r, :] + b)`, keeping `z = y + b` when asked (SiLU's backward needs it).
     fn bias_activation(y: &mut [f32], b: &[f32], act: Activation, z: Option<&mut [f32]>) {
+        // One loop per activation, the match outside it: a per-element match does not vectorize.
+        macro_rules! by_activation {
+            ($each:ident) => {
+                match act {
+                    Activation::Identity => $each!(|v: f32| v),
+                    Activation::Relu => $each!(|v: f32| v.max(0.0)),
+                    Activation::Tanh => $each!(fastmath::tanh),
+                    Activation::Sigmoid => $each!(fastmath::sigmoid),
+                    Activation::Elu => {
+                        $each!(|v: f32| if v > 0.0 { v } else { fastmath::exp_m1(v) })
+                    }
+                    Activation::Silu => $each!(|v: f32| v * fastmath::sigmoid(v)),
+                }
+            };
+        }
         let width = b.len();
         if let Some(z) = z {
-            // Bias first (keeping z), then the activation over whole rows: a per-element match
-            // on the activation does not vectorize.
+            // Bias first (keeping z), then the activation over the whole block.
             for (yr, zr) in y.chunks_exact_mut(width).zip(z.chunks_exact_mut(width)) {
                 for ((yv, zv), bv) in yr.iter_mut().zip(zr.iter_mut()).zip(b) {
                     let v = *yv + bv;
@@ -662,14 +661,7 @@ multiversion! {
                     }
                 };
             }
-            match act {
-                Activation::Identity => {}
-                Activation::Relu => all!(|v: f32| v.max(0.0)),
-                Activation::Tanh => all!(fastmath::tanh),
-                Activation::Sigmoid => all!(fastmath::sigmoid),
-                Activation::Elu => all!(|v: f32| if v > 0.0 { v } else { fastmath::exp_m1(v) }),
-                Activation::Silu => all!(|v: f32| v * fastmath::sigmoid(v)),
-            }
+            by_activation!(all);
             return;
         }
         macro_rules! rows {
@@ -681,14 +673,7 @@ multiversion! {
                 }
             };
         }
-        match act {
-            Activation::Identity => rows!(|v: f32| v),
-            Activation::Relu => rows!(|v: f32| v.max(0.0)),
-            Activation::Tanh => rows!(fastmath::tanh),
-            Activation::Sigmoid => rows!(fastmath::sigmoid),
-            Activation::Elu => rows!(|v: f32| if v > 0.0 { v } else { fastmath::exp_m1(v) }),
-            Activation::Silu => rows!(|v: f32| v * fastmath::sigmoid(v)),
-        }
+        by_activation!(rows);
     }
 }
 
