@@ -10,7 +10,7 @@ use tandem::dynamics::classic::GymPendulumParams;
 use tandem::envs::{make, PendulumTask, Task};
 use tandem::models::{DynamicsModel, FitConfig, Judges, MlpModel, MlpModelConfig};
 use tandem::models::{OptimizerConfig, TransitionsBuilder};
-use tandem::pipelines::dyna::{imagine, sample_states};
+use tandem::pipelines::dyna::{imagine, sample_starts};
 
 const FIT_EVERY: u64 = 250; // real steps between model fits and rollout batches
 const ROLLOUTS: usize = 2000; // branched rollouts per batch, from random real states
@@ -61,7 +61,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     ..fit.clone()
                 },
             )?;
-            let starts = sample_states(&all, ROLLOUTS, &mut rng)?;
+            let starts = sample_starts(&all, ROLLOUTS, &mut rng)?;
             imagine(&mut lp, &model, &task, &judges, &starts, HORIZON, &mut rng)?;
         }
         if lp.primary().len() > cfg.learning_starts {

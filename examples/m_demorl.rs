@@ -60,7 +60,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             )?;
             // 8–15: initialize D_MPC; M and H from the schedules; DMD-MPC from x_{t,0} ~ D_ENV.
             lp.resize_secondary(inner.capacity(&b, epoch))?;
-            inner.imagine(&mut lp, &mut f_phi, task, &all, epoch, t, &mut rng)?;
+            inner.imagine(&mut lp, Some(&mut f_phi), task, &all, epoch, t, &mut rng)?;
         }
         // 16–18: update SAC on D_ENV ∪ D_MPC.
         if lp.primary().len() > b.sac.learning_starts {

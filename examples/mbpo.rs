@@ -57,7 +57,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             )?;
             // M rollouts per step: s uniformly from D_env, k steps with π, into D_model.
             lp.resize_secondary(rollouts.capacity(&cfg, epoch))?;
-            rollouts.imagine(&mut lp, &mut model, task, &all, epoch, t, &mut rng)?;
+            rollouts.imagine(&mut lp, Some(&mut model), task, &all, epoch, t, &mut rng)?;
         }
         // G gradient updates of π on D_env ∪ D_model.
         if lp.primary().len() > cfg.sac.learning_starts {

@@ -199,8 +199,47 @@ fn p3_mujoco_runs_with_the_feature_only() {
         for m in ["sac", "mbpo", "m_demorl"] {
             assert!(table[m]["return_at_budget"]["mean"].is_number(), "{m}");
         }
+        // The target is MBPO's mean return at the budget.
+        assert_eq!(
+            table["mbpo"]["samples_to_target"]["target"],
+            table["mbpo"]["return_at_budget"]["mean"]
+        );
         let svg = std::fs::read_to_string(out.join("fig2.svg")).unwrap();
         assert!(svg.contains("HalfCheetah-v5"));
+        // p1 on the same task: its SAC and MBPO are p3's runs, number for number; its target
+        // is SAC's mean return at the budget.
+        let p1 = out.with_file_name("mujoco-cli-p1");
+        let _ = std::fs::remove_dir_all(&p1);
+        let o = tandem(&[
+            "reproduce",
+            "p1",
+            "--quick",
+            "--quiet",
+            "--seeds",
+            "1",
+            "--out",
+            p1.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", err_text(&o));
+        let t1 = std::fs::read_to_string(p1.join("table.json")).unwrap();
+        let t1: serde_json::Value = serde_json::from_str(&t1).unwrap();
+        for m in ["sac", "mbpo", "incremental_dyna"] {
+            assert!(t1[m]["return_at_budget"]["mean"].is_number(), "{m}");
+        }
+        assert_eq!(
+            t1["sac"]["samples_to_target"]["target"],
+            t1["sac"]["return_at_budget"]["mean"]
+        );
+        for m in ["sac", "mbpo"] {
+            let curve = |d: &PathBuf| {
+                std::fs::read_to_string(d.join(format!("runs/{m}__seed0/curve.csv"))).unwrap()
+            };
+            assert_eq!(curve(&p1), curve(&out), "{m}");
+        }
+        assert!(std::fs::read_to_string(p1.join("fig1.svg"))
+            .unwrap()
+            .contains("incremental"));
+        let _ = std::fs::remove_dir_all(&p1);
     } else {
         assert_eq!(o.status.code(), Some(1));
         assert!(

@@ -38,6 +38,7 @@ use tandem::report::{
 use tandem::run::RunDir;
 
 use super::harness::{self, JobError, Study, StudyArgs};
+use super::reproduce_p1::P1Study;
 use super::reproduce_p3::P3Study;
 use super::{CliError, Result};
 
@@ -47,6 +48,10 @@ pub enum ReproduceCommand {
     /// p0 (difference models) on the DC-motor pendulum: cold start, warm start and the
     /// difference-model method over seeds; Table II and Fig. 5.
     P0Pendulum(P0Args),
+    /// p1 (the deep incremental model) on a gymnasium MuJoCo task (`--env`, needs `--features
+    /// mujoco`): SAC, MBPO and Dyna-SAC with the incremental model at the same real steps and
+    /// updates per step; p1 Fig. 1.
+    P1(super::reproduce_p1::P1Args),
     /// p2 (model-augmented REINFORCE) on CartPole-v1: REINFORCE alone and with the learned model.
     P2Cartpole(super::reproduce_p2::P2Args),
     /// p2 (model-augmented DQN) on its pixel maze: DQN alone and with the pixel model, and the
@@ -59,8 +64,8 @@ pub enum ReproduceCommand {
     /// and M-DeMoRL with MBPO's settings for the task; p3 Fig. 2, and Fig. 3 with
     /// `--ablate-elites`.
     P3Mujoco(super::reproduce_p3::P3MujocoArgs),
-    /// Combine p0-pendulum, p3-leg or p3-mujoco reproductions of disjoint seeds (e.g. one process per seed,
-    /// `--first-seed`) into one table and figure; their settings must be equal.
+    /// Combine p0-pendulum, p1, p3-leg or p3-mujoco reproductions of disjoint seeds (e.g. one
+    /// process per seed, `--first-seed`) into one table and figure; their settings must be equal.
     Merge(MergeArgs),
 }
 
@@ -91,6 +96,7 @@ pub struct P0Args {
 pub fn run(cmd: ReproduceCommand) -> Result<()> {
     match cmd {
         ReproduceCommand::P0Pendulum(args) => harness::run(&P0Pendulum, &args.study),
+        ReproduceCommand::P1(args) => harness::run(&P1Study::new(args.env), &args.study),
         ReproduceCommand::P2Cartpole(args) => {
             super::reproduce_p2::p2(super::reproduce_p2::Experiment::CartPole, &args)
         }
@@ -112,6 +118,12 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
                 "p0-pendulum" => {
                     harness::merge(&P0Pendulum, &args.dirs, args.out.as_deref(), args.overwrite)
                 }
+                "p1" => harness::merge(
+                    &P1Study::new(None),
+                    &args.dirs,
+                    args.out.as_deref(),
+                    args.overwrite,
+                ),
                 "p3-leg" => harness::merge(
                     &P3Study::leg(false, false),
                     &args.dirs,

@@ -19,7 +19,8 @@ use clap::Args;
 use serde::{Deserialize, Serialize};
 use tandem::mujoco::TaskKind;
 use tandem::pipelines::mbpo::{
-    leg2r_problem_with, mujoco_problem, run_oracle, Event, LinearSchedule, Problem, RunRecord,
+    leg2r_problem_with, mujoco_problem, run_oracle, Event, LinearSchedule, MbpoConfig, Problem,
+    RunRecord,
 };
 use tandem::pipelines::p3::{run, Method, P3Config};
 use tandem::pipelines::Checkpoints;
@@ -74,11 +75,17 @@ pub struct P3Settings {
     /// friction), its reward (15) with errors in units of 2 cm and 0.2 m/s (ours: in metres the
     /// reward is flat, random torques score 0.80 of a perfect step, so no method could double
     /// another's).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// (Missing from a file, it is `None`, not the leg of `Default`: a MuJoCo study's settings,
+    /// which leave it out, stay a MuJoCo study's through `--config` and `--resume`.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub leg: Option<Leg2RConfig>,
     /// The return (per episode) whose first evaluation at or above it counts as
-    /// reached.
+    /// reached, unless `target_method` names a run.
     pub target_return: f64,
+    /// The run whose mean return at the budget is the target instead (the MuJoCo tasks: `mbpo`,
+    /// for "reaches MBPO's final return in fewer real steps"); `None`: `target_return`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_method: Option<String>,
     /// M-DeMoRL's elite fractions to ablate (p3 Fig. 3); empty: no ablation.
     pub ablate_elites: Vec<f64>,
     /// Also run MBPO with the true system as its model (the run `mbpo_oracle`, the leg only):
@@ -97,65 +104,113 @@ impl Default for P3Settings {
                 ..Leg2RConfig::for_model(Leg2RModel::Real)
             }),
             target_return: 500.0,
+            target_method: None,
             ablate_elites: Vec::new(),
             oracle: false,
         }
     }
 }
 
+/// The shared loop at `--quick`'s toy sizes: 3 epochs of 300 steps, networks of 16×16, an
+/// ensemble of 3, refits every 150 steps, 2 rollouts per step, one update per step.
+pub(super) fn quick_loop(b: &mut MbpoConfig) {
+    b.sac.hidden = vec![16, 16];
+    b.sac.batch_size = 32;
+    b.sac.learning_starts = 100;
+    b.ensemble.members = 3;
+    b.ensemble.elites = 2;
+    b.ensemble.hidden = vec![16, 16];
+    b.model_fit.epochs = 2;
+    b.model_min_updates = 4;
+    b.epoch_length = 300;
+    b.real_steps = 900;
+    b.model_train_freq = 150;
+    b.rollouts_per_step = 2;
+    b.updates_per_step = 1;
+    b.eval_every = 300;
+    b.eval_episodes = 1;
+    b.checkpoint_every = 150;
+}
+
 /// The leg's id.
 const LEG: &str = "Leg2R-real-v0";
 
-/// MBPO's settings for a MuJoCo task (Janner et al., Appendix C) and the return whose reaching
-/// is counted.
+/// A MuJoCo task's loop: MBPO's settings for it (Janner et al., Appendix C) resized to this
+/// machine, and a return whose reaching is counted where no run's return is the target.
 struct MujocoPreset {
     id: &'static str,
     epochs: u64,
-    updates_per_step: usize,
     /// The rollout length `k` by epoch (`None`: 1 throughout).
     rollout_length: Option<LinearSchedule>,
+    /// MBPO's 400 rollouts per real step, or fewer where long rollouts would cost hours.
+    rollouts_per_step: usize,
     target_return: f64,
 }
 
-/// The MuJoCo tasks `p3-mujoco` runs (targets: HalfCheetah p3 Fig. 3's 10 000, the others ours).
+/// SAC updates per real step `G` on the MuJoCo tasks, the same for every method (MBPO: 20, 40 on
+/// HalfCheetah). Ours: at 4, one seed of one method of 100 epochs takes about an hour on this
+/// 2-core machine with two runs side by side (SAC's 256×256 update about 6 ms on one core).
+pub const MUJOCO_UPDATES_PER_STEP: usize = 4;
+
+/// The MuJoCo tasks the p1 and p3 studies run (fixed targets: HalfCheetah p3 Fig. 3's 10 000,
+/// the others ours; the studies count real steps to a baseline's final return instead).
 const MUJOCO: [MujocoPreset; 4] = [
     MujocoPreset {
         id: "HalfCheetah-v5",
-        epochs: 400,
-        updates_per_step: 40,
+        epochs: 100,
         rollout_length: None,
+        rollouts_per_step: 400,
         target_return: 10_000.0,
     },
     MujocoPreset {
         id: "Hopper-v5",
-        epochs: 125,
-        updates_per_step: 20,
+        epochs: 100,
         rollout_length: Some(LinearSchedule {
             from_epoch: 20,
             to_epoch: 100,
             start: 1,
             end: 15,
         }),
+        rollouts_per_step: 100,
         target_return: 3000.0,
     },
     MujocoPreset {
         id: "Walker2d-v5",
-        epochs: 300,
-        updates_per_step: 20,
+        epochs: 100,
         rollout_length: None,
+        rollouts_per_step: 400,
         target_return: 3500.0,
     },
     MujocoPreset {
         id: "InvertedPendulum-v5",
         epochs: 15,
-        updates_per_step: 20,
         rollout_length: None,
+        rollouts_per_step: 400,
         target_return: 1000.0,
     },
 ];
 
+/// The shared loop on the MuJoCo task `env` and its fixed target return; `None` for a task the
+/// studies do not run. MBPO's settings (SAC 256×256 after 5000 random steps, ensembles of 7
+/// members of 4 × 200 SiLU units, 5 elites, real ratio 0.05, rollouts of its length schedule
+/// from real states) with this machine's budget: `epochs` of 1000 real steps,
+/// [`MUJOCO_UPDATES_PER_STEP`] updates per real step, and the model refit once an epoch (MBPO:
+/// every 250 steps) with at most 200 minibatches per member, whole epochs and at least one, the
+/// weights carried over (MBPO: until the held-out loss stops improving).
+pub(super) fn mujoco_loop(env: &str) -> Option<(MbpoConfig, f64)> {
+    let m = MUJOCO.iter().find(|m| m.id == env)?;
+    let mut b = MbpoConfig::default();
+    b.real_steps = m.epochs * b.epoch_length;
+    b.updates_per_step = MUJOCO_UPDATES_PER_STEP;
+    b.rollout_length = m.rollout_length.unwrap_or(LinearSchedule::constant(1));
+    b.rollouts_per_step = m.rollouts_per_step;
+    b.model_train_freq = b.epoch_length;
+    b.model_max_updates = Some(200);
+    Some((b, m.target_return))
+}
+
 /// The ids `p3-mujoco` runs, for messages.
-fn mujoco_ids() -> String {
+pub(super) fn mujoco_ids() -> String {
     MUJOCO.iter().map(|m| m.id).collect::<Vec<_>>().join(", ")
 }
 
@@ -163,16 +218,17 @@ impl P3Settings {
     /// p3's settings on the MuJoCo task `env` (MBPO's loop for it, p3's inner loop); `None` for
     /// a task `p3-mujoco` does not run.
     pub fn mujoco(env: &str) -> Option<Self> {
-        let m = MUJOCO.iter().find(|m| m.id == env)?;
-        let mut p3 = P3Config::default();
-        p3.base.real_steps = m.epochs * p3.base.epoch_length;
-        p3.base.updates_per_step = m.updates_per_step;
-        p3.base.rollout_length = m.rollout_length.unwrap_or(LinearSchedule::constant(1));
+        let (base, target_return) = mujoco_loop(env)?;
+        let p3 = P3Config {
+            base,
+            ..P3Config::default()
+        };
         Some(Self {
-            env: m.id.into(),
+            env: env.into(),
             p3,
             leg: None,
-            target_return: m.target_return,
+            target_return,
+            target_method: Some(Method::Mbpo.name().into()),
             ablate_elites: Vec::new(),
             oracle: false,
         })
@@ -181,23 +237,7 @@ impl P3Settings {
     /// The `--quick` settings: p3's loop at toy sizes (3 epochs of 300 steps, tiny networks).
     pub fn quick(self) -> Self {
         let mut s = self;
-        let b = &mut s.p3.base;
-        b.sac.hidden = vec![16, 16];
-        b.sac.batch_size = 32;
-        b.sac.learning_starts = 100;
-        b.ensemble.members = 3;
-        b.ensemble.elites = 2;
-        b.ensemble.hidden = vec![16, 16];
-        b.model_fit.epochs = 2;
-        b.model_min_updates = 4;
-        b.epoch_length = 300;
-        b.real_steps = 900;
-        b.model_train_freq = 150;
-        b.rollouts_per_step = 2;
-        b.updates_per_step = 1;
-        b.eval_every = 300;
-        b.eval_episodes = 1;
-        b.checkpoint_every = 150;
+        quick_loop(&mut s.p3.base);
         s.p3.mpc.samples = 8;
         s.p3.horizon = LinearSchedule {
             from_epoch: 0,
@@ -248,6 +288,12 @@ impl P3Settings {
                 if let Err(e) = mujoco_problem(&self.env) {
                     return bad(e.to_string());
                 }
+            }
+        }
+        if let Some(m) = &self.target_method {
+            let known: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+            if !known.contains(&m.as_str()) {
+                return bad(format!("target_method {m}: one of {}", known.join(", ")));
             }
         }
         if !self.target_return.is_finite() {
@@ -525,7 +571,7 @@ where
 }
 
 /// The run's events as the harness' progress: the real steps, every 100.
-fn step_progress(progress: &mut dyn FnMut(u64)) -> impl FnMut(Event) + '_ {
+pub(super) fn step_progress(progress: &mut dyn FnMut(u64)) -> impl FnMut(Event) + '_ {
     move |e| {
         if let Event::Step { real_steps } = e {
             if real_steps % 100 == 0 {
@@ -536,7 +582,7 @@ fn step_progress(progress: &mut dyn FnMut(u64)) -> impl FnMut(Event) + '_ {
 }
 
 /// How the sample ratios are taken.
-const RATIO_NOTE: &str =
+pub(super) const RATIO_NOTE: &str =
     "per-seed real steps to the target, a seed that never reached it counted at the steps it used";
 
 /// The runs' names in table order: the three methods, then the ablation.
@@ -553,34 +599,83 @@ fn names(records: &[RunRecord]) -> Vec<String> {
 /// Per run name: the return at the budget and the real steps to the target; SAC and MBPO over
 /// M-DeMoRL.
 pub fn table(records: &[RunRecord], s: &P3Settings) -> Table {
-    let budget = s.p3.base.real_steps;
+    let b = &s.p3.base;
+    let target = target_of(
+        records,
+        b.real_steps,
+        s.target_return,
+        s.target_method.as_deref(),
+    );
+    runs_table(
+        records,
+        &names(records),
+        b.real_steps,
+        target,
+        s.leg.is_some().then_some(b.epoch_length),
+        Method::MDemorl.name(),
+        &[Method::Sac.name(), Method::Mbpo.name()],
+    )
+}
+
+/// The return whose reaching is counted: the mean return at `budget` of the runs `method`
+/// where it names one that has runs, else `fixed`.
+pub(super) fn target_of(
+    records: &[RunRecord],
+    budget: u64,
+    fixed: f64,
+    method: Option<&str>,
+) -> f64 {
+    let Some(m) = method else { return fixed };
+    let at: Vec<f64> = records
+        .iter()
+        .filter(|r| r.method == m)
+        .filter_map(|r| r.return_at(budget))
+        .collect();
+    if at.is_empty() {
+        fixed
+    } else {
+        at.iter().sum::<f64>() / at.len() as f64
+    }
+}
+
+/// Per run of `names` (those with records): the return at the budget and the real steps to
+/// `target` (with the mean return per epoch where `epoch_length` is given); the `baselines`'
+/// real steps over `ours`'s.
+pub(super) fn runs_table(
+    records: &[RunRecord],
+    names: &[String],
+    budget: u64,
+    target: f64,
+    epoch_length: Option<u64>,
+    ours: &str,
+    baselines: &[&str],
+) -> Table {
     let mut t = Table::default();
     let mut used = Vec::new();
-    for name in names(records) {
+    for name in names {
         let seeds: Vec<SeedRun> = records
             .iter()
-            .filter(|r| r.method == name)
+            .filter(|r| &r.method == name)
             .map(|r| SeedRun {
                 seed: r.seed,
                 samples: r.real_steps,
                 return_at_budget: r.return_at(budget).unwrap_or(f64::NAN),
-                samples_to_target: r.steps_to(s.target_return),
+                samples_to_target: r.steps_to(target),
             })
             .collect();
         if seeds.is_empty() {
             continue;
         }
-        let (mut figures, mean, short) = MethodFigures::from_runs(budget, s.target_return, &seeds);
-        if s.leg.is_some() {
-            figures.return_at_epoch = return_at_epoch(records, &name, s.p3.base.epoch_length);
+        let (mut figures, mean, short) = MethodFigures::from_runs(budget, target, &seeds);
+        if let Some(len) = epoch_length {
+            figures.return_at_epoch = return_at_epoch(records, name, len);
         }
         used.push((name.clone(), mean, short));
-        t.methods.insert(name, figures);
+        t.methods.insert(name.clone(), figures);
     }
-    let ours = Method::MDemorl.name();
     if let Some((_, m_mean, m_short)) = used.iter().find(|u| u.0 == ours) {
-        for base in [Method::Sac.name(), Method::Mbpo.name()] {
-            if let Some((_, b_mean, b_short)) = used.iter().find(|u| u.0 == base) {
+        for base in baselines {
+            if let Some((_, b_mean, b_short)) = used.iter().find(|u| u.0 == *base) {
                 t.comparisons.push(Comparison::new(
                     (base, *b_mean, *b_short),
                     (ours, *m_mean, *m_short),
@@ -641,15 +736,6 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
         .collect();
     let n_seeds = t.methods.values().map(|m| m.seeds.len()).max().unwrap_or(0);
     let b = &s.p3.base;
-    let rate = |name: &str| {
-        let (u, sec) = records
-            .iter()
-            .filter(|r| r.method == name)
-            .fold((0u64, 0.0), |(u, s), r| {
-                (u + r.updates, s + r.update_seconds)
-            });
-        (sec > 0.0).then(|| u as f64 / sec)
-    };
     let closing = vec![
         format!(
             "All methods take {} real steps ({} epochs of {}), evaluated every {} with {} \
@@ -681,27 +767,17 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
                 l.position_scale, l.velocity_scale
             )),
         ),
+        target_sentence(t, s.target_method.as_deref(), &labels),
         format!(
-            "{} SAC update rate {}. Wall time {wall:.0} s.",
+            "{} {}",
             if s.leg.is_some() {
                 "p3 reports M-DeMoRL at about twice SAC's reward on the hardware leg by 80 epochs."
             } else {
                 "p3 reports M-DeMoRL about 30 % faster than MBPO to the same final return."
             },
-            labels
-                .iter()
-                .filter_map(|(n, l)| rate(n).map(|r| format!("{r:.0} updates/s ({l})")))
-                .collect::<Vec<_>>()
-                .join(", "),
+            rates_and_wall(records, &labels, wall)
         ),
-        format!(
-            "Seconds per seed of one thread (mean): {}.",
-            labels
-                .iter()
-                .filter_map(|(n, l)| time_split(records, n).map(|t| format!("{l} {t}")))
-                .collect::<Vec<_>>()
-                .join("; ")
-        ),
+        seconds_per_seed(records, &labels),
     ];
     t.markdown(&MarkdownText {
         title: format!("p3 on {} ({n_seeds} seeds)", s.env),
@@ -723,6 +799,57 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
         comparison_order: &["sac", "mbpo"],
         closing,
     })
+}
+
+/// "SAC update rate … Wall time … s.": each labelled run's updates per second of update time.
+pub(super) fn rates_and_wall(records: &[RunRecord], labels: &[(&str, &str)], wall: f64) -> String {
+    let rates: Vec<String> = labels
+        .iter()
+        .filter_map(|(n, l)| update_rate(records, n).map(|r| format!("{r:.0} updates/s ({l})")))
+        .collect();
+    format!(
+        "SAC update rate {}. Wall time {wall:.0} s.",
+        rates.join(", ")
+    )
+}
+
+/// "Seconds per seed of one thread (mean): …" for each labelled run ([`time_split`]).
+pub(super) fn seconds_per_seed(records: &[RunRecord], labels: &[(&str, &str)]) -> String {
+    let parts: Vec<String> = labels
+        .iter()
+        .filter_map(|(n, l)| time_split(records, n).map(|t| format!("{l} {t}")))
+        .collect();
+    format!(
+        "Seconds per seed of one thread (mean): {}.",
+        parts.join("; ")
+    )
+}
+
+/// SAC updates per second of update time over the runs `name` (`None` without update time).
+fn update_rate(records: &[RunRecord], name: &str) -> Option<f64> {
+    let (u, sec) = records
+        .iter()
+        .filter(|r| r.method == name)
+        .fold((0u64, 0.0), |(u, s), r| {
+            (u + r.updates, s + r.update_seconds)
+        });
+    (sec > 0.0).then(|| u as f64 / sec)
+}
+
+/// What the target return is: a fixed figure, or a run's mean return at the budget.
+pub(super) fn target_sentence(t: &Table, method: Option<&str>, labels: &[(&str, &str)]) -> String {
+    let target = t
+        .methods
+        .values()
+        .next()
+        .map_or(f64::NAN, |m| m.samples_to_target.target);
+    match method.and_then(|m| labels.iter().find(|(n, _)| *n == m)) {
+        Some((_, label)) => format!(
+            "The target return {target:.1} is {label}'s mean return at the budget: the real \
+             steps to it say how much sooner a method reaches {label}'s final return."
+        ),
+        None => format!("The target return is {target:.1}."),
+    }
 }
 
 /// The mean seconds per seed of the runs `name`: the total, and its SAC updates, model fits and
@@ -758,5 +885,32 @@ pub fn figure(records: &[RunRecord], names: &[&str], title: &str) -> Figure {
         x_label: "real steps".into(),
         y_label: "return per episode".into(),
         curves,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `--config` file over a MuJoCo study's settings leaves it a MuJoCo study: the leg's
+    /// settings, which it leaves out, do not come back from `Default`.
+    #[test]
+    fn a_config_file_keeps_a_mujoco_study_off_the_leg() {
+        let base = P3Settings::mujoco("HalfCheetah-v5").unwrap();
+        let s = harness::override_settings(&base, "[p3.base]\nreal_steps = 10000\n", "t").unwrap();
+        assert!(s.leg.is_none());
+        assert_eq!(s.p3.base.real_steps, 10_000);
+        assert_eq!(s.target_method.as_deref(), Some("mbpo"));
+        assert_eq!(
+            P3Settings {
+                p3: s.p3.clone(),
+                ..base.clone()
+            },
+            s
+        );
+        // The leg's own settings keep the leg.
+        let leg =
+            harness::override_settings(&P3Settings::default(), "oracle = true\n", "t").unwrap();
+        assert!(leg.leg.is_some() && leg.oracle);
     }
 }

@@ -18,26 +18,44 @@ use tandem_models::{branched_rollouts, DynamicsModel, Judges, ModelError, Transi
 
 use super::Result;
 
-/// `n` states drawn uniformly (with replacement) from `data`'s states: the starts of branched
-/// rollouts. An error for empty data.
-pub fn sample_states(data: &Transitions, n: usize, rng: &mut Rng) -> Result<Array2<f64>> {
+/// Where branched rollouts start: real states and the controls applied just before them
+/// ([`Transitions::prev_actions`]: zero at an episode's start), row for row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Starts {
+    /// `n x S` canonical states.
+    pub states: Array2<f64>,
+    /// `n x U` previous controls (what p1's incremental model conditions on).
+    pub prev_controls: Array2<f64>,
+}
+
+/// `n` rows drawn uniformly (with replacement) from `data`: the starts of branched rollouts. An
+/// error for empty data.
+pub fn sample_starts(data: &Transitions, n: usize, rng: &mut Rng) -> Result<Starts> {
     if data.is_empty() {
         return Err(ModelError::Empty.into());
     }
     let idx: Vec<usize> = (0..n).map(|_| rng.random_range(0..data.len())).collect();
-    Ok(data.states.select(Axis(0), &idx))
+    Ok(Starts {
+        states: data.states.select(Axis(0), &idx),
+        prev_controls: data.prev_actions.select(Axis(0), &idx),
+    })
 }
 
-/// Rolls `model` under `task` for `horizon` steps from every row of `starts` (states), acting
-/// with the loop's agent ([`BatchPolicy::act_batch`] in [`Mode::Explore`]), judged as `judges`
-/// say, and stores every imagined transition in the loop's secondary buffer. Returns how many
-/// were stored. The loop must have a secondary buffer ([`OffPolicyLoop::with_secondary`]).
+/// The states of [`sample_starts`] alone (the same draws).
+pub fn sample_states(data: &Transitions, n: usize, rng: &mut Rng) -> Result<Array2<f64>> {
+    sample_starts(data, n, rng).map(|s| s.states)
+}
+
+/// Rolls `model` under `task` for `horizon` steps from every row of `starts`, acting with the
+/// loop's agent ([`BatchPolicy::act_batch`] in [`Mode::Explore`]), judged as `judges` say, and
+/// stores every imagined transition in the loop's secondary buffer. Returns how many were
+/// stored. The loop must have a secondary buffer ([`OffPolicyLoop::with_secondary`]).
 pub fn imagine<A, M, T>(
     lp: &mut OffPolicyLoop<A>,
     model: &M,
     task: &T,
     judges: &Judges,
-    starts: &Array2<f64>,
+    starts: &Starts,
     horizon: usize,
     rng: &mut Rng,
 ) -> Result<usize>
@@ -56,8 +74,8 @@ where
         model,
         task,
         judges,
-        starts.view(),
-        None,
+        starts.states.view(),
+        Some(starts.prev_controls.view()),
         horizon,
         &mut policy,
         rng,
@@ -109,8 +127,9 @@ mod tests {
             .unwrap();
         let data = b.build();
         let mut rng = rng_from_seed(2);
-        let starts = sample_states(&data, 5, &mut rng).unwrap();
+        let starts = sample_starts(&data, 5, &mut rng).unwrap();
         assert!(starts
+            .states
             .rows()
             .into_iter()
             .all(|r| r[0] == 0.5 || r[0] == -2.0));

@@ -46,7 +46,7 @@ use tandem_models::{
 };
 use tandem_nn::{Checkpoint, Checkpointable};
 
-use super::dyna::{imagine, sample_states};
+use super::dyna::{imagine, sample_starts};
 use super::p0::CurvePoint;
 use super::{Checkpoints, PipelineError, Result};
 
@@ -430,31 +430,106 @@ impl RunRecord {
     }
 }
 
-/// What fills the loop's secondary buffer after each refit (MBPO's rollouts, M-DeMoRL's plans):
-/// its name and sizes. [`Imagine`] does the filling.
+/// What fills the loop's secondary buffer after each refit (MBPO's rollouts, M-DeMoRL's plans,
+/// p1's one-step incremental predictions): its name, sizes and the model the loop fits for it.
+/// [`Imagine`] does the filling.
 pub trait Imagination {
+    /// The model the loop fits on all real data before each filling and saves with every
+    /// checkpoint: MBPO's and M-DeMoRL's [`ProbabilisticEnsemble`], p1's
+    /// [`tandem_models::IncrementalModel`]; [`NoModel`] where the imagination steps a model it
+    /// was given ([`OracleRollouts`]).
+    type Model: DynamicsModel + Checkpointable;
     /// The method's name in records and checkpoints.
     fn name(&self) -> &'static str;
     /// The secondary buffer's capacity during `epoch`.
     fn capacity(&self, cfg: &MbpoConfig, epoch: u64) -> usize;
     /// The schedule's value (`k` or `H`) at `epoch`.
     fn horizon(&self, epoch: u64) -> usize;
-    /// Whether the loop fits its ensemble before each filling (false for [`OracleRollouts`],
-    /// whose model is given).
-    fn fits_model(&self) -> bool {
-        true
+    /// A fresh model for `state_dim` canonical states and `control_dim` controls under `cfg`,
+    /// initialized from `seed`; `None` when nothing is fitted (a given model).
+    fn new_model(
+        &self,
+        cfg: &MbpoConfig,
+        state_dim: usize,
+        control_dim: usize,
+        seed: u64,
+    ) -> Result<Option<Self::Model>>;
+}
+
+/// The model of an imagination that fits none ([`OracleRollouts`]): a type without values, so
+/// the loop's model is always `None` for it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoModel {}
+
+impl DynamicsModel for NoModel {
+    fn state_dim(&self) -> usize {
+        match *self {}
     }
+
+    fn action_dim(&self) -> usize {
+        match *self {}
+    }
+
+    fn predict(
+        &self,
+        _input: &tandem_models::ModelInput<'_>,
+        _rng: &mut Rng,
+    ) -> std::result::Result<tandem_models::Prediction, tandem_models::ModelError> {
+        match *self {}
+    }
+
+    fn fit(
+        &mut self,
+        _data: &Transitions,
+        _cfg: &FitConfig,
+    ) -> std::result::Result<tandem_models::FitReport, tandem_models::ModelError> {
+        match *self {}
+    }
+}
+
+impl Checkpointable for NoModel {
+    fn save_to(&self, _prefix: &str, _ckpt: &mut Checkpoint) -> tandem_nn::Result<()> {
+        match *self {}
+    }
+
+    fn load_from(&mut self, _prefix: &str, _ckpt: &Checkpoint) -> tandem_nn::Result<()> {
+        match *self {}
+    }
+}
+
+/// MBPO's probabilistic ensemble ([`MbpoConfig::ensemble`]) seeded with `seed`.
+pub(crate) fn ensemble_of(
+    cfg: &MbpoConfig,
+    state_dim: usize,
+    control_dim: usize,
+    seed: u64,
+) -> Result<Option<ProbabilisticEnsemble>> {
+    let ens = EnsembleConfig {
+        seed,
+        ..cfg.ensemble.clone()
+    };
+    Ok(Some(ProbabilisticEnsemble::new(
+        state_dim,
+        control_dim,
+        ens,
+    )?))
+}
+
+/// The model an imagination was handed, or an error naming the method.
+pub(crate) fn fitted<'a, M>(model: Option<&'a mut M>, method: &str) -> Result<&'a mut M> {
+    model.ok_or_else(|| PipelineError::Config(format!("{method}: the loop passed no fitted model")))
 }
 
 /// Fills the loop's secondary buffer for a task `T`.
 pub trait Imagine<T: Task>: Imagination {
     /// Fills the secondary buffer after a refit during `epoch`; returns how many transitions
-    /// it stored. `data` are all real transitions (canonical states); `seed` is this refit's.
+    /// it stored. `model` is the one [`Imagination::new_model`] made, just refitted; `data` are
+    /// all real transitions (canonical states); `seed` is this refit's.
     #[allow(clippy::too_many_arguments)]
     fn imagine(
         &mut self,
         lp: &mut OffPolicyLoop<Sac>,
-        model: &mut ProbabilisticEnsemble,
+        model: Option<&mut Self::Model>,
         task: &T,
         data: &Transitions,
         epoch: u64,
@@ -495,8 +570,20 @@ impl Rollouts {
 }
 
 impl Imagination for Rollouts {
+    type Model = ProbabilisticEnsemble;
+
     fn name(&self) -> &'static str {
         "mbpo"
+    }
+
+    fn new_model(
+        &self,
+        cfg: &MbpoConfig,
+        state_dim: usize,
+        control_dim: usize,
+        seed: u64,
+    ) -> Result<Option<ProbabilisticEnsemble>> {
+        ensemble_of(cfg, state_dim, control_dim, seed)
     }
 
     fn capacity(&self, cfg: &MbpoConfig, epoch: u64) -> usize {
@@ -515,13 +602,14 @@ impl<T: Task> Imagine<T> for Rollouts {
     fn imagine(
         &mut self,
         lp: &mut OffPolicyLoop<Sac>,
-        model: &mut ProbabilisticEnsemble,
+        model: Option<&mut ProbabilisticEnsemble>,
         task: &T,
         data: &Transitions,
         epoch: u64,
         _seed: u64,
         rng: &mut Rng,
     ) -> Result<usize> {
+        let model = fitted(model, "mbpo")?;
         model.set_propagation(Propagation::RandomMember);
         self.through(&*model, &self.judges, lp, task, data, epoch, rng)
     }
@@ -531,7 +619,7 @@ impl Rollouts {
     /// `M × per_refit` rollouts of the epoch's length `k` through `model` from real states drawn
     /// uniformly from `data`, acted by SAC, stored in the loop's secondary buffer.
     #[allow(clippy::too_many_arguments)]
-    fn through<T: Task, M: DynamicsModel + ?Sized>(
+    pub(crate) fn through<T: Task, M: DynamicsModel + ?Sized>(
         &self,
         model: &M,
         judges: &Judges,
@@ -542,7 +630,7 @@ impl Rollouts {
         rng: &mut Rng,
     ) -> Result<usize> {
         let n = self.rollouts_per_step * self.per_refit as usize;
-        let starts = sample_states(data, n, rng)?;
+        let starts = sample_starts(data, n, rng)?;
         imagine(lp, model, task, judges, &starts, self.length.at(epoch), rng)
     }
 }
@@ -571,8 +659,14 @@ impl<M> OracleRollouts<M> {
 }
 
 impl<M> Imagination for OracleRollouts<M> {
+    type Model = NoModel;
+
     fn name(&self) -> &'static str {
         "mbpo_oracle"
+    }
+
+    fn new_model(&self, _: &MbpoConfig, _: usize, _: usize, _: u64) -> Result<Option<NoModel>> {
+        Ok(None)
     }
 
     fn capacity(&self, cfg: &MbpoConfig, epoch: u64) -> usize {
@@ -582,17 +676,13 @@ impl<M> Imagination for OracleRollouts<M> {
     fn horizon(&self, epoch: u64) -> usize {
         self.rollouts.horizon(epoch)
     }
-
-    fn fits_model(&self) -> bool {
-        false
-    }
 }
 
 impl<T: Task, M: DynamicsModel> Imagine<T> for OracleRollouts<M> {
     fn imagine(
         &mut self,
         lp: &mut OffPolicyLoop<Sac>,
-        _model: &mut ProbabilisticEnsemble,
+        _model: Option<&mut NoModel>,
         task: &T,
         data: &Transitions,
         epoch: u64,
@@ -741,15 +831,8 @@ where
         lp = lp.with_secondary(capacity0, cfg.real_ratio)?;
     }
     let (s_dim, u_dim) = (task.state_dim(), tandem_envs::control_dim(task));
-    let mut model = match imagination {
-        Some(_) => Some(ProbabilisticEnsemble::new(
-            s_dim,
-            u_dim,
-            EnsembleConfig {
-                seed: seeds.derive("model"),
-                ..cfg.ensemble.clone()
-            },
-        )?),
+    let mut model = match imagination.as_deref() {
+        Some(i) => i.new_model(cfg, s_dim, u_dim, seeds.derive("model"))?,
         None => None,
     };
     let mut all = Transitions::default();
@@ -806,7 +889,7 @@ where
         let rec = lp.step(&mut env, &mut p.runner, opts)?;
         let t = count.get();
         on_event(Event::Step { real_steps: t });
-        if let (Some(imagination), Some(model)) = (imagination.as_deref_mut(), model.as_mut()) {
+        if let Some(imagination) = imagination.as_deref_mut() {
             let (x, x1) = rec.states.as_ref().expect("recorded");
             let u = task.control(&rec.action);
             pending.push_canonical(task, x, &u, x1, rec.reward, rec.terminated, rec.done())?;
@@ -814,7 +897,7 @@ where
                 flush(&mut all, &mut pending, (s_dim, u_dim))?;
                 let epoch = cfg.epoch_of(t);
                 let mut loss = None;
-                if imagination.fits_model() {
+                if let Some(model) = model.as_mut() {
                     let fit = cfg.fit_for(all.len(), seeds.derive(&format!("fit-{}", p.refits)));
                     let f0 = Instant::now();
                     let report = model.fit(&all, &fit)?;
@@ -828,8 +911,15 @@ where
                 }
                 let plan_seed = seeds.derive(&format!("imagine-{}", p.refits));
                 let i0 = Instant::now();
-                let n = imagination
-                    .imagine(&mut lp, model, task, &all, epoch, plan_seed, &mut p.rng)?;
+                let n = imagination.imagine(
+                    &mut lp,
+                    model.as_mut(),
+                    task,
+                    &all,
+                    epoch,
+                    plan_seed,
+                    &mut p.rng,
+                )?;
                 p.seconds.imagine += i0.elapsed().as_secs_f64();
                 p.refits += 1;
                 p.imagined += n as u64;

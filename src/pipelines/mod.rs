@@ -4,6 +4,7 @@
 //! | module | paper | loop |
 //! |---|---|---|
 //! | [`p0`] | Rastogi et al., difference models | pre-train on the idealized plant; collect true samples, fit a residual model, retrain on plant + residual |
+//! | [`p1`] | Cong Li, deep incremental model | the MBPO loop with one-step rollouts through the incremental model `s + L_θ(s, a_prev) Δa`, the task's reward |
 //! | [`p2`] | Manglik and Tripathi, model-augmented REINFORCE | N real episodes, then real episodes alternated with episodes imagined by a learned `(s', r, done)` model |
 //! | [`p2_maze`] | the same, DQN from pixels | the same loop for an off-policy agent on p2's maze, with the pixel model; the pixel model's F1 experiment |
 //! | [`dyna`] | (shared) | MBPO-style Dyna: branched rollouts of a learned model from real states, acted by the agent's own batched policy, into the loop's second buffer |
@@ -15,6 +16,7 @@ pub mod adapter;
 pub mod dyna;
 pub mod mbpo;
 pub mod p0;
+pub mod p1;
 pub mod p2;
 pub mod p2_maze;
 pub mod p3;

@@ -44,8 +44,8 @@ use tandem_planners::{Bounds, DmdMpc, DmdMpcConfig, Noise, Objective};
 
 use super::dyna::sample_states;
 use super::mbpo::{
-    observations, run_with, Event, Imagination, Imagine, LinearSchedule, MbpoConfig, Problem,
-    Rollouts, RunRecord,
+    ensemble_of, fitted, observations, run_with, Event, Imagination, Imagine, LinearSchedule,
+    MbpoConfig, Problem, Rollouts, RunRecord,
 };
 use super::{Checkpoints, PipelineError, Result};
 
@@ -246,8 +246,20 @@ pub struct MpcPlans {
 }
 
 impl Imagination for MpcPlans {
+    type Model = ProbabilisticEnsemble;
+
     fn name(&self) -> &'static str {
         Method::MDemorl.name()
+    }
+
+    fn new_model(
+        &self,
+        cfg: &MbpoConfig,
+        state_dim: usize,
+        control_dim: usize,
+        seed: u64,
+    ) -> Result<Option<ProbabilisticEnsemble>> {
+        ensemble_of(cfg, state_dim, control_dim, seed)
     }
 
     fn capacity(&self, _base: &MbpoConfig, epoch: u64) -> usize {
@@ -263,13 +275,14 @@ impl<T: Task + Clone + Send + Sync + 'static> Imagine<T> for MpcPlans {
     fn imagine(
         &mut self,
         lp: &mut OffPolicyLoop<Sac>,
-        model: &mut ProbabilisticEnsemble,
+        model: Option<&mut ProbabilisticEnsemble>,
         task: &T,
         data: &Transitions,
         epoch: u64,
         seed: u64,
         rng: &mut Rng,
     ) -> Result<usize> {
+        let model = fitted(model, Method::MDemorl.name())?;
         if self.cfg.keep_iterations == 1 {
             lp.clear(Store::Secondary)?;
         }

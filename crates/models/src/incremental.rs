@@ -5,7 +5,7 @@ use nalgebra::DMatrix;
 use ndarray::{Array2, ArrayView2};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
-use tandem_nn::{Activation, Mlp, MlpConfig};
+use tandem_nn::{Activation, Checkpoint, Checkpointable, Mlp, MlpConfig, NnError};
 
 use crate::data::check_input;
 use crate::model::{
@@ -414,6 +414,60 @@ impl DynamicsModel for IncrementalModel {
     }
 }
 
+/// What a fit learned besides the network and its optimizer: the input standardizations and
+/// the change scales.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Learned {
+    in_state: Standardizer,
+    in_prev: Standardizer,
+    ds_scale: Vec<f64>,
+    da_scale: Vec<f64>,
+}
+
+/// The learned part (network, optimizer state, standardizations, change scales); the widths,
+/// structure and prior are the constructor's. Loading into a model of other widths is an error
+/// naming the entry, and leaves the model unchanged. A run that saves and loads its model
+/// predicts and fits on exactly as one that did not.
+impl Checkpointable for IncrementalModel {
+    fn save_to(&self, prefix: &str, ckpt: &mut Checkpoint) -> tandem_nn::Result<()> {
+        self.net.save_to(&format!("{prefix}.net"), ckpt)?;
+        self.opt.save_to(&format!("{prefix}.opt"), ckpt)?;
+        let learned = Learned {
+            in_state: self.in_state.clone(),
+            in_prev: self.in_prev.clone(),
+            ds_scale: self.ds_scale.clone(),
+            da_scale: self.da_scale.clone(),
+        };
+        ckpt.put_json(&format!("{prefix}.learned"), &learned)
+    }
+
+    fn load_from(&mut self, prefix: &str, ckpt: &Checkpoint) -> tandem_nn::Result<()> {
+        let name = format!("{prefix}.learned");
+        let l: Learned = ckpt.get_json(&name)?;
+        let widths = (
+            l.in_state.dim(),
+            l.in_prev.dim(),
+            l.ds_scale.len(),
+            l.da_scale.len(),
+        );
+        let (s, a) = (self.state_dim, self.action_dim);
+        if widths != (s, a, s, a) {
+            return Err(NnError::Checkpoint(format!(
+                "`{name}`: widths {widths:?} (state, previous action, state change, action \
+                 change), this model's are {:?}",
+                (s, a, s, a)
+            )));
+        }
+        let (mut net, mut opt) = (self.net.clone(), self.opt.clone());
+        net.load_from(&format!("{prefix}.net"), ckpt)?;
+        opt.load_from(&format!("{prefix}.opt"), ckpt)?;
+        (self.net, self.opt) = (net, opt);
+        (self.in_state, self.in_prev) = (l.in_state, l.in_prev);
+        (self.ds_scale, self.da_scale) = (l.ds_scale, l.da_scale);
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -507,6 +561,40 @@ mod tests {
         assert!(worst < 0.03, "largest gain error {worst}");
         let e = crate::testutil::rmse(&m, &test);
         assert!(e < 0.02, "one-step rmse {e}");
+    }
+
+    #[test]
+    fn a_checkpoint_restores_the_predictions_and_other_widths_are_refused() {
+        let b = DMatrix::from_row_slice(3, 2, &[0.5, -0.2, 0.0, 1.5, -0.8, 0.3]);
+        let data = static_linear_data(&b, &[0.1, -0.2, 0.3], 10, 20, 4);
+        let fit = FitConfig {
+            epochs: 2,
+            batch_size: 32,
+            holdout_fraction: 0.2,
+            seed: 0,
+        };
+        let mut m = IncrementalModel::new(3, 2, fast(GainStructure::Full, None)).unwrap();
+        m.fit(&data, &fit).unwrap();
+        let mut ckpt = Checkpoint::new();
+        m.save_to("m", &mut ckpt).unwrap();
+        let input = ModelInput::new(data.states.view(), data.actions.view())
+            .with_prev_actions(data.prev_actions.view());
+        let predict = |m: &IncrementalModel| m.predict(&input, &mut rng_from_seed(0)).unwrap();
+        // A fresh model (L = 0 before a fit) predicts otherwise until it loads the checkpoint.
+        let mut back = IncrementalModel::new(3, 2, fast(GainStructure::Full, None)).unwrap();
+        assert_ne!(predict(&back), predict(&m));
+        back.load_from("m", &ckpt).unwrap();
+        assert_eq!(predict(&back), predict(&m));
+        // Both continue training alike (optimizer state restored too).
+        m.fit(&data, &fit).unwrap();
+        back.fit(&data, &fit).unwrap();
+        assert_eq!(back.network().params(), m.network().params());
+        assert_eq!(predict(&back), predict(&m));
+        let mut other = IncrementalModel::new(2, 2, fast(GainStructure::Full, None)).unwrap();
+        let before = other.network().params().to_vec();
+        let e = other.load_from("m", &ckpt).unwrap_err().to_string();
+        assert!(e.contains("m.learned"), "{e}");
+        assert_eq!(other.network().params(), &before[..]);
     }
 
     #[test]

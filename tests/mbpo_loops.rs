@@ -1,6 +1,7 @@
-//! The MBPO loop and M-DeMoRL (p3 Algorithm 1) on Pendulum-v1: schedules and counts written out
-//! by hand, determinism per seed, a stopped run resumed to the same numbers, errors for bad
-//! settings, and the planner's view of a model in the agent's action units.
+//! The MBPO loop, M-DeMoRL (p3 Algorithm 1) and Dyna-SAC with the incremental model (p1
+//! Algorithm 1) on Pendulum-v1: schedules and counts written out by hand, determinism per seed, a
+//! stopped run resumed to the same numbers, errors for bad settings, the planner's view of a
+//! model in the agent's action units, and p1's imagined steps as the model's own predictions.
 
 use std::cell::Cell;
 use std::collections::BTreeMap;
@@ -9,10 +10,12 @@ use std::rc::Rc;
 use ndarray::array;
 use tandem::core::seeding::rng_from_seed;
 use tandem::dynamics::classic::GymPendulum;
+use tandem::models::IncrementalModelConfig;
 use tandem::models::{DynamicsModel, ModelInput, PlantModel};
 use tandem::pipelines::mbpo::{
     leg2r_problem, pendulum_problem, run_sac, Event, LinearSchedule, MbpoConfig, RunRecord,
 };
+use tandem::pipelines::p1::{self, P1Config};
 use tandem::pipelines::p3::{self, InActions, Method, P3Config};
 use tandem::pipelines::{Checkpoints, Ephemeral, PipelineError};
 use tandem_nn::Checkpoint;
@@ -211,35 +214,209 @@ impl Checkpoints for Memory {
     }
 }
 
+/// `go` for seed 5 run whole, then stopped after 400 real steps and resumed from its last
+/// checkpoint: both records without timings, and the checkpoints.
+fn whole_and_resumed(
+    go: impl Fn(
+        u64,
+        &mut dyn Checkpoints,
+        &mut dyn FnMut(Event),
+    ) -> tandem::pipelines::Result<RunRecord>,
+) -> (RunRecord, RunRecord, Memory) {
+    let whole = strip(go(5, &mut Ephemeral, &mut |_| {}).unwrap());
+    let done = Rc::new(Cell::new(0));
+    let mut store = Memory {
+        saved: BTreeMap::new(),
+        done: done.clone(),
+        stop_after: Some(400),
+    };
+    let mut count = |e: Event| {
+        if let Event::Step { real_steps } = e {
+            done.set(real_steps);
+        }
+    };
+    let e = go(5, &mut store, &mut count).unwrap_err();
+    assert!(matches!(e, PipelineError::Stopped), "{e}");
+    store.stop_after = None;
+    let resumed = strip(go(5, &mut store, &mut |_| {}).unwrap());
+    (whole, resumed, store)
+}
+
 #[test]
 fn a_stopped_run_resumes_to_the_same_numbers() {
     let mut cfg = small();
-    // Episodes of 200 steps and checkpoints every 150: the resumed run restarts mid-episode,
-    // after a refit that changed the buffer's size.
+    // Episodes of 200 steps and checkpoints every 150: the resumed run restarts mid-episode
+    // (the last checkpoint before the stop at 400 is from step 300), after a refit that
+    // changed the buffer's size.
     cfg.base.checkpoint_every = 150;
     let problem = pendulum_problem();
     for method in Method::ALL {
-        let whole = strip(run(method, &cfg, 5, &mut Vec::new()));
-        let done = Rc::new(Cell::new(0));
-        let mut store = Memory {
-            saved: BTreeMap::new(),
-            done: done.clone(),
-            // Stops after 400 real steps; the last checkpoint is from step 300.
-            stop_after: Some(400),
-        };
-        let mut count = |e: Event| {
-            if let Event::Step { real_steps } = e {
-                done.set(real_steps);
-            }
-        };
-        let e = p3::run(method, &problem, &cfg, 5, &mut store, &mut count).unwrap_err();
-        assert!(matches!(e, PipelineError::Stopped), "{e}");
-        store.stop_after = None;
-        let resumed = p3::run(method, &problem, &cfg, 5, &mut store, &mut |_| {}).unwrap();
-        assert_eq!(strip(resumed), whole, "{method:?}");
+        let (whole, resumed, mut store) =
+            whole_and_resumed(|seed, store, ev| p3::run(method, &problem, &cfg, seed, store, ev));
+        assert_eq!(resumed, whole, "{method:?}");
         // Another seed's checkpoint is refused.
         let e = p3::run(method, &problem, &cfg, 6, &mut store, &mut |_| {}).unwrap_err();
         assert!(e.to_string().contains("seed 5"), "{e}");
+    }
+    // p1's Dyna-SAC: the incremental model, its standardizations and optimizer come back too.
+    let p1_cfg = p1_small(&cfg);
+    let dyna = p1::Method::IncrementalDyna;
+    let (whole, resumed, _) =
+        whole_and_resumed(|seed, store, ev| p1::run(dyna, &problem, &p1_cfg, seed, store, ev));
+    assert_eq!(resumed, whole);
+}
+
+/// p1's settings around p3's small loop: the incremental model 16×16.
+fn p1_small(p3: &P3Config) -> P1Config {
+    P1Config {
+        base: p3.base.clone(),
+        model: IncrementalModelConfig {
+            hidden: vec![16, 16],
+            ..IncrementalModelConfig::default()
+        },
+    }
+}
+
+#[test]
+fn incremental_dyna_makes_one_step_rollouts_and_shares_sac_and_mbpo_with_p3() {
+    let cfg = small();
+    let p1_cfg = p1_small(&cfg);
+    let problem = pendulum_problem();
+    let mut ev = Vec::new();
+    let d = p1::run(
+        p1::Method::IncrementalDyna,
+        &problem,
+        &p1_cfg,
+        0,
+        &mut Ephemeral,
+        &mut |e| ev.push(e),
+    )
+    .unwrap();
+    assert_eq!(d.method, "incremental_dyna");
+    // Refits at 100, 200, ..., 600, each 2 rollouts per step x 100 steps, one step long
+    // whatever the loop's k schedule says (p1: one-step rollouts).
+    assert_eq!(d.horizons, [1; 6]);
+    assert_eq!(d.imagined, 6 * 200);
+    assert_eq!((d.real_steps, d.updates), (600, 1000));
+    assert!(d
+        .fit_holdout_loss
+        .iter()
+        .all(|l| l.is_finite() && *l >= 0.0));
+    // SAC and MBPO are the shared loop's: p1's runs are p3's, number for number.
+    for (a, b) in [
+        (p1::Method::Sac, Method::Sac),
+        (p1::Method::Mbpo, Method::Mbpo),
+    ] {
+        let x = p1::run(a, &problem, &p1_cfg, 2, &mut Ephemeral, &mut |_| {}).unwrap();
+        let y = run(b, &cfg, 2, &mut Vec::new());
+        assert_eq!(strip(x), strip(y), "{a:?}");
+    }
+    assert_eq!(
+        d.curve[0],
+        run(Method::Sac, &cfg, 0, &mut Vec::new()).curve[0]
+    );
+}
+
+/// Every imagined step of p1's rollouts is the incremental model's prediction from the real
+/// state and the real control applied before it (not zero), with the task's reward.
+#[test]
+fn incremental_rollouts_predict_from_the_real_previous_control() {
+    use tandem::envs::{Action, Task};
+    use tandem::models::{FitConfig, TransitionsBuilder};
+    use tandem::pipelines::mbpo::{Imagination, Imagine};
+    use tandem_agents::{OffPolicyLoop, Sac, SacConfig};
+
+    let problem = pendulum_problem();
+    let task = &problem.task;
+    let mut env = (problem.env)().unwrap();
+    env.reset(Some(1));
+    let mut data = TransitionsBuilder::new(2, 1);
+    for t in 0..200 {
+        let x = env.state();
+        let a = Action::Continuous(vec![2.0 * (t as f64 * 0.37).sin()]);
+        let step = env.step(&a).unwrap();
+        data.push(&x, &task.control(&a), &env.state(), step.reward, false)
+            .unwrap();
+    }
+    let data = data.build();
+    assert!(data.prev_actions.iter().filter(|u| **u != 0.0).count() > 190);
+
+    let mut p1_cfg = p1_small(&small());
+    p1_cfg.base.rollouts_per_step = 1;
+    p1_cfg.base.model_train_freq = 40;
+    let mut im = p1::IncrementalRollouts::of(&p1_cfg);
+    let mut model = im.new_model(&p1_cfg.base, 2, 1, 7).unwrap().unwrap();
+    let fit = FitConfig {
+        epochs: 5,
+        batch_size: 32,
+        holdout_fraction: 0.2,
+        seed: 0,
+    };
+    model.fit(&data, &fit).unwrap();
+    let sac_cfg = SacConfig {
+        hidden: vec![8],
+        ..SacConfig::default()
+    };
+    let (o, a) = (task.observation_space(), task.action_space());
+    let sac = Sac::new(sac_cfg.clone(), o, a, 0).unwrap();
+    let mut lp = OffPolicyLoop::new(sac, sac_cfg.schedule(), o, a, rng_from_seed(1))
+        .unwrap()
+        .with_secondary(100, 0.5)
+        .unwrap();
+    let n = im
+        .imagine(
+            &mut lp,
+            Some(&mut model),
+            task,
+            &data,
+            0,
+            0,
+            &mut rng_from_seed(2),
+        )
+        .unwrap();
+    assert_eq!(n, 40);
+    let buffer = lp.secondary().unwrap();
+    for k in 0..n {
+        let row = buffer.get(k).unwrap();
+        // Pendulum observations are (cos θ, sin θ, ω): find the start among the real states.
+        let (c, s, w) = (
+            f64::from(row.obs[[0, 0]]),
+            f64::from(row.obs[[0, 1]]),
+            f64::from(row.obs[[0, 2]]),
+        );
+        let i = (0..data.len())
+            .find(|&i| {
+                let x = data.states.row(i);
+                (x[0].cos() - c).abs() < 1e-5
+                    && (x[0].sin() - s).abs() < 1e-5
+                    && (x[1] - w).abs() < 1e-4
+            })
+            .expect("a real start");
+        let u = f64::from(row.actions[[0, 0]]);
+        // The rollouts start from the canonical state (the angle wrapped into [-π, π)).
+        let mut x = data.states.row(i).to_vec();
+        task.canonicalize(&mut x);
+        let states = ndarray::Array2::from_shape_vec((1, 2), x.clone()).unwrap();
+        let prev = data.prev_actions.slice(ndarray::s![i..i + 1, ..]);
+        let actions = array![[task.control(&Action::Continuous(vec![u]))[0]]];
+        let input = ModelInput::new(states.view(), actions.view()).with_prev_actions(prev);
+        let next = model
+            .predict(&input, &mut rng_from_seed(0))
+            .unwrap()
+            .next_states;
+        let obs = task.observe(next.row(0).as_slice().unwrap());
+        for (j, o) in obs.iter().enumerate() {
+            let stored = f64::from(row.next_obs[[0, j]]);
+            assert!(
+                (stored - o).abs() < 1e-3,
+                "row {k}, component {j}: {stored} vs the model's {o}"
+            );
+        }
+        let r = task.reward(&x, &[actions[[0, 0]]], next.row(0).as_slice().unwrap());
+        assert!(
+            (f64::from(row.rewards[0]) - r).abs() < 1e-3 * r.abs().max(1.0),
+            "row {k}"
+        );
     }
 }
 
@@ -393,7 +570,7 @@ fn oracle_rollouts_on_the_leg_are_the_real_legs_own_steps() {
     use tandem::dynamics::leg2r::leg2r_plant;
     use tandem::dynamics::Clocked;
     use tandem::envs::{Action, Leg2RConfig, Leg2RModel, Task};
-    use tandem::models::{EnsembleConfig, ProbabilisticEnsemble, TransitionsBuilder};
+    use tandem::models::TransitionsBuilder;
     use tandem::pipelines::mbpo::{leg2r_problem_with, Imagination, Imagine, OracleRollouts};
     use tandem_agents::{OffPolicyLoop, Sac, SacConfig};
 
@@ -422,7 +599,8 @@ fn oracle_rollouts_on_the_leg_are_the_real_legs_own_steps() {
     cfg.model_train_freq = 10;
     let plant = Clocked::new(leg2r_plant(&leg.plant).unwrap(), leg.trajectory.period).unwrap();
     let mut oracle = OracleRollouts::of(&cfg, PlantModel::new(plant));
-    assert!(!oracle.fits_model());
+    // It brings its own model: the loop fits nothing for it.
+    assert!(oracle.new_model(&cfg, 6, 2, 0).unwrap().is_none());
     assert_eq!(Imagination::name(&oracle), "mbpo_oracle");
     let sac_cfg = SacConfig {
         hidden: vec![8],
@@ -434,23 +612,8 @@ fn oracle_rollouts_on_the_leg_are_the_real_legs_own_steps() {
         .unwrap()
         .with_secondary(100, 0.5)
         .unwrap();
-    let unused = EnsembleConfig {
-        members: 1,
-        elites: 1,
-        hidden: vec![4],
-        ..EnsembleConfig::default()
-    };
-    let mut ensemble = ProbabilisticEnsemble::new(6, 2, unused).unwrap();
     let n = oracle
-        .imagine(
-            &mut lp,
-            &mut ensemble,
-            task,
-            &data,
-            0,
-            0,
-            &mut rng_from_seed(2),
-        )
+        .imagine(&mut lp, None, task, &data, 0, 0, &mut rng_from_seed(2))
         .unwrap();
     // 3 rollouts per real step x 10 real steps per refit, one step each.
     assert_eq!(n, 30);
