@@ -148,9 +148,10 @@ struct MujocoPreset {
 }
 
 /// SAC updates per real step `G` on the MuJoCo tasks, the same for every method (MBPO: 20, 40 on
-/// HalfCheetah). Ours: at 4, one seed of one method of 100 epochs takes about an hour on this
-/// 2-core machine with two runs side by side (SAC's 256×256 update about 6 ms on one core).
-pub const MUJOCO_UPDATES_PER_STEP: usize = 4;
+/// HalfCheetah). Ours: SAC's 256×256 update (about 0.67 GFLOP) takes 10–12 ms on one core of
+/// the 2-core machine this was sized on and about 17 ms with two runs side by side, so at 2 one
+/// seed of SAC over 100 epochs takes about an hour there, MBPO and M-DeMoRL somewhat more.
+pub const MUJOCO_UPDATES_PER_STEP: usize = 2;
 
 /// The MuJoCo tasks the p1 and p3 studies run (fixed targets: HalfCheetah p3 Fig. 3's 10 000,
 /// the others ours; the studies count real steps to a baseline's final return instead).
