@@ -52,7 +52,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // soon as the random warm-up steps are in.
         if t > warmup && ((t - 1) % b.epoch_length == 0 || t == warmup + 1) {
             let all = d_env.clone().build();
-            f.fit(&all, &b.fit_for(all.len(), seeds.derive(&format!("fit-{t}"))))?;
+            f.fit(
+                &all,
+                &b.fit_for(all.len(), seeds.derive(&format!("fit-{t}"))),
+            )?;
         }
         // 5: take an action in the environment according to π; add it to D_env (with the
         // control before it, which the model conditions on).

@@ -148,10 +148,11 @@ struct MujocoPreset {
 }
 
 /// SAC updates per real step `G` on the MuJoCo tasks, the same for every method (MBPO: 20, 40 on
-/// HalfCheetah). Ours: SAC's 256×256 update (about 0.67 GFLOP) takes 10–12 ms on one core of
-/// the 2-core machine this was sized on and about 17 ms with two runs side by side, so at 2 one
-/// seed of SAC over 100 epochs takes about an hour there, MBPO and M-DeMoRL somewhat more.
-pub const MUJOCO_UPDATES_PER_STEP: usize = 2;
+/// HalfCheetah). Ours: SAC's 256×256 update (about 0.67 GFLOP) takes about 12.5 ms on one core
+/// of the 2-core machine this was sized on and about 6.7 ms with its passes split over both, so
+/// at 4 one seed of SAC over 100 epochs (95 000 × 4 updates) takes about 45 minutes with
+/// `--jobs 1`, MBPO and M-DeMoRL about an hour.
+pub const MUJOCO_UPDATES_PER_STEP: usize = 4;
 
 /// The MuJoCo tasks the p1 and p3 studies run (fixed targets: HalfCheetah p3 Fig. 3's 10 000,
 /// the others ours; the studies count real steps to a baseline's final return instead).
