@@ -26,7 +26,9 @@ use serde::{Deserialize, Serialize};
 use tandem_agents::{OffPolicyLoop, Sac};
 use tandem_core::Rng;
 use tandem_envs::{Env, EnvError, Task};
-use tandem_models::{IncrementalModel, IncrementalModelConfig, Judges, Transitions};
+use tandem_models::{
+    DynamicsModel, FitConfig, IncrementalModel, IncrementalModelConfig, Judges, Transitions,
+};
 
 use super::mbpo::{
     fitted, run_with, Event, Imagination, Imagine, LinearSchedule, MbpoConfig, Problem, Rollouts,
@@ -174,5 +176,215 @@ where
             let mut r = IncrementalRollouts::of(cfg);
             run_with(problem, &cfg.base, seed, Some(&mut r), store, on_event)
         }
+    }
+}
+
+/// Settings of p1's §6 online fine-tuning: a residual incremental policy from the
+/// error-evolution model `e_{k+1} = e_k + L_k Δa_{e,k}` (eq. 9) added to a pre-trained policy
+/// after the system changed. `Default`: 10 episodes (the budget), MPC over one step
+/// (`horizon` 1; p1 allows "MPC or LQR"), the model refit after every episode.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FineTuneConfig {
+    /// Episodes on the changed system.
+    pub episodes: usize,
+    /// `Q`'s diagonal: the weight of each state component's squared tracking error (0 for a
+    /// component without a target, e.g. a clock). Empty: all ones.
+    pub error_weights: Vec<f64>,
+    /// `R = r I`: the weight of the squared residual increment (in the agent's action units).
+    pub increment_weight: f64,
+    /// Steps of the finite-horizon LQR on eq. (9) with `L_k` held over them (1: one-step MPC).
+    pub horizon: usize,
+    /// Refit `L_θ` after every episode on all of the changed system's transitions so far (p1:
+    /// the error-evolution model is fitted online); `false` keeps the model it is given.
+    pub refit: bool,
+    /// Each refit (continuing from the current weights).
+    pub fit: FitConfig,
+}
+
+impl Default for FineTuneConfig {
+    fn default() -> Self {
+        Self {
+            episodes: 10,
+            error_weights: Vec::new(),
+            increment_weight: 1e-3,
+            horizon: 1,
+            refit: true,
+            fit: FitConfig {
+                epochs: 5,
+                batch_size: 256,
+                holdout_fraction: 0.1,
+                seed: 0,
+            },
+        }
+    }
+}
+
+/// The first step's gain of the LQR on `e_{t+1} = e_t + L u_t` (A = I, B = L) with stage cost
+/// `eᵀQe + uᵀRu` over `horizon` steps and terminal weight `Q`: `Δa = −K e`. `None` where a
+/// solve fails (a singular `R + LᵀPL`, which `R > 0` rules out).
+pub fn residual_gain(
+    l: &nalgebra::DMatrix<f64>,
+    q: &[f64],
+    r: f64,
+    horizon: usize,
+) -> Option<nalgebra::DMatrix<f64>> {
+    use nalgebra::DMatrix;
+    let (s, a) = l.shape();
+    let qm = DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(q));
+    let mut p = qm.clone();
+    let mut k = DMatrix::zeros(a, s);
+    for _ in 0..horizon.max(1) {
+        let m = DMatrix::<f64>::identity(a, a) * r + l.transpose() * &p * l;
+        k = m.cholesky()?.solve(&(l.transpose() * &p));
+        p = &qm + &p - &p * l * &k;
+    }
+    Some(k)
+}
+
+/// One episode of fine-tuning (or of the pre-trained policy alone).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FineTuneEpisode {
+    /// The episode's return.
+    pub episode_return: f64,
+    /// Mean over the steps of the residual's largest component (action units).
+    pub mean_residual: f64,
+}
+
+/// p1 §6 on a changed system: `cfg.episodes` episodes of `agent`'s deterministic policy `a_d`
+/// plus, where `residual` is set, the residual incremental policy: at every step the tracking
+/// error `e = s − desired(s)` (canonical states), `L_k = L_θ(s_k, a_{k−1})` from `model`, the
+/// increment `Δa_e = −K e` of the LQR on eq. (9), accumulated (`c_k = c_{k−1} + Δa_e`, an
+/// incremental policy integrates its increments) and applied as `a = clip(a_d + c)`. The
+/// model works in the agent's action units (fitted on them, e.g. on the original system, or
+/// started from a prior `L0`); with `cfg.refit` it is refit after every episode on all
+/// transitions of the changed system so far. Episode `i` resets `env` with seed `seed + i`.
+/// Returns each episode's figures.
+#[allow(clippy::too_many_arguments)]
+pub fn fine_tune<T: Task + ?Sized>(
+    agent: &mut dyn tandem_agents::Agent,
+    env: &mut dyn Env,
+    task: &T,
+    desired: &dyn Fn(&[f64]) -> Vec<f64>,
+    model: &mut IncrementalModel,
+    cfg: &FineTuneConfig,
+    residual: bool,
+    seed: u64,
+) -> Result<Vec<FineTuneEpisode>> {
+    use tandem_core::{Action, Space};
+    let (low, high) = match task.action_space() {
+        Space::Box { low, high, .. } => (low.clone(), high.clone()),
+        Space::Discrete { .. } => {
+            return Err(super::PipelineError::Config(
+                "fine-tuning adds residual actions: a continuous (box) action space".into(),
+            ))
+        }
+    };
+    let (s_dim, a_dim) = (task.state_dim(), low.len());
+    let q: Vec<f64> = if cfg.error_weights.is_empty() {
+        vec![1.0; s_dim]
+    } else {
+        cfg.error_weights.clone()
+    };
+    if q.len() != s_dim || q.iter().any(|w| !(w.is_finite() && *w >= 0.0)) {
+        return Err(super::PipelineError::Config(format!(
+            "error_weights: {s_dim} finite weights >= 0, got {:?}",
+            cfg.error_weights
+        )));
+    }
+    if !(cfg.increment_weight.is_finite() && cfg.increment_weight > 0.0) {
+        return Err(super::PipelineError::Config(format!(
+            "increment_weight {} must be > 0",
+            cfg.increment_weight
+        )));
+    }
+    let mut data = tandem_models::TransitionsBuilder::new(s_dim, a_dim);
+    let mut out = Vec::with_capacity(cfg.episodes);
+    for ep in 0..cfg.episodes {
+        let mut obs = env.reset(Some(seed + ep as u64));
+        let mut prev = vec![0.0; a_dim];
+        let mut c = vec![0.0; a_dim];
+        let (mut ret, mut res_sum, mut steps) = (0.0, 0.0, 0usize);
+        loop {
+            let mut s = env.state();
+            task.canonicalize(&mut s);
+            let a_d = agent.act(&obs, tandem_agents::Mode::Deterministic)?;
+            let a_d = a_d.as_continuous().unwrap_or(&[]).to_vec();
+            if residual {
+                let sd = desired(&s);
+                let e: Vec<f64> = s.iter().zip(&sd).map(|(x, d)| x - d).collect();
+                let states = ndarray::Array2::from_shape_vec((1, s_dim), s.clone())
+                    .map_err(|e| super::PipelineError::Config(e.to_string()))?;
+                let prevs = ndarray::Array2::from_shape_vec((1, a_dim), prev.clone())
+                    .map_err(|e| super::PipelineError::Config(e.to_string()))?;
+                let l = model.gain(states.view(), prevs.view())?.remove(0);
+                if let Some(k) = residual_gain(&l, &q, cfg.increment_weight, cfg.horizon) {
+                    let de = k * nalgebra::DVector::from_column_slice(&e);
+                    for j in 0..a_dim {
+                        // The residual never needs more than the action range.
+                        let span = high[j] - low[j];
+                        c[j] = (c[j] - de[j]).clamp(-span, span);
+                    }
+                }
+            }
+            let a: Vec<f64> = (0..a_dim)
+                .map(|j| (a_d[j] + c[j]).clamp(low[j], high[j]))
+                .collect();
+            res_sum += c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let step = env.step(&Action::Continuous(a.clone()))?;
+            let mut s1 = env.state();
+            task.canonicalize(&mut s1);
+            data.push(&s, &a, &s1, step.reward, step.terminated)?;
+            ret += step.reward;
+            steps += 1;
+            prev = a;
+            obs = step.observation;
+            if step.terminated || step.truncated {
+                data.end_episode();
+                break;
+            }
+        }
+        out.push(FineTuneEpisode {
+            episode_return: ret,
+            mean_residual: res_sum / steps.max(1) as f64,
+        });
+        if residual && cfg.refit {
+            let all = data.clone().build();
+            model.fit(
+                &all,
+                &FitConfig {
+                    seed: cfg.fit.seed + ep as u64,
+                    ..cfg.fit.clone()
+                },
+            )?;
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DMatrix;
+
+    /// On the scalar integrator `e' = e + u` with `q = r = 1`, one step gives `K = 1/2`; the
+    /// infinite horizon solves `p²/(1 + p) = 1`, `p` the golden ratio, and `K = p/(1 + p)`.
+    #[test]
+    fn residual_gain_matches_the_scalar_riccati_solution() {
+        let l = DMatrix::from_element(1, 1, 1.0);
+        let one = residual_gain(&l, &[1.0], 1.0, 1).unwrap();
+        assert!((one[(0, 0)] - 0.5).abs() < 1e-12);
+        let p = (1.0 + 5f64.sqrt()) / 2.0;
+        let many = residual_gain(&l, &[1.0], 1.0, 200).unwrap();
+        assert!(
+            (many[(0, 0)] - p / (1.0 + p)).abs() < 1e-12,
+            "{}",
+            many[(0, 0)]
+        );
+        // A state component without weight gets no feedback; a 2 x 1 `L` with weights (4, 0)
+        // in one step: K = (r + 4 l1²)⁻¹ [4 l1, 0].
+        let l = DMatrix::from_column_slice(2, 1, &[0.5, 3.0]);
+        let k = residual_gain(&l, &[4.0, 0.0], 0.1, 1).unwrap();
+        assert!((k[(0, 0)] - 2.0 / 1.1).abs() < 1e-12 && k[(0, 1)] == 0.0);
     }
 }
