@@ -597,6 +597,110 @@ mod tests {
         assert_eq!(other.network().params(), &before[..]);
     }
 
+    /// A rigid-body plant whose exact input Jacobian comes from the analytic ABA derivatives:
+    /// the 2R leg (no hard stops), torques well inside its motors' limits. On one-step-back
+    /// data whose two steps leave the same predecessor `x` (`s_t = f(x, u_prev)`,
+    /// `s_{t+1} = f(x, u)`) the incremental form is exact to first order in `Δu`, so the fitted
+    /// `L_θ(s_t, u_prev)` must be `∂f/∂u (x, u_prev)`: checked at held-out states.
+    #[test]
+    fn learns_the_input_jacobian_of_a_rigid_body_plant() {
+        use nalgebra::DVector;
+        use tandem_dynamics::leg2r::{leg2r_plant, Leg2RParams};
+        use tandem_dynamics::Plant;
+
+        let plant = leg2r_plant(&Leg2RParams {
+            joint_limits: None,
+            ..Leg2RParams::idealized()
+        })
+        .unwrap();
+        let mut rng = rng_from_seed(5);
+        // (x, u_prev, u): joint angles over a band of the workspace, slow joints, torques of
+        // at most 1 N m (the motors give 3) changed by at most 0.3 N m.
+        let mut sample = |n: usize| -> Vec<(DVector<f64>, DVector<f64>, DVector<f64>)> {
+            (0..n)
+                .map(|_| {
+                    let x = DVector::from_vec(vec![
+                        rng.random_range(-0.6..0.6),
+                        rng.random_range(-1.6..-0.4),
+                        rng.random_range(-0.5..0.5),
+                        rng.random_range(-0.5..0.5),
+                    ]);
+                    let up = DVector::from_vec(vec![
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-1.0..1.0),
+                    ]);
+                    let du = DVector::from_vec(vec![
+                        rng.random_range(-0.3..0.3),
+                        rng.random_range(-0.3..0.3),
+                    ]);
+                    let u = &up + du;
+                    (x, up, u)
+                })
+                .collect()
+        };
+        let to_data = |rows: &[(DVector<f64>, DVector<f64>, DVector<f64>)]| {
+            let n = rows.len();
+            let mut t = Transitions {
+                states: Array2::zeros((n, 4)),
+                actions: Array2::zeros((n, 2)),
+                prev_actions: Array2::zeros((n, 2)),
+                next_states: Array2::zeros((n, 4)),
+                rewards: Array1::zeros(n),
+                terminated: Array1::from_elem(n, false),
+            };
+            for (r, (x, up, u)) in rows.iter().enumerate() {
+                let (s, s1) = (plant.step(x, up), plant.step(x, u));
+                for i in 0..4 {
+                    t.states[[r, i]] = s[i];
+                    t.next_states[[r, i]] = s1[i];
+                }
+                for j in 0..2 {
+                    t.prev_actions[[r, j]] = up[j];
+                    t.actions[[r, j]] = u[j];
+                }
+            }
+            t
+        };
+        let train = to_data(&sample(1500));
+        let test_rows = sample(50);
+        let test = to_data(&test_rows);
+        let cfg = IncrementalModelConfig {
+            hidden: vec![64, 64],
+            activation: Activation::Tanh,
+            optimizer: OptimizerConfig::adam(3e-3),
+            ..IncrementalModelConfig::default()
+        };
+        let mut m = IncrementalModel::new(4, 2, cfg).unwrap();
+        let fit = FitConfig {
+            epochs: 150,
+            batch_size: 64,
+            holdout_fraction: 0.1,
+            seed: 0,
+        };
+        m.fit(&train, &fit).unwrap();
+        let gains = m
+            .gain(test.states.view(), test.prev_actions.view())
+            .unwrap();
+        let mut worst = 0.0f64;
+        for ((x, up, _), l) in test_rows.iter().zip(&gains) {
+            let (_, b) = plant.linearize(x, up);
+            // Rows of joint angles and of joint velocities differ by the control period: each
+            // row block relative to its own size.
+            for rows in [0..2, 2..4] {
+                let bb = b.rows(rows.start, 2);
+                let ll = l.rows(rows.start, 2);
+                worst = worst.max((ll - bb).norm() / bb.norm());
+            }
+        }
+        eprintln!(
+            "incremental model on the leg: largest relative error of L's row blocks {worst:.4}"
+        );
+        assert!(
+            worst < 0.1,
+            "relative error of the learned input matrix {worst}"
+        );
+    }
+
     #[test]
     fn diagonal_gain_and_prior_starting_point() {
         let b = DMatrix::from_diagonal(&nalgebra::dvector![0.7, -1.2]);
