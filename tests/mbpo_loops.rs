@@ -266,6 +266,23 @@ fn a_stopped_run_resumes_to_the_same_numbers() {
     assert_eq!(resumed, whole);
 }
 
+/// An untrained SAC of 8 hidden units for `task` in a loop with a secondary buffer of 100.
+fn tiny_sac_loop<T: tandem::envs::Task>(
+    task: &T,
+) -> tandem_agents::OffPolicyLoop<tandem_agents::Sac> {
+    use tandem_agents::{OffPolicyLoop, Sac, SacConfig};
+    let cfg = SacConfig {
+        hidden: vec![8],
+        ..SacConfig::default()
+    };
+    let (o, a) = (task.observation_space(), task.action_space());
+    let sac = Sac::new(cfg.clone(), o, a, 0).unwrap();
+    OffPolicyLoop::new(sac, cfg.schedule(), o, a, rng_from_seed(1))
+        .unwrap()
+        .with_secondary(100, 0.5)
+        .unwrap()
+}
+
 /// p1's settings around p3's small loop: the incremental model 16×16.
 fn p1_small(p3: &P3Config) -> P1Config {
     P1Config {
@@ -324,7 +341,6 @@ fn incremental_rollouts_predict_from_the_real_previous_control() {
     use tandem::envs::{Action, Task};
     use tandem::models::{FitConfig, TransitionsBuilder};
     use tandem::pipelines::mbpo::{Imagination, Imagine};
-    use tandem_agents::{OffPolicyLoop, Sac, SacConfig};
 
     let problem = pendulum_problem();
     let task = &problem.task;
@@ -353,16 +369,7 @@ fn incremental_rollouts_predict_from_the_real_previous_control() {
         seed: 0,
     };
     model.fit(&data, &fit).unwrap();
-    let sac_cfg = SacConfig {
-        hidden: vec![8],
-        ..SacConfig::default()
-    };
-    let (o, a) = (task.observation_space(), task.action_space());
-    let sac = Sac::new(sac_cfg.clone(), o, a, 0).unwrap();
-    let mut lp = OffPolicyLoop::new(sac, sac_cfg.schedule(), o, a, rng_from_seed(1))
-        .unwrap()
-        .with_secondary(100, 0.5)
-        .unwrap();
+    let mut lp = tiny_sac_loop(task);
     let n = im
         .imagine(
             &mut lp,
@@ -572,7 +579,6 @@ fn oracle_rollouts_on_the_leg_are_the_real_legs_own_steps() {
     use tandem::envs::{Action, Leg2RConfig, Leg2RModel, Task};
     use tandem::models::TransitionsBuilder;
     use tandem::pipelines::mbpo::{leg2r_problem_with, Imagination, Imagine, OracleRollouts};
-    use tandem_agents::{OffPolicyLoop, Sac, SacConfig};
 
     let leg = Leg2RConfig {
         position_scale: 0.02,
@@ -602,16 +608,7 @@ fn oracle_rollouts_on_the_leg_are_the_real_legs_own_steps() {
     // It brings its own model: the loop fits nothing for it.
     assert!(oracle.new_model(&cfg, 6, 2, 0).unwrap().is_none());
     assert_eq!(Imagination::name(&oracle), "mbpo_oracle");
-    let sac_cfg = SacConfig {
-        hidden: vec![8],
-        ..SacConfig::default()
-    };
-    let (o, a) = (task.observation_space(), task.action_space());
-    let sac = Sac::new(sac_cfg.clone(), o, a, 0).unwrap();
-    let mut lp = OffPolicyLoop::new(sac, sac_cfg.schedule(), o, a, rng_from_seed(1))
-        .unwrap()
-        .with_secondary(100, 0.5)
-        .unwrap();
+    let mut lp = tiny_sac_loop(task);
     let n = oracle
         .imagine(&mut lp, None, task, &data, 0, 0, &mut rng_from_seed(2))
         .unwrap();

@@ -25,8 +25,8 @@ use tandem::run::RunDir;
 
 use super::harness::{self, JobError, Study, StudyArgs};
 use super::reproduce_p3::{
-    mujoco_ids, mujoco_loop, quick_loop, rates_and_wall, runs_table, seconds_per_seed,
-    step_progress, target_of, target_sentence,
+    check_target_method, loop_sentence, mujoco_ids, mujoco_loop, quick_loop, rates_and_wall,
+    runs_table, seconds_per_seed, step_progress, target_of, target_sentence,
 };
 use super::{CliError, Result};
 
@@ -98,12 +98,8 @@ impl P1Settings {
                 self.target_return
             ));
         }
-        if let Some(m) = &self.target_method {
-            let known: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
-            if !known.contains(&m.as_str()) {
-                return bad(format!("target_method {m}: one of {}", known.join(", ")));
-            }
-        }
+        let known: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+        check_target_method(self.target_method.as_deref(), &known).or_else(bad)?;
         Ok(())
     }
 }
@@ -247,21 +243,12 @@ fn markdown(t: &tandem::report::Table, s: &P1Settings, records: &[RunRecord], wa
     let m = &s.p1.model;
     let closing = vec![
         format!(
-            "All methods take {} real steps ({} epochs of {}), evaluated every {} with {} \
-             deterministic episodes (not counted); SAC {:?} hidden units, {} random steps, {} \
-             updates per real step, minibatches {} % real data for the model-based methods; \
-             models refit every {} real steps on all real data; MBPO an ensemble of {} ({} \
-             elites) of {:?}, {} rollouts per real step of length {} → {}; Dyna-SAC the \
-             incremental model `s + L(s, a_prev) Δa` ({:?} {:?} units, {:?} L), {} one-step \
-             rollouts per real step, the task's reward.",
-            b.real_steps,
-            b.real_steps / b.epoch_length,
-            b.epoch_length,
-            b.eval_every,
-            b.eval_episodes,
-            b.sac.hidden,
-            b.sac.learning_starts,
-            b.updates_per_step,
+            "{}, minibatches {} % real data for the model-based methods; models refit every {} \
+             real steps on all real data; MBPO an ensemble of {} ({} elites) of {:?}, {} \
+             rollouts per real step of length {} → {}; Dyna-SAC the incremental model \
+             `s + L(s, a_prev) Δa` ({:?} {:?} units, {:?} L), {} one-step rollouts per real \
+             step, the task's reward.",
+            loop_sentence(b),
             b.real_ratio * 100.0,
             b.model_train_freq,
             b.ensemble.members,

@@ -292,12 +292,8 @@ impl P3Settings {
                 }
             }
         }
-        if let Some(m) = &self.target_method {
-            let known: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
-            if !known.contains(&m.as_str()) {
-                return bad(format!("target_method {m}: one of {}", known.join(", ")));
-            }
-        }
+        let known: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+        check_target_method(self.target_method.as_deref(), &known).or_else(bad)?;
         if !self.target_return.is_finite() {
             return bad(format!(
                 "target_return {} must be finite",
@@ -619,6 +615,37 @@ pub fn table(records: &[RunRecord], s: &P3Settings) -> Table {
     )
 }
 
+/// "All methods take … updates per real step": the budget, evaluations and SAC of the loop
+/// every method of a study shares.
+pub(super) fn loop_sentence(b: &MbpoConfig) -> String {
+    format!(
+        "All methods take {} real steps ({} epochs of {}), evaluated every {} with {} \
+         deterministic episodes (not counted); SAC {:?} hidden units, {} random steps, {} \
+         updates per real step",
+        b.real_steps,
+        b.real_steps / b.epoch_length,
+        b.epoch_length,
+        b.eval_every,
+        b.eval_episodes,
+        b.sac.hidden,
+        b.sac.learning_starts,
+        b.updates_per_step,
+    )
+}
+
+/// An error message unless `method` is `None` or one of the runs `known`.
+pub(super) fn check_target_method(
+    method: Option<&str>,
+    known: &[&str],
+) -> std::result::Result<(), String> {
+    match method {
+        Some(m) if !known.contains(&m) => {
+            Err(format!("target_method {m}: one of {}", known.join(", ")))
+        }
+        _ => Ok(()),
+    }
+}
+
 /// The return whose reaching is counted: the mean return at `budget` of the runs `method`
 /// where it names one that has runs, else `fixed`.
 pub(super) fn target_of(
@@ -740,19 +767,10 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
     let b = &s.p3.base;
     let closing = vec![
         format!(
-            "All methods take {} real steps ({} epochs of {}), evaluated every {} with {} \
-             deterministic episodes (not counted); SAC {:?} hidden units, {} random steps, {} \
-             updates per real step; the model an ensemble of {} ({} elites) of {:?}, refit \
-             every {} real steps; MBPO {} rollouts per real step; M-DeMoRL {} sampled \
-             sequences, H {} → {} over epochs {}–{}, up to {} MPC transitions an epoch.{}",
-            b.real_steps,
-            b.real_steps / b.epoch_length,
-            b.epoch_length,
-            b.eval_every,
-            b.eval_episodes,
-            b.sac.hidden,
-            b.sac.learning_starts,
-            b.updates_per_step,
+            "{}; the model an ensemble of {} ({} elites) of {:?}, refit every {} real steps; \
+             MBPO {} rollouts per real step; M-DeMoRL {} sampled sequences, H {} → {} over \
+             epochs {}–{}, up to {} MPC transitions an epoch.{}",
+            loop_sentence(b),
             b.ensemble.members,
             b.ensemble.elites,
             b.ensemble.hidden,

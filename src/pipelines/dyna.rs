@@ -31,10 +31,7 @@ pub struct Starts {
 /// `n` rows drawn uniformly (with replacement) from `data`: the starts of branched rollouts. An
 /// error for empty data.
 pub fn sample_starts(data: &Transitions, n: usize, rng: &mut Rng) -> Result<Starts> {
-    if data.is_empty() {
-        return Err(ModelError::Empty.into());
-    }
-    let idx: Vec<usize> = (0..n).map(|_| rng.random_range(0..data.len())).collect();
+    let idx = start_rows(data, n, rng)?;
     Ok(Starts {
         states: data.states.select(Axis(0), &idx),
         prev_controls: data.prev_actions.select(Axis(0), &idx),
@@ -43,7 +40,16 @@ pub fn sample_starts(data: &Transitions, n: usize, rng: &mut Rng) -> Result<Star
 
 /// The states of [`sample_starts`] alone (the same draws).
 pub fn sample_states(data: &Transitions, n: usize, rng: &mut Rng) -> Result<Array2<f64>> {
-    sample_starts(data, n, rng).map(|s| s.states)
+    let idx = start_rows(data, n, rng)?;
+    Ok(data.states.select(Axis(0), &idx))
+}
+
+/// `n` row indices of `data` drawn uniformly with replacement; an error for empty data.
+fn start_rows(data: &Transitions, n: usize, rng: &mut Rng) -> Result<Vec<usize>> {
+    if data.is_empty() {
+        return Err(ModelError::Empty.into());
+    }
+    Ok((0..n).map(|_| rng.random_range(0..data.len())).collect())
 }
 
 /// Rolls `model` under `task` for `horizon` steps from every row of `starts`, acting with the

@@ -53,6 +53,17 @@ pub enum PipelineError {
     Stopped,
 }
 
+/// The bounds `(low, high)` of a continuous (box) action space; for a discrete one, the error
+/// "`needs` a continuous (box) action space".
+pub fn box_bounds(space: &tandem_core::Space, needs: &str) -> Result<(Vec<f64>, Vec<f64>)> {
+    match space {
+        tandem_core::Space::Box { low, high, .. } => Ok((low.clone(), high.clone())),
+        tandem_core::Space::Discrete { .. } => Err(PipelineError::Config(format!(
+            "{needs} a continuous (box) action space"
+        ))),
+    }
+}
+
 impl From<NnError> for PipelineError {
     fn from(e: NnError) -> Self {
         PipelineError::Checkpoint(e.to_string())

@@ -271,15 +271,8 @@ pub fn fine_tune<T: Task + ?Sized>(
     residual: bool,
     seed: u64,
 ) -> Result<Vec<FineTuneEpisode>> {
-    use tandem_core::{Action, Space};
-    let (low, high) = match task.action_space() {
-        Space::Box { low, high, .. } => (low.clone(), high.clone()),
-        Space::Discrete { .. } => {
-            return Err(super::PipelineError::Config(
-                "fine-tuning adds residual actions: a continuous (box) action space".into(),
-            ))
-        }
-    };
+    use tandem_core::Action;
+    let (low, high) = super::box_bounds(task.action_space(), "fine-tuning adds residual actions:")?;
     let (s_dim, a_dim) = (task.state_dim(), low.len());
     let q: Vec<f64> = if cfg.error_weights.is_empty() {
         vec![1.0; s_dim]

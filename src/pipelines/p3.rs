@@ -34,7 +34,7 @@ use std::sync::Arc;
 use ndarray::{Array1, Array2, ArrayView2};
 use serde::{Deserialize, Serialize};
 use tandem_agents::{BatchPolicy, Critic, Mode, OffPolicyLoop, Sac, Store};
-use tandem_core::{seeding::rng_from_seed, Action, Rng, Space};
+use tandem_core::{seeding::rng_from_seed, Action, Rng};
 use tandem_envs::{Env, EnvError, Task};
 use tandem_models::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, ProbabilisticEnsemble,
@@ -289,14 +289,7 @@ impl<T: Task + Clone + Send + Sync + 'static> Imagine<T> for MpcPlans {
         model.set_propagation(Propagation::FixedMember);
         let h = self.cfg.horizon.at(epoch);
         let starts = sample_states(data, self.cfg.plans_per_refit(epoch), rng)?;
-        let (low, high) = match task.action_space() {
-            Space::Box { low, high, .. } => (low.clone(), high.clone()),
-            Space::Discrete { .. } => {
-                return Err(PipelineError::Config(
-                    "M-DeMoRL plans over a continuous (box) action space".into(),
-                ))
-            }
-        };
+        let (low, high) = super::box_bounds(task.action_space(), "M-DeMoRL plans over")?;
         let half: Vec<f64> = low.iter().zip(&high).map(|(l, u)| 0.5 * (u - l)).collect();
         let mut planner = DmdMpc::new(DmdMpcConfig {
             horizon: h,
