@@ -20,7 +20,9 @@
 //! The `biped` group times `RigidBodyPlant::linearize` of one 30 ms control period (30 RK4 steps
 //! with contact) of the Leo-like biped (10 DoF, 6 actions): analytical (ABA derivatives chained
 //! with the actuator and contact partials through the RK4 stages) against central differences
-//! (`2 (20 + 6)` rollouts of the period). Run with `cargo bench --bench dynamics`.
+//! (`2 (20 + 6)` rollouts of the period), and `step`, one control period of the true biped
+//! (what p0's Leo study spends per sample on the true system). Run with
+//! `cargo bench --bench dynamics`.
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use nalgebra::DVector;
@@ -109,6 +111,13 @@ fn bench(c: &mut Criterion) {
     });
     g.bench_function("linearize_fd", |b| {
         b.iter(|| plant.linearize_fd(black_box(&x), black_box(&u)))
+    });
+    g.bench_function("step", |b| {
+        b.iter(|| {
+            let mut y = x.as_slice().to_vec();
+            plant.step_in_place(black_box(&mut y), black_box(u.as_slice()));
+            y
+        })
     });
     g.finish();
 }

@@ -9,8 +9,8 @@ use tandem::envs::{make, SampleCounter};
 
 use tandem::nn::Checkpoint;
 use tandem::pipelines::p0::{
-    agent_spaces, collect, ddpg_agent, p0_loop, pendulum_problem, run_seed, Method, P0Config,
-    RunRecord,
+    agent_spaces, collect, ddpg_agent, leo_problem, p0_loop, pendulum_problem, run_seed, Method,
+    P0Config, RunRecord,
 };
 use tandem::pipelines::{Checkpoints, Ephemeral, PipelineError, Result};
 
@@ -212,8 +212,25 @@ fn reproduce_quick_writes_table_ii_and_fig_5() {
         assert!(t.get("mean").is_some());
         assert!(out.join(format!("runs/{m}__seed1/curve.csv")).exists());
     }
+    // The small-batch row (400 true samples per update, the quick budget 800): two updates.
+    let small = &table["difference_small_batch"]["return_at_budget"];
+    assert_eq!(small["per_seed"].as_array().unwrap().len(), 2);
+    assert!(table.get("cold_over_difference_small_batch").is_some());
+    let rec: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("runs/difference_small_batch__seed0/record.json"))
+            .unwrap(),
+    )
+    .unwrap();
+    let samples: Vec<u64> = rec["curve"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["true_samples"].as_u64().unwrap())
+        .collect();
+    assert_eq!(samples, [0, 400, 800]);
     let md = std::fs::read_to_string(out.join("table.md")).unwrap();
     assert!(md.contains("Difference model") && md.contains("not counted"));
+    assert!(md.contains("Difference model, small batch") && md.contains("batch of 400"));
     let svg = std::fs::read_to_string(out.join("fig5.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("difference"));
     std::fs::remove_dir_all(&out).ok();
@@ -403,4 +420,123 @@ fn seeds_run_apart_and_merged_equal_one_run_of_all_seeds() {
         "is interrupted",
     );
     let _ = std::fs::remove_dir_all(&root);
+}
+
+/// A tiny Leo configuration: p0's Leo settings with small networks and budgets.
+fn tiny_leo() -> P0Config {
+    let mut c = P0Config::leo();
+    c.ddpg.actor_hidden = vec![16];
+    c.ddpg.critic_hidden = vec![16];
+    c.ddpg.buffer_size = 5000;
+    c.residual.hidden = vec![16];
+    c.pretrain_steps = 300;
+    c.real_batch = 300;
+    c.real_budget = 600;
+    c.baseline_max_samples = 600;
+    c.eval_interval = 300;
+    c.model_steps = 200;
+    c.fit.epochs = 1;
+    c
+}
+
+#[test]
+fn leo_runs_measure_their_first_and_last_policy_on_the_same_episode_as_the_curve() {
+    let cfg = tiny_leo();
+    assert_eq!(
+        cfg.methods(),
+        [Method::Cold, Method::Warm, Method::Difference]
+    );
+    let problem = leo_problem().unwrap();
+    let records = run_seed(
+        &problem,
+        &cfg,
+        &cfg.methods(),
+        3,
+        &|m, s| ddpg_agent(&cfg, &problem.task, m, s),
+        &mut Ephemeral,
+        &mut |_| {},
+    )
+    .unwrap();
+    for r in &records {
+        let (start, last) = (r.start.as_ref().unwrap(), r.last.as_ref().unwrap());
+        // The measured episodes are the curve's evaluation episodes: same start, same policy.
+        assert_eq!(start.eval_return, r.curve[0].eval_return, "{:?}", r.method);
+        assert_eq!(last.eval_return, r.curve.last().unwrap().eval_return);
+        // Frames every 5 steps (first and last kept) of the 10 joint positions; the distance
+        // is the torso's x at the last frame minus its start.
+        assert_eq!(start.frame_every, 5);
+        assert!(start.frames.iter().all(|f| f.len() == 10));
+        let (first, end) = (&last.frames[0], last.frames.last().unwrap());
+        let d = last.measures["distance_m"];
+        assert!((d - (end[0] - first[0])).abs() < 1e-12);
+        assert!(last.measures.contains_key("work_j") && last.measures.contains_key("fell"));
+        // The true system counted: cold and warm use their 600 samples, the difference method
+        // two batches of 300.
+        assert_eq!(r.true_samples, 600);
+    }
+    // Warm start and the difference method start from the same pre-trained policy.
+    let start = |m: Method| {
+        records
+            .iter()
+            .find(|r| r.method == m)
+            .unwrap()
+            .start
+            .clone()
+    };
+    assert_eq!(start(Method::Warm), start(Method::Difference));
+    assert_ne!(start(Method::Warm), start(Method::Cold));
+}
+
+#[test]
+fn reproduce_p0_leo_quick_writes_tables_iii_and_iv_fig_8_and_the_gaits() {
+    let out = std::env::temp_dir().join(format!("tandem-p0-leo-quick-{}", std::process::id()));
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_tandem"))
+        .args([
+            "reproduce",
+            "p0-leo",
+            "--quick",
+            "--seeds",
+            "1",
+            "--quiet",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let read = |f: &str| std::fs::read_to_string(out.join(f)).unwrap();
+    let table: serde_json::Value = serde_json::from_str(&read("table.json")).unwrap();
+    for m in ["cold", "warm", "difference"] {
+        assert_eq!(table[m]["return_at_budget"]["budget"], 1400, "{m}");
+        assert_eq!(table[m]["samples_to_target"]["target"], 2300.0);
+    }
+    assert!(table.get("difference_small_batch").is_none());
+    let t3: serde_json::Value = serde_json::from_str(&read("table3.json")).unwrap();
+    for p in ["mu_idl", "mu_d", "mu_true"] {
+        assert_eq!(t3[p]["seeds"], serde_json::json!([0]), "{p}");
+        assert!(t3[p]["return"]["mean"].as_f64().is_some());
+        assert!(t3[p]["distance_m"]["per_seed"][0].as_f64().is_some());
+    }
+    // μ^idl is the warm start's first policy: its return is the warm curve's first point.
+    let warm: serde_json::Value =
+        serde_json::from_str(&read("runs/warm__seed0/record.json")).unwrap();
+    assert_eq!(
+        t3["mu_idl"]["return"]["mean"],
+        warm["curve"][0]["eval_return"]
+    );
+    let md = read("table.md");
+    assert!(
+        md.starts_with("# p0 Table IV on the Leo-like biped (1 seeds)"),
+        "{md}"
+    );
+    assert!(md.contains("## p0 Table III") && md.contains("| μ^d (difference) |"));
+    assert!(read("fig8.svg").contains("Fig. 8"));
+    let gait = read("gait.svg");
+    assert_eq!(
+        gait.matches("<line").count(),
+        3,
+        "one ground line per policy"
+    );
+    assert!(gait.contains("μ^idl: return") && gait.contains("μ^true: return"));
+    std::fs::remove_dir_all(&out).ok();
 }

@@ -6,6 +6,7 @@ pub mod harness;
 pub mod json;
 pub mod presets;
 pub mod reproduce;
+pub mod reproduce_p0;
 pub mod reproduce_p1;
 pub mod reproduce_p2;
 pub mod reproduce_p3;

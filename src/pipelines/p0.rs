@@ -21,17 +21,22 @@
 //! system; those evaluation episodes are not training samples (p0's Fig. 5 plots exactly this:
 //! the return on the true system against the true samples used for learning).
 
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 use tandem_agents::{
-    evaluate, Agent, AgentError, Ddpg, DdpgConfig, EpisodeRunner, NoiseConfig, OffPolicyAgent,
-    OffPolicyLoop, OffPolicySchedule, Resumable, StepOptions, Store,
+    evaluate, Agent, AgentError, Ddpg, DdpgConfig, EpisodeRunner, Mode, NoiseConfig,
+    OffPolicyAgent, OffPolicyLoop, OffPolicySchedule, Resumable, StepOptions, Store,
 };
 use tandem_core::{Rng, SeedStream, Space};
 use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
+use tandem_dynamics::rigid_plant::RigidBodyPlant;
 use tandem_dynamics::Plant;
-use tandem_envs::{DcMotorPendulumEnv, DcMotorPendulumTask, Env, EnvError, SampleCounter, Task};
+use tandem_envs::{
+    leo_parts, DcMotorPendulumEnv, DcMotorPendulumTask, Env, EnvError, LeoEnv, LeoModel,
+    LeoWalkTask, SampleCounter, Task,
+};
 use tandem_models::{
     DynamicsModel, FitConfig, FitReport, ModelEnv, PlantModel, ResidualModel, ResidualModelConfig,
     Transitions, TransitionsBuilder,
@@ -53,19 +58,38 @@ pub enum Method {
     Warm,
     /// Pre-trained on the idealized plant, then iterated difference-model learning.
     Difference,
+    /// The difference method with [`P0Config::small_batch`] true samples per model update
+    /// instead of [`P0Config::real_batch`] (ours: a finer grain of sample counts).
+    DifferenceSmallBatch,
 }
 
 impl Method {
-    /// All three, in Table II's order.
-    pub const ALL: [Method; 3] = [Method::Cold, Method::Warm, Method::Difference];
+    /// All of them, in Table II's order (the small-batch variant last).
+    pub const ALL: [Method; 4] = [
+        Method::Cold,
+        Method::Warm,
+        Method::Difference,
+        Method::DifferenceSmallBatch,
+    ];
 
-    /// `"cold"`, `"warm"` or `"difference"`.
+    /// `"cold"`, `"warm"`, `"difference"` or `"difference_small_batch"`.
     pub fn name(self) -> &'static str {
         match self {
             Method::Cold => "cold",
             Method::Warm => "warm",
             Method::Difference => "difference",
+            Method::DifferenceSmallBatch => "difference_small_batch",
         }
+    }
+
+    /// The method called `name` ([`Method::name`]).
+    pub fn from_name(name: &str) -> Option<Method> {
+        Method::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// Whether it learns with a difference model.
+    pub fn is_difference(self) -> bool {
+        matches!(self, Method::Difference | Method::DifferenceSmallBatch)
     }
 }
 
@@ -91,6 +115,9 @@ pub struct P0Config {
     pub pretrain_steps: u64,
     /// True samples collected before each difference-model update (p0 Sec. IV-C: 3750).
     pub real_batch: u64,
+    /// The batch of [`Method::DifferenceSmallBatch`], which runs only when this is set (ours:
+    /// one pendulum episode, 400, so that its sample counts are not quantized at 3750).
+    pub small_batch: Option<u64>,
     /// True samples the difference method may use in all (Table II's fixed budget: 15000).
     pub real_budget: u64,
     /// True samples the cold and warm starts may use at most. The cold start always uses all of
@@ -138,6 +165,7 @@ impl Default for P0Config {
             },
             pretrain_steps: 16_000,
             real_batch: 3750,
+            small_batch: Some(400),
             real_budget: 15_000,
             baseline_max_samples: 20_000,
             baseline_stop_early: true,
@@ -158,11 +186,65 @@ impl Default for P0Config {
 }
 
 impl P0Config {
+    /// Settings for p0's Leo (Sec. IV-B, IV-C): the same DDPG, difference network and batch of
+    /// 3750 true samples as the pendulum, Table IV's budget of 33750 true samples; ours where
+    /// p0 gives no figure, said per field below.
+    pub fn leo() -> Self {
+        // The observation ([`LeoWalkTask`]): x, z, θ_torso, 6 leg angles, ẋ, ż, θ̇_torso, 6 leg
+        // velocities. The agent does not see x (the task is the same anywhere on the boom),
+        // sees the hip height around its standing value in units of 10 cm... scaled, and the
+        // angular velocities in units of 10 rad/s.
+        let mut features = vec![Feature::Linear {
+            index: 1,
+            scale: 10.0,
+        }];
+        features.extend((2..=10).map(|index| Feature::Linear { index, scale: 1.0 }));
+        features.extend((11..=17).map(|index| Feature::Linear { index, scale: 0.1 }));
+        Self {
+            features,
+            // Per-step rewards of order one, returns of order 10^3.
+            reward_scale: 0.1,
+            pretrain_steps: 300_000,
+            real_batch: 3750,
+            small_batch: None,
+            real_budget: 33_750,
+            baseline_max_samples: 300_000,
+            eval_interval: 1250,
+            model_steps: 30_000,
+            target_return: 2300.0,
+            ..Self::default()
+        }
+    }
+
+    /// True samples per model update of a difference method (`None` for cold and warm start,
+    /// and for [`Method::DifferenceSmallBatch`] without [`Self::small_batch`]).
+    pub fn batch_of(&self, method: Method) -> Option<u64> {
+        match method {
+            Method::Difference => Some(self.real_batch),
+            Method::DifferenceSmallBatch => self.small_batch,
+            Method::Cold | Method::Warm => None,
+        }
+    }
+
+    /// The methods these settings run: all but [`Method::DifferenceSmallBatch`] without a
+    /// [`Self::small_batch`].
+    pub fn methods(&self) -> Vec<Method> {
+        Method::ALL
+            .into_iter()
+            .filter(|&m| m != Method::DifferenceSmallBatch || self.small_batch.is_some())
+            .collect()
+    }
+
     /// Checks the ranges the loop relies on.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: &str| Err(PipelineError::Config(m.to_string()));
         if self.real_batch == 0 || self.real_budget < self.real_batch {
             return bad("need 0 < real_batch <= real_budget");
+        }
+        if let Some(b) = self.small_batch {
+            if b == 0 || self.real_budget < b {
+                return bad("need 0 < small_batch <= real_budget");
+            }
         }
         if !(self.reward_scale > 0.0 && self.reward_scale.is_finite()) || self.features.is_empty() {
             return bad("reward_scale must be positive and features non-empty");
@@ -187,6 +269,39 @@ pub struct Problem<P, T, F> {
     pub task: T,
     /// Builds a fresh true system (with its episode limit).
     pub true_env: F,
+    /// What a run reports of its first and last policy besides the return (p0's walked
+    /// distance and work per metre for Leo); `None` for the return alone.
+    pub measures: Option<Measures<T>>,
+}
+
+/// Named figures of an episode of task `T` from its states (the start included) and the plant
+/// inputs between them.
+pub type EpisodeMeasure<T> = fn(&T, &[Vec<f64>], &[Vec<f64>]) -> BTreeMap<String, f64>;
+
+/// Measures of one evaluation episode on the true system, and the frames a picture of it needs.
+#[derive(Debug, Clone, Copy)]
+pub struct Measures<T> {
+    /// Named figures of the episode from its states (the start included) and the plant inputs
+    /// between them; finite (a figure that is not defined for an episode is left out).
+    pub of_episode: EpisodeMeasure<T>,
+    /// Keep every this many states of the episode as frames (the first and last always).
+    pub frame_every: usize,
+    /// The part of a state a frame keeps (e.g. the joint positions).
+    pub frame: fn(&[f64]) -> Vec<f64>,
+}
+
+/// The deterministic policy's episode on the true system: its return, the problem's
+/// [`Measures`] and frames of its states.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PolicyEval {
+    /// Undiscounted return of the episode.
+    pub eval_return: f64,
+    /// The problem's measures ([`Measures::of_episode`]).
+    pub measures: BTreeMap<String, f64>,
+    /// Every [`Measures::frame_every`]-th state's [`Measures::frame`].
+    pub frames: Vec<Vec<f64>>,
+    /// Steps between frames.
+    pub frame_every: usize,
 }
 
 /// One point of a learning curve: the deterministic policy's return on the true system after
@@ -219,6 +334,13 @@ pub struct RunRecord {
     pub fit_holdout_loss: Vec<f64>,
     /// Wall time of the run, pre-training excluded, seconds.
     pub wall_seconds: f64,
+    /// The starting policy's episode (the pre-trained `μ^idl` for warm start and the difference
+    /// methods), where the problem has [`Measures`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start: Option<PolicyEval>,
+    /// The final policy's episode, where the problem has [`Measures`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last: Option<PolicyEval>,
 }
 
 impl RunRecord {
@@ -331,6 +453,46 @@ pub fn mean_return(agent: &mut dyn Agent, env: &mut dyn Env, episodes: usize) ->
     Ok(r.iter().sum::<f64>() / episodes as f64)
 }
 
+/// One deterministic episode of `agent` on `env` (from the same start as [`mean_return`]'s
+/// first episode), measured with `measures`.
+pub fn measured_episode<T: Task>(
+    agent: &mut dyn Agent,
+    env: &mut dyn Env,
+    task: &T,
+    measures: &Measures<T>,
+) -> Result<PolicyEval> {
+    let mut obs = env.reset(Some(SeedStream::new(0).derive("eval-episode-0")));
+    let mut states = vec![env.state()];
+    let mut controls = Vec::new();
+    let mut ret = 0.0;
+    let limit = env.max_episode_steps().unwrap_or(usize::MAX);
+    while controls.len() < limit {
+        let a = agent.act(&obs, Mode::Deterministic)?;
+        let st = env.step(&a)?;
+        ret += st.reward;
+        controls.push(task.control(&a));
+        states.push(env.state());
+        if st.terminated || st.truncated {
+            break;
+        }
+        obs = st.observation;
+    }
+    let every = measures.frame_every.max(1);
+    let last = states.len() - 1;
+    let frames = states
+        .iter()
+        .enumerate()
+        .filter(|&(i, _)| i % every == 0 || i == last)
+        .map(|(_, s)| (measures.frame)(s))
+        .collect();
+    Ok(PolicyEval {
+        eval_return: ret,
+        measures: (measures.of_episode)(task, &states, &controls),
+        frames,
+        frame_every: every,
+    })
+}
+
 /// Pre-trains the loop's agent for `steps` steps on the idealized plant (a [`ModelEnv`] over
 /// [`PlantModel`]); the replay buffer is emptied afterwards (its transitions are idealized).
 pub fn pretrain<A, P, T>(
@@ -397,6 +559,9 @@ struct MethodProgress {
     /// (difference), with that environment's state when an episode is in progress.
     runner: EpisodeRunner,
     env_state: Option<Vec<f64>>,
+    /// The starting policy's episode, where the problem has [`Measures`].
+    #[serde(default)]
+    start: Option<PolicyEval>,
 }
 
 /// Saves the agent, its loop, the progress and (difference method) the model and the true
@@ -480,12 +645,30 @@ where
     let key = method.name();
     let seeds = SeedStream::new(seed);
     let mut eval_env = (problem.true_env)()?;
-    let mut model_env = match method {
-        Method::Difference => Some(ModelEnv::new(
+    let batch = cfg.batch_of(method);
+    if method.is_difference() && batch.is_none() {
+        return Err(PipelineError::Config(format!(
+            "{} runs only with small_batch set",
+            method.name()
+        )));
+    }
+    let mut model_env = match batch {
+        Some(_) => Some(ModelEnv::new(
             ResidualModel::new(problem.idealized.clone(), cfg.residual.clone())?,
             problem.task.clone(),
         )?),
-        Method::Cold | Method::Warm => None,
+        None => None,
+    };
+    let measure = |agent: &mut A, env: &mut Box<dyn Env>| -> Result<Option<PolicyEval>> {
+        match &problem.measures {
+            Some(m) => Ok(Some(measured_episode(
+                agent,
+                env.as_mut(),
+                &problem.task,
+                m,
+            )?)),
+            None => Ok(None),
+        }
     };
     let mut all: Option<Transitions> = None;
     let saved = store.load(key)?;
@@ -504,10 +687,12 @@ where
                 true_samples: 0,
                 eval_return: mean_return(&mut start.agent, &mut eval_env, cfg.eval_episodes)?,
             }];
+            let start_eval = measure(&mut start.agent, &mut eval_env)?;
             start.clear(Store::Primary)?;
-            let episodes = match method {
-                Method::Difference => "model-episodes",
-                Method::Cold | Method::Warm => "true-episodes",
+            let episodes = if batch.is_some() {
+                "model-episodes"
+            } else {
+                "true-episodes"
             };
             MethodProgress {
                 method,
@@ -521,6 +706,7 @@ where
                 reached: false,
                 runner: EpisodeRunner::new(seeds.derive(episodes), "ep"),
                 env_state: None,
+                start: start_eval,
             }
         }
     };
@@ -542,8 +728,8 @@ where
         p.env_state = p.runner.in_episode().then_some(env_state).flatten();
         save_method(store, key, start, p, model, all)
     };
-    match method {
-        Method::Cold | Method::Warm => {
+    match batch {
+        None => {
             while count.get() < cfg.baseline_max_samples {
                 let n = cfg
                     .eval_interval
@@ -566,9 +752,9 @@ where
                 checkpoint(store, &mut p, &start, state, None, None)?;
             }
         }
-        Method::Difference => {
+        Some(real_batch) => {
             let model_env = model_env.as_mut().expect("built for the difference method");
-            while count.get() + cfg.real_batch <= cfg.real_budget {
+            while count.get() + real_batch <= cfg.real_budget {
                 let k = p.iterations;
                 // 1. True samples with the previous policy plus exploration noise.
                 let c = count.clone();
@@ -576,7 +762,7 @@ where
                     &mut start,
                     &mut env,
                     &problem.task,
-                    cfg.real_batch,
+                    real_batch,
                     seeds.derive(&format!("collect-{k}")),
                     store,
                     &mut || tick(c.get()),
@@ -607,9 +793,12 @@ where
             }
         }
     }
+    let last = measure(&mut start.agent, &mut eval_env)?;
     Ok(RunRecord {
         method,
         seed,
+        start: p.start,
+        last,
         curve: p.curve,
         true_samples: count.get(),
         simulated_steps: p.simulated,
@@ -739,6 +928,54 @@ pub fn pendulum_problem() -> Problem<DcMotorPendulum, DcMotorPendulumTask, MakeE
         idealized: DcMotorPendulum::new(params),
         task: DcMotorPendulumTask::new(DcMotorPendulumEnv::ID_IDEALIZED, &params),
         true_env: || tandem_envs::make(DcMotorPendulumEnv::ID_REAL),
+        measures: None,
+    }
+}
+
+/// p0's Leo (Sec. IV-B, Table I): the idealized biped (torso 0.942 kg) as the plant, the
+/// walking task, and `Leo-true-v0` (torso 1.25 kg, viscous joint friction 0.03) as the true
+/// system; each run reports its first and last policy's walked distance and work per metre
+/// ([`leo_measures`]).
+pub fn leo_problem() -> Result<Problem<RigidBodyPlant, LeoWalkTask, MakeEnv>> {
+    let (idealized, task) = leo_parts(LeoModel::Idealized, LeoEnv::ID)?;
+    Ok(Problem {
+        idealized,
+        task,
+        true_env: || tandem_envs::make(LeoEnv::ID_TRUE),
+        measures: Some(leo_measures()),
+    })
+}
+
+/// Keys of [`leo_measures`]: walked distance `L` (m), electrical work per metre `E` (J/m; left
+/// out when the biped did not walk forwards), the episode's electrical work (J) and whether it
+/// ended in a fall (1 or 0).
+pub const LEO_MEASURES: [&str; 4] = ["distance_m", "work_per_metre_j", "work_j", "fell"];
+
+/// p0's Table III measures of a Leo episode ([`LEO_MEASURES`]); frames are the joint positions
+/// every 5 steps (0.15 s).
+pub fn leo_measures() -> Measures<LeoWalkTask> {
+    fn of_episode(
+        task: &LeoWalkTask,
+        states: &[Vec<f64>],
+        controls: &[Vec<f64>],
+    ) -> BTreeMap<String, f64> {
+        let g = task.gait(states, controls);
+        let values = [
+            Some(g.distance),
+            g.work_per_metre,
+            Some(g.work),
+            Some(f64::from(u8::from(g.fell))),
+        ];
+        LEO_MEASURES
+            .iter()
+            .zip(values)
+            .filter_map(|(k, v)| Some((k.to_string(), v?)))
+            .collect()
+    }
+    Measures {
+        of_episode,
+        frame_every: 5,
+        frame: |s| s[..s.len() / 2].to_vec(),
     }
 }
 

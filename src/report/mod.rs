@@ -17,6 +17,8 @@ use serde_json::Value;
 
 use crate::run::{svg_chart, Series};
 
+pub mod gait;
+
 pub use finite::{ensure_finite, to_json_pretty, NonFinite};
 
 /// Why a report could not be written or read.

@@ -12,9 +12,9 @@
 
 use crate::actuators::{Actuator, DcMotor, PdController};
 use crate::contact::GroundContact;
-use crate::rigid::Model;
+use crate::rigid::{forward_kinematics, Data, Model};
 use crate::rigid_plant::{Overrides, RigidBodyPlant, RigidPlantConfig, RigidPlantError};
-use nalgebra::DVector;
+use nalgebra::{DVector, Vector3};
 
 /// Thigh length (m).
 pub const THIGH: f64 = 0.116;
@@ -142,6 +142,10 @@ pub fn leo_urdf() -> String {
 pub const HEEL: [f64; 3] = [-0.03, 0.0, -ANKLE_HEIGHT];
 /// See [`HEEL`].
 pub const TOE: [f64; 3] = [0.06, 0.0, -ANKLE_HEIGHT];
+/// The top of the torso (its contact point) in the torso frame (m).
+pub const HEAD: [f64; 3] = [0.0, 0.0, 0.26];
+/// The arm's tip (its contact point) in the arm frame (m).
+pub const HAND: [f64; 3] = [0.0, 0.0, -0.15];
 
 /// The biped as a plant: six DC motors (actions are volts), a PD shoulder, foot/knee/hip/torso/arm
 /// contact points on a ground plane at z = 0.
@@ -172,8 +176,8 @@ pub fn leo_plant(
     }
     p = p
         .with_contact("hip", "torso", [0.0; 3])?
-        .with_contact("head", "torso", [0.0, 0.0, 0.26])?
-        .with_contact("hand", "arm", [0.0, 0.0, -0.15])?;
+        .with_contact("head", "torso", HEAD)?
+        .with_contact("hand", "arm", HAND)?;
     p = p.with_ground(GroundContact::default());
     p.with_overrides(overrides)
 }
@@ -195,6 +199,48 @@ pub fn standing_state(model: &Model) -> DVector<f64> {
     let z = model.joint_index("boom_z").expect("biped has boom_z");
     x[z] = HIP_HEIGHT - 0.0002;
     x
+}
+
+/// The biped drawn as sagittal-plane polylines `(x, z)` (m) at joint positions `q`: each leg
+/// hip–knee–ankle and its foot heel–toe, the torso hip–head, the arm shoulder–hand. For pictures
+/// of a gait.
+pub fn skeleton(model: &Model, q: &[f64]) -> Result<Vec<Vec<[f64; 2]>>, RigidPlantError> {
+    if q.len() != model.nv() {
+        return Err(RigidPlantError::Config(format!(
+            "skeleton: {} joint positions for a model of {}",
+            q.len(),
+            model.nv()
+        )));
+    }
+    let mut data = Data::new(model);
+    forward_kinematics(model, &mut data, q);
+    let joint = |name: &str| {
+        model
+            .joint_index(name)
+            .ok_or_else(|| RigidPlantError::Config(format!("skeleton: no joint {name}")))
+    };
+    let point = |j: usize, p: [f64; 3]| {
+        let w = data.o_m_i[j].act_point(&Vector3::new(p[0], p[1], p[2]));
+        [w.x, w.z]
+    };
+    let torso = joint("torso_pitch")?;
+    let mut lines = vec![
+        vec![point(torso, [0.0; 3]), point(torso, HEAD)],
+        vec![
+            point(joint("shoulder")?, [0.0; 3]),
+            point(joint("shoulder")?, HAND),
+        ],
+    ];
+    for side in ["left", "right"] {
+        let ankle = joint(&format!("{side}_ankle"))?;
+        lines.push(vec![
+            point(joint(&format!("{side}_hip"))?, [0.0; 3]),
+            point(joint(&format!("{side}_knee"))?, [0.0; 3]),
+            point(ankle, [0.0; 3]),
+        ]);
+        lines.push(vec![point(ankle, HEEL), point(ankle, TOE)]);
+    }
+    Ok(lines)
 }
 
 /// A hand-written test policy for the biped: joint-space PD through the motor model (volts from

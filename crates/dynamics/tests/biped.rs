@@ -129,3 +129,28 @@ fn biped_walks() {
         assert!(min_h > -0.005, "{name}: penetration {min_h}");
     }
 }
+
+#[test]
+fn skeleton_of_the_standing_biped_has_its_dimensions() {
+    let p = leo_plant(RigidPlantConfig::default(), &Overrides::default()).unwrap();
+    let x = standing_state(p.model());
+    let lines = skeleton(p.model(), &x.as_slice()[..10]).unwrap();
+    assert_eq!(lines.len(), 6);
+    let len = |a: [f64; 2], b: [f64; 2]| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+    for leg in [&lines[2], &lines[4]] {
+        // Vertical leg: hip above knee above ankle by the link lengths.
+        assert!((len(leg[0], leg[1]) - THIGH).abs() < 1e-12);
+        assert!((len(leg[1], leg[2]) - SHIN).abs() < 1e-12);
+        assert!((leg[0][0] - leg[2][0]).abs() < 1e-12);
+    }
+    // Flat feet on the ground (the standing state's 0.2 mm sinkage).
+    for foot in [&lines[3], &lines[5]] {
+        assert!(foot.iter().all(|p| p[1].abs() < 1e-3), "{foot:?}");
+        assert!((len(foot[0], foot[1]) - (TOE[0] - HEEL[0])).abs() < 1e-12);
+    }
+    // The heights agree with the plant's contact points (heel, toe, head, hand).
+    let h = p.contact_heights(x.as_slice());
+    assert!((lines[3][0][1] - h[0]).abs() < 1e-12 && (lines[3][1][1] - h[1]).abs() < 1e-12);
+    assert!((lines[0][1][1] - h[7]).abs() < 1e-12 && (lines[1][1][1] - h[8]).abs() < 1e-12);
+    assert!(skeleton(p.model(), &[0.0; 3]).is_err());
+}

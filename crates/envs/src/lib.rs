@@ -20,6 +20,7 @@ mod cartpole;
 mod dc_motor;
 mod env;
 mod leg2r;
+mod leo;
 mod pendulum;
 mod pixel_maze;
 mod registry;
@@ -35,6 +36,10 @@ pub use env::{check_state, round_to_f32, Env, EnvError, Step};
 pub use leg2r::{
     leg2r_reward, FootTarget, FootTrajectory, Leg2RConfig, Leg2REnv, Leg2RModel, Leg2RTask,
     LEG2R_STEPS,
+};
+pub use leo::{
+    leo_parts, Gait, LeoEnv, LeoModel, LeoWalkTask, LEO_REWARD_FALL, LEO_REWARD_PER_JOULE,
+    LEO_REWARD_PER_METRE, LEO_REWARD_PER_STEP, LEO_STEPS,
 };
 pub use pendulum::{angle_normalize, pendulum_reward, PendulumEnv, PendulumTask};
 pub use pixel_maze::{PixelMazeEnv, PIXEL_MAZE_GRID, PIXEL_MAZE_OBSTACLES, PIXEL_MAZE_PIXELS};

@@ -3,8 +3,8 @@
 use tandem_core::Space;
 
 use crate::{
-    CartPoleEnv, DcMotorPendulumEnv, Env, EnvError, Leg2REnv, Leg2RModel, PendulumEnv,
-    PendulumModel, PixelMazeEnv, TimeLimit, LEG2R_STEPS,
+    CartPoleEnv, DcMotorPendulumEnv, Env, EnvError, Leg2REnv, Leg2RModel, LeoEnv, LeoModel,
+    PendulumEnv, PendulumModel, PixelMazeEnv, TimeLimit, LEG2R_STEPS, LEO_STEPS,
 };
 
 /// One registered environment: its id, what it is, its episode limit and its spaces.
@@ -59,6 +59,16 @@ const REGISTRY: &[(&str, &str, usize)] = &[
         "p3's 2R leg, true model (shank 0.26 kg instead of 0.20, joint friction)",
         LEG2R_STEPS,
     ),
+    (
+        LeoEnv::ID,
+        "p0's Leo-like biped walking on a boom (6 DC motors, 30 ms), idealized model",
+        LEO_STEPS,
+    ),
+    (
+        LeoEnv::ID_TRUE,
+        "p0's Leo-like biped, true model (torso 1.25 kg instead of 0.942, joint friction)",
+        LEO_STEPS,
+    ),
 ];
 
 /// The environment `id` without a time limit, or [`EnvError::Unknown`].
@@ -73,6 +83,8 @@ pub fn make_unwrapped(id: &str) -> Result<Box<dyn Env>, EnvError> {
         PixelMazeEnv::ID => Box::new(PixelMazeEnv::new()),
         Leg2REnv::ID => Box::new(Leg2REnv::new(Leg2RModel::Idealized)),
         Leg2REnv::ID_REAL => Box::new(Leg2REnv::new(Leg2RModel::Real)),
+        LeoEnv::ID => Box::new(LeoEnv::new(LeoModel::Idealized)),
+        LeoEnv::ID_TRUE => Box::new(LeoEnv::new(LeoModel::True)),
         _ => return Err(EnvError::Unknown(id.to_string())),
     })
 }
@@ -127,7 +139,7 @@ mod tests {
             assert_eq!(env.action_space(), &spec.action_space);
         }
         let limits: Vec<usize> = registered().iter().map(|s| s.max_episode_steps).collect();
-        assert_eq!(limits, vec![500, 200, 400, 400, 50, 1000, 1000]);
+        assert_eq!(limits, vec![500, 200, 400, 400, 50, 1000, 1000, 667, 667]);
     }
 
     #[test]
