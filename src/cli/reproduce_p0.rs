@@ -772,21 +772,25 @@ mod tests {
         );
     }
 
-    /// The committed p0 results (`results/p0-pendulum/`), 5 seeds, 787 s wall time.
+    /// The committed p0 results (`results/p0-pendulum/`), 5 seeds, 5078 s wall time.
     const COMMITTED_JSON: &str = include_str!("../../results/p0-pendulum/table.json");
     const COMMITTED_MD: &str = include_str!("../../results/p0-pendulum/table.md");
 
     #[test]
     fn the_committed_table_reads_back_and_renders_to_the_committed_files() {
         let t = Table::from_json(COMMITTED_JSON, "table.json").unwrap();
-        assert_eq!(t.methods.len(), 3);
-        assert_eq!(t.comparisons.len(), 2);
+        assert_eq!(t.methods.len(), 4);
+        assert_eq!(t.comparisons.len(), 4);
         assert_eq!(t.to_json().unwrap().trim_end(), COMMITTED_JSON.trim_end());
         // The footer's figures are P0Config's defaults, which the committed run used.
-        let cfg = P0Config {
-            small_batch: None,
-            ..P0Config::default()
-        };
-        assert_eq!(markdown(P0Task::Pendulum, &t, &cfg, 787.0), COMMITTED_MD);
+        let md = markdown(P0Task::Pendulum, &t, &P0Config::default(), 5078.0);
+        assert_eq!(md, COMMITTED_MD);
+        // A batch of one episode: the target after 400 true samples on every seed that needed
+        // any (seed 4's pre-trained policy already reached it).
+        let small = &t.methods["difference_small_batch"].samples_to_target;
+        assert_eq!(
+            small.per_seed,
+            [Some(400), Some(400), Some(400), Some(400), Some(0)]
+        );
     }
 }
