@@ -79,11 +79,7 @@ pub struct P0Study(pub P0Task);
 
 /// The `--quick` configuration: the same loop with small networks and budgets, for smoke tests.
 pub fn quick_config() -> P0Config {
-    let mut c = P0Config::default();
-    c.ddpg.actor_hidden = vec![32, 32];
-    c.ddpg.critic_hidden = vec![32, 32];
-    c.ddpg.buffer_size = 10_000;
-    c.residual.hidden = vec![32, 32];
+    let mut c = with_small_networks(P0Config::default());
     c.pretrain_steps = 800;
     c.real_batch = 400;
     c.real_budget = 800;
@@ -96,11 +92,7 @@ pub fn quick_config() -> P0Config {
 
 /// The `--quick` configuration of `p0-leo`: Leo's settings with small networks and budgets.
 pub fn leo_quick_config() -> P0Config {
-    let mut c = P0Config::leo();
-    c.ddpg.actor_hidden = vec![32, 32];
-    c.ddpg.critic_hidden = vec![32, 32];
-    c.ddpg.buffer_size = 10_000;
-    c.residual.hidden = vec![32, 32];
+    let mut c = with_small_networks(P0Config::leo());
     c.pretrain_steps = 700;
     c.real_batch = 700;
     c.real_budget = 1400;
@@ -108,6 +100,15 @@ pub fn leo_quick_config() -> P0Config {
     c.eval_interval = 700;
     c.model_steps = 300;
     c.fit.epochs = 2;
+    c
+}
+
+/// `c` with the `--quick` networks (32×32 actor, critic and difference network) and replay.
+fn with_small_networks(mut c: P0Config) -> P0Config {
+    c.ddpg.actor_hidden = vec![32, 32];
+    c.ddpg.critic_hidden = vec![32, 32];
+    c.ddpg.buffer_size = 10_000;
+    c.residual.hidden = vec![32, 32];
     c
 }
 
@@ -213,6 +214,33 @@ pub fn table(records: &[RunRecord], cfg: &P0Config) -> Table {
 /// `wall` is the run's wall time.
 pub fn markdown(task: P0Task, t: &Table, cfg: &P0Config, wall: f64) -> String {
     let n_seeds = t.methods.values().map(|m| m.seeds.len()).max().unwrap_or(0);
+    let (title, intro) = match task {
+        P0Task::Pendulum => (
+            format!("p0 Table II on the DC-motor pendulum ({n_seeds} seeds)"),
+            "Return of the deterministic policy on the true system (undiscounted, one \
+             400-step episode from (π, 0)). True samples are training samples on the true \
+             system, counted exactly; evaluation episodes are not counted. Mean ± standard \
+             error over seeds.",
+        ),
+        P0Task::Leo => (
+            format!("p0 Table IV on the Leo-like biped ({n_seeds} seeds)"),
+            "Return of the deterministic policy on the true biped (undiscounted, one 20 s \
+             episode of 667 steps from standing). True samples are training samples on the \
+             true biped, counted exactly; evaluation episodes are not counted. Mean ± standard \
+             error over seeds.",
+        ),
+    };
+    let mut text = MarkdownText {
+        title,
+        intro: intro.into(),
+        labels: LABELS,
+        comparison_intro: "True samples to the target relative to the difference method (means \
+                           over seeds; a seed that never reached it counts at the samples it \
+                           used)"
+            .into(),
+        comparison_order: &["warm", "cold"],
+        closing: Vec::new(),
+    };
     let mut closing = Vec::new();
     if let Some(r) = &t.reference {
         let gap = r
@@ -230,16 +258,17 @@ pub fn markdown(task: P0Task, t: &Table, cfg: &P0Config, wall: f64) -> String {
             gap.map_or("n/a".to_string(), |g| format!("{:.1} %", 100.0 * g)),
         ));
     }
+    // The sentence under the table names each baseline's first comparison (with p0's batch);
+    // those with the small batch get their own.
     let small = Method::DifferenceSmallBatch.name();
-    let small_ratios: Vec<String> = ["warm", "cold"]
+    let small_ratios: Vec<String> = text
+        .comparison_order
         .iter()
         .filter_map(|b| {
-            let c = t
-                .comparisons
+            t.comparisons
                 .iter()
-                .find(|c| c.baseline == *b && c.method == small)?;
-            let ge = if c.lower_bound { "≥ " } else { "" };
-            Some(format!("{} {ge}{:.1}×", label_of(b), c.ratio?))
+                .find(|c| c.baseline == *b && c.method == small)?
+                .ratio_text(text.label(b))
         })
         .collect();
     if let (Some(b), false) = (cfg.small_batch, small_ratios.is_empty()) {
@@ -263,41 +292,8 @@ pub fn markdown(task: P0Task, t: &Table, cfg: &P0Config, wall: f64) -> String {
         cfg.real_batch,
         cfg.real_budget,
     ));
-    let (title, intro) = match task {
-        P0Task::Pendulum => (
-            format!("p0 Table II on the DC-motor pendulum ({n_seeds} seeds)"),
-            "Return of the deterministic policy on the true system (undiscounted, one \
-             400-step episode from (π, 0)). True samples are training samples on the true \
-             system, counted exactly; evaluation episodes are not counted. Mean ± standard \
-             error over seeds.",
-        ),
-        P0Task::Leo => (
-            format!("p0 Table IV on the Leo-like biped ({n_seeds} seeds)"),
-            "Return of the deterministic policy on the true biped (undiscounted, one 20 s \
-             episode of 667 steps from standing). True samples are training samples on the \
-             true biped, counted exactly; evaluation episodes are not counted. Mean ± standard \
-             error over seeds.",
-        ),
-    };
-    t.markdown(&MarkdownText {
-        title,
-        intro: intro.into(),
-        labels: LABELS,
-        comparison_intro: "True samples to the target relative to the difference method (means \
-                           over seeds; a seed that never reached it counts at the samples it \
-                           used)"
-            .into(),
-        comparison_order: &["warm", "cold"],
-        closing,
-    })
-}
-
-/// The label of method `name` in the tables.
-fn label_of(name: &str) -> &str {
-    LABELS
-        .iter()
-        .find(|(n, _)| *n == name)
-        .map_or(name, |(_, l)| l)
+    text.closing = closing;
+    t.markdown(&text)
 }
 
 /// Fig. 5 (pendulum) or Fig. 8 (Leo): the mean return on the true system against true samples,

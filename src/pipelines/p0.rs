@@ -26,7 +26,7 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 use tandem_agents::{
-    evaluate, Agent, AgentError, Ddpg, DdpgConfig, EpisodeRunner, Mode, NoiseConfig,
+    evaluate, evaluate_episode, Agent, AgentError, Ddpg, DdpgConfig, EpisodeRunner, NoiseConfig,
     OffPolicyAgent, OffPolicyLoop, OffPolicySchedule, Resumable, StepOptions, Store,
 };
 use tandem_core::{Rng, SeedStream, Space};
@@ -192,8 +192,7 @@ impl P0Config {
     pub fn leo() -> Self {
         // The observation ([`LeoWalkTask`]): x, z, θ_torso, 6 leg angles, ẋ, ż, θ̇_torso, 6 leg
         // velocities. The agent does not see x (the task is the same anywhere on the boom),
-        // sees the hip height around its standing value in units of 10 cm... scaled, and the
-        // angular velocities in units of 10 rad/s.
+        // sees the hip height in decimetres and the angular velocities in units of 10 rad/s.
         let mut features = vec![Feature::Linear {
             index: 1,
             scale: 10.0,
@@ -461,22 +460,14 @@ pub fn measured_episode<T: Task>(
     task: &T,
     measures: &Measures<T>,
 ) -> Result<PolicyEval> {
-    let mut obs = env.reset(Some(SeedStream::new(0).derive("eval-episode-0")));
-    let mut states = vec![env.state()];
-    let mut controls = Vec::new();
-    let mut ret = 0.0;
-    let limit = env.max_episode_steps().unwrap_or(usize::MAX);
-    while controls.len() < limit {
-        let a = agent.act(&obs, Mode::Deterministic)?;
-        let st = env.step(&a)?;
-        ret += st.reward;
-        controls.push(task.control(&a));
+    let (mut states, mut controls) = (Vec::new(), Vec::new());
+    let seed = SeedStream::new(0).derive("eval-episode-0");
+    let eval_return = evaluate_episode(agent, env, seed, None, &mut |env, action| {
         states.push(env.state());
-        if st.terminated || st.truncated {
-            break;
+        if let Some(a) = action {
+            controls.push(task.control(a));
         }
-        obs = st.observation;
-    }
+    })?;
     let every = measures.frame_every.max(1);
     let last = states.len() - 1;
     let frames = states
@@ -486,7 +477,7 @@ pub fn measured_episode<T: Task>(
         .map(|(_, s)| (measures.frame)(s))
         .collect();
     Ok(PolicyEval {
-        eval_return: ret,
+        eval_return,
         measures: (measures.of_episode)(task, &states, &controls),
         frames,
         frame_every: every,

@@ -229,6 +229,13 @@ impl Comparison {
             note: note.into(),
         }
     }
+
+    /// `"<label> 2.5×"` (`"<label> ≥ 2.5×"` for a lower bound), `label` naming the baseline;
+    /// `None` without a ratio.
+    pub fn ratio_text(&self, label: &str) -> Option<String> {
+        let ge = if self.lower_bound { "≥ " } else { "" };
+        Some(format!("{label} {ge}{:.1}×", self.ratio?))
+    }
 }
 
 /// A results table: methods by name, an optional reference, comparisons.
@@ -437,9 +444,7 @@ impl Table {
             .iter()
             .filter_map(|b| {
                 let c = self.comparisons.iter().find(|c| c.baseline == *b)?;
-                let x = c.ratio?;
-                let ge = if c.lower_bound { "≥ " } else { "" };
-                Some(format!("{} {ge}{x:.1}×", text.label(b)))
+                c.ratio_text(text.label(b))
             })
             .collect();
         if !ratios.is_empty() {

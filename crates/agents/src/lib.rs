@@ -67,7 +67,8 @@ pub use error::{AgentError, Result};
 pub use learner::{Algo, AlgoConfig, Learner};
 pub use noise::{Noise, NoiseConfig};
 pub use off_policy::{
-    evaluate, EpisodeRunner, LoopCounts, OffPolicyLoop, Source, StepOptions, StepRecord, Store,
+    evaluate, evaluate_episode, EpisodeRunner, LoopCounts, OffPolicyLoop, Source, StepOptions,
+    StepRecord, Store,
 };
 pub use reinforce::Reinforce;
 pub use replay::{MixedSampler, ReplayBuffer, TransitionRef};

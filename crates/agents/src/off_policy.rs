@@ -614,24 +614,40 @@ pub fn evaluate(
     seeds: &SeedStream,
     limit: Option<usize>,
 ) -> Result<Vec<f64>> {
+    (0..episodes)
+        .map(|i| {
+            let seed = seeds.derive(&format!("eval-episode-{i}"));
+            evaluate_episode(agent, env, seed, limit, &mut |_, _| {})
+        })
+        .collect()
+}
+
+/// The return of one deterministic episode of `agent` on `env` reset with `seed`, ending at
+/// termination, truncation or `limit` (default: the environment's), as [`evaluate`] runs each
+/// of its episodes. `observe(env, action)` sees the environment after the reset (`None`) and
+/// after every step (`Some` of the action taken), e.g. to record its states.
+pub fn evaluate_episode(
+    agent: &mut dyn Agent,
+    env: &mut dyn Env,
+    seed: u64,
+    limit: Option<usize>,
+    observe: &mut dyn FnMut(&dyn Env, Option<&Action>),
+) -> Result<f64> {
     let limit = limit.or(env.max_episode_steps());
-    let mut returns = Vec::with_capacity(episodes);
-    for i in 0..episodes {
-        let mut obs = env.reset(Some(seeds.derive(&format!("eval-episode-{i}"))));
-        let (mut ret, mut len) = (0.0, 0usize);
-        loop {
-            let a = agent.act(&obs, Mode::Deterministic)?;
-            let st = env.step(&a).map_err(env_err)?;
-            ret += st.reward;
-            len += 1;
-            if st.terminated || st.truncated || limit.is_some_and(|m| len >= m) {
-                break;
-            }
-            obs = st.observation;
+    let mut obs = env.reset(Some(seed));
+    observe(env, None);
+    let (mut ret, mut len) = (0.0, 0usize);
+    loop {
+        let a = agent.act(&obs, Mode::Deterministic)?;
+        let st = env.step(&a).map_err(env_err)?;
+        observe(env, Some(&a));
+        ret += st.reward;
+        len += 1;
+        if st.terminated || st.truncated || limit.is_some_and(|m| len >= m) {
+            return Ok(ret);
         }
-        returns.push(ret);
+        obs = st.observation;
     }
-    Ok(returns)
 }
 
 #[cfg(test)]

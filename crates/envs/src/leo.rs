@@ -32,7 +32,7 @@
 //! ```
 
 use tandem_core::{Action, Rng, Space};
-use tandem_dynamics::actuators::DcMotor;
+use tandem_dynamics::actuators::{Actuator, DcMotor};
 use tandem_dynamics::biped::{leo_plant, leo_true_overrides, standing_state};
 use tandem_dynamics::rigid_plant::{Overrides, RigidBodyPlant, RigidPlantConfig};
 use tandem_dynamics::Plant;
@@ -90,10 +90,9 @@ pub struct LeoWalkTask {
     id: String,
     /// Forward kinematics for the fall check.
     plant: RigidBodyPlant,
-    motor: DcMotor,
     dt: f64,
-    /// Plant joint index of each of the six motors.
-    motor_joints: [usize; 6],
+    /// The six motors in action order, with their plant joint index.
+    motors: Vec<(usize, DcMotor)>,
     /// Contact points that end the episode when they touch the ground.
     fall_contacts: Vec<usize>,
     start: Vec<f64>,
@@ -120,12 +119,22 @@ impl LeoWalkTask {
                 plant.action_dim()
             )));
         }
-        let joints = plant.action_joints();
-        let mut motor_joints = [0; 6];
-        for (k, name) in joints.iter().enumerate() {
-            motor_joints[k] = model
-                .joint_index(name)
-                .ok_or_else(|| bad(format!("no joint {name}")))?;
+        // The learned actuators in action order, which must all be DC motors of one voltage
+        // limit (the action space's bound).
+        let motors: Vec<(usize, DcMotor)> = plant
+            .actuators()
+            .iter()
+            .filter(|(_, a)| a.is_learned())
+            .map(|&(j, a)| match a {
+                Actuator::Motor(m) => Ok((j, m)),
+                other => Err(bad(format!(
+                    "joint {j} is driven by {other:?}, not a DC motor"
+                ))),
+            })
+            .collect::<Result<_, _>>()?;
+        let voltage_max = motors[0].1.voltage_max;
+        if motors.iter().any(|(_, m)| m.voltage_max != voltage_max) {
+            return Err(bad("the motors' voltage limits differ".into()));
         }
         let fall_contacts = plant
             .contacts()
@@ -135,16 +144,14 @@ impl LeoWalkTask {
             .map(|(i, _)| i)
             .collect();
         let inf = f64::INFINITY;
-        let motor = DcMotor::default();
         Ok(Self {
             id: id.to_string(),
-            motor,
             dt: plant.dt(),
-            motor_joints,
+            motors,
             fall_contacts,
             start: standing_state(model).as_slice().to_vec(),
             observation_space: Space::boxed(vec![-inf; 18], vec![inf; 18]),
-            action_space: Space::symmetric(6, motor.voltage_max),
+            action_space: Space::symmetric(6, voltage_max),
             plant: plant.clone(),
         })
     }
@@ -152,12 +159,11 @@ impl LeoWalkTask {
     /// The motors' electrical work (J) over the step `state --u--> next`:
     /// `T_s Σ_j U_j (U_j − K G φ̇_j) / R`, `φ̇_j` the mean of the start and end velocities.
     pub fn electrical_work(&self, state: &[f64], u: &[f64], next: &[f64]) -> f64 {
-        let m = &self.motor;
-        let kg = m.torque_constant * m.gear;
-        self.motor_joints
+        self.motors
             .iter()
             .zip(u)
-            .map(|(&j, &uj)| {
+            .map(|(&(j, m), &uj)| {
+                let kg = m.torque_constant * m.gear;
                 let uj = uj.clamp(-m.voltage_max, m.voltage_max);
                 let w = 0.5 * (state[NV + j] + next[NV + j]);
                 uj * (uj - kg * w) / m.resistance
