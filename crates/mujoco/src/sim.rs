@@ -139,6 +139,52 @@ impl Scene {
         Space::boxed(low, high)
     }
 
+    /// The id of site `name`.
+    pub fn site_id(&self, name: &str) -> Result<usize, MujocoError> {
+        self.model
+            .name_to_id(MjtObjBase::mjOBJ_SITE, name)
+            .ok_or_else(|| MujocoError::Model {
+                path: self.path.clone(),
+                message: format!("no site named `{name}`"),
+            })
+    }
+
+    /// The world positions of the sites `ids` (from [`Scene::site_id`]) at joint positions
+    /// `qpos`: MuJoCo's forward kinematics (`mj_kinematics`), for costs on end-effector points.
+    ///
+    /// Errors: `qpos` is not `nq` long or not finite, or an id is out of range.
+    pub fn site_positions(
+        &self,
+        qpos: &[f64],
+        ids: &[usize],
+    ) -> Result<Vec<[f64; 3]>, MujocoError> {
+        let bad = |message: String| MujocoError::Model {
+            path: self.path.clone(),
+            message,
+        };
+        if qpos.len() != self.nq() {
+            return Err(bad(format!(
+                "qpos has {} entries, the model {}",
+                qpos.len(),
+                self.nq()
+            )));
+        }
+        if let Some(i) = qpos.iter().position(|v| !v.is_finite()) {
+            return Err(bad(format!("qpos[{i}] = {} is not finite", qpos[i])));
+        }
+        let nsite = self.model.ffi().nsite as usize;
+        if let Some(id) = ids.iter().find(|&&id| id >= nsite) {
+            return Err(bad(format!(
+                "site id {id} out of range (the model has {nsite})"
+            )));
+        }
+        let mut data = self.new_data();
+        data.qpos_mut().copy_from_slice(qpos);
+        data.kinematics();
+        let xpos = data.site_xpos();
+        Ok(ids.iter().map(|&id| xpos[id]).collect())
+    }
+
     fn new_data(&self) -> Data {
         MjData::new(self.model.clone())
     }

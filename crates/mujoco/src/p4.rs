@@ -1,0 +1,390 @@
+//! p4's (PILQR, Chebotar et al. 2017) manipulation tasks as MuJoCo scenes written for tandem:
+//! the geometry, the conditions (initial states and goals) and the costs, as pure functions of
+//! the scene's state `qpos ++ qvel`. The scenes themselves are in this crate's `scenes/` folder
+//! ([`scene_path`]); loading them needs the feature `mujoco`.
+//!
+//! **Gripper pusher** (`scenes/p4_pusher.xml`, p4 Fig. 2 left and Fig. 3): a planar 4-DoF arm
+//! (shoulder, elbow, wrist, one sliding finger of a parallel gripper) pushes a block, which
+//! slides on the table along x and y, to a goal. State `[q_s, q_e, q_w, q_f, b_x, b_y]` and
+//! their velocities (12), action the four motor torques (forces for the finger). The cost
+//! (p4: "a weighted combination of the distance from the gripper to the block and from the block
+//! to the goal") is, per control step `t` of `T`,
+//!
+//! ```text
+//! c(x, u, t) = w_goal (t+1)²/T² ℓ(‖b − g‖) + w_block ℓ(‖p(q) − b‖) + w_u ‖u‖²,
+//! ℓ(d) = ½ l₂ d² + l₁ √(α + d²)
+//! ```
+//!
+//! with `p(q)` the gripper point (forward kinematics, [`pusher_gripper`]), the block–goal term
+//! ramped quadratically in time, and `ℓ` the smooth l1-l2 ("Huber-style") penalty usual for
+//! LQR-based methods (weights in [`PusherCost::default`]). The four conditions
+//! ([`PUSHER_CONDITIONS`]) place the block and the goal; the last one is the hard one of p4's
+//! Fig. 3, the block far from both the gripper and the goal.
+
+use std::path::PathBuf;
+
+use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
+
+/// The folder of p4's MJCF scenes (`crates/mujoco/scenes` of the repository this crate was built
+/// from).
+pub fn scenes_dir() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"))
+}
+
+/// The MJCF file of scene `name` (`"p4_pusher"`, ...).
+pub fn scene_path(name: &str) -> PathBuf {
+    scenes_dir().join(format!("{name}.xml"))
+}
+
+/// The pusher's scene name.
+pub const PUSHER_SCENE: &str = "p4_pusher";
+/// MuJoCo steps per control step (0.01 s each: control at 20 Hz, as p4's GPS experiments).
+pub const PUSHER_FRAME_SKIP: usize = 5;
+/// Control steps per episode (5 s).
+pub const PUSHER_HORIZON: usize = 100;
+/// Length of the state `qpos ++ qvel`.
+pub const PUSHER_STATE_DIM: usize = 12;
+/// Number of motors.
+pub const PUSHER_ACTION_DIM: usize = 4;
+/// Link lengths from joint to joint, and from the wrist to the gripper point between the
+/// fingers (m), as in the scene.
+pub const PUSHER_LINKS: [f64; 3] = [0.5, 0.4, 0.15];
+
+/// One pusher condition: where the block starts and where it must go (m, table frame).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PusherCondition {
+    /// The block's start `(x, y)`.
+    pub block: [f64; 2],
+    /// The goal `(x, y)`.
+    pub goal: [f64; 2],
+}
+
+/// The four conditions; the arm always starts stretched along +x at rest (gripper point at
+/// `(1.05, 0)`). The last is the hard one: the block 1.2 m from the gripper and 0.8 m from the
+/// goal, on the far side of the workspace.
+pub const PUSHER_CONDITIONS: [PusherCondition; 4] = [
+    PusherCondition {
+        block: [0.75, 0.35],
+        goal: [0.45, 0.7],
+    },
+    PusherCondition {
+        block: [0.8, -0.3],
+        goal: [0.85, -0.7],
+    },
+    PusherCondition {
+        block: [0.45, 0.55],
+        goal: [0.0, 0.8],
+    },
+    PusherCondition {
+        block: [0.2, -0.85],
+        goal: [0.9, -0.45],
+    },
+];
+
+/// The index of the hard condition in [`PUSHER_CONDITIONS`].
+pub const PUSHER_HARD: usize = 3;
+
+impl PusherCondition {
+    /// The initial state: arm stretched and open-gripped at zero, the block at its start, all at
+    /// rest.
+    pub fn initial_state(&self) -> Vec<f64> {
+        let mut x = vec![0.0; PUSHER_STATE_DIM];
+        x[4] = self.block[0];
+        x[5] = self.block[1];
+        x
+    }
+
+    /// The block–goal distance of a state.
+    pub fn block_goal_distance(&self, x: &[f64]) -> f64 {
+        (x[4] - self.goal[0]).hypot(x[5] - self.goal[1])
+    }
+}
+
+/// The gripper point (between the fingers) of arm angles `q = [q_s, q_e, q_w, ..]`: planar
+/// forward kinematics of the scene's links.
+pub fn pusher_gripper(q: &[f64]) -> [f64; 2] {
+    let (mut a, mut p) = (0.0, [0.0, 0.0]);
+    for (l, qi) in PUSHER_LINKS.iter().zip(q) {
+        a += qi;
+        p[0] += l * a.cos();
+        p[1] += l * a.sin();
+    }
+    p
+}
+
+/// The smooth l1-l2 penalty `½ l₂ d² + l₁ √(α + d²)` of a distance `d`.
+pub fn l12(d: f64, l1: f64, l2: f64, alpha: f64) -> f64 {
+    0.5 * l2 * d * d + l1 * (alpha + d * d).sqrt()
+}
+
+/// The pusher's cost weights (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PusherCost {
+    /// Weight of the block–goal term (ramped by `(t+1)²/T²`).
+    pub goal: f64,
+    /// Weight of the gripper–block term.
+    pub block: f64,
+    /// Weight of `‖u‖²`.
+    pub action: f64,
+    /// `l₁` of the penalty.
+    pub l1: f64,
+    /// `l₂` of the penalty.
+    pub l2: f64,
+    /// `α` of the penalty.
+    pub alpha: f64,
+}
+
+impl Default for PusherCost {
+    /// Block–goal 4, gripper–block 1 (GPS's weighting of the two distance terms),
+    /// `ℓ = 5 d² + 0.1 √(10⁻⁵ + d²)`, torques `10⁻³ ‖u‖²`.
+    fn default() -> Self {
+        Self {
+            goal: 4.0,
+            block: 1.0,
+            action: 1e-3,
+            l1: 0.1,
+            l2: 10.0,
+            alpha: 1e-5,
+        }
+    }
+}
+
+impl PusherCost {
+    /// `c(x, u, t)` for `cond` over a horizon of `horizon` steps.
+    pub fn running(
+        &self,
+        cond: &PusherCondition,
+        horizon: usize,
+        x: &[f64],
+        u: &[f64],
+        t: usize,
+    ) -> f64 {
+        let ramp = ((t + 1) as f64 / horizon as f64).powi(2);
+        let g = pusher_gripper(x);
+        let gripper_block = (g[0] - x[4]).hypot(g[1] - x[5]);
+        let pen = |d| l12(d, self.l1, self.l2, self.alpha);
+        self.goal * ramp * pen(cond.block_goal_distance(x))
+            + self.block * pen(gripper_block)
+            + self.action * u.iter().map(|v| v * v).sum::<f64>()
+    }
+
+    /// The state part of `c(x, u, t)` (everything but `w_u ‖u‖²`) with its gradient and its
+    /// Gauss–Newton Hessian in `x`: each term `ℓ(‖r(x)‖)` contributes `Jᵀ ∇ℓ` and `Jᵀ ∇²ℓ J`
+    /// (`J = ∂r/∂x`; `∇²ℓ` is positive definite), the curvature of the kinematics left out as in
+    /// GPS's forward-kinematics costs, so that LQR-FLM's backward pass sees a convex cost.
+    pub fn state_expansion(
+        &self,
+        cond: &PusherCondition,
+        horizon: usize,
+        x: &[f64],
+        t: usize,
+    ) -> (f64, DVector<f64>, DMatrix<f64>) {
+        let n = PUSHER_STATE_DIM;
+        let ramp = ((t + 1) as f64 / horizon as f64).powi(2);
+        let (mut c, mut g, mut h) = (0.0, DVector::zeros(n), DMatrix::zeros(n, n));
+        // Block–goal: r = b − goal, J selects the block's coordinates.
+        let mut j_goal = DMatrix::zeros(2, n);
+        j_goal[(0, 4)] = 1.0;
+        j_goal[(1, 5)] = 1.0;
+        let r_goal = Vector2::new(x[4] - cond.goal[0], x[5] - cond.goal[1]);
+        // Gripper–block: r = p(q) − b, J = [∂p/∂q, 0, −I, 0].
+        let p = pusher_gripper(x);
+        let r_block = Vector2::new(p[0] - x[4], p[1] - x[5]);
+        let mut j_block = DMatrix::zeros(2, n);
+        let mut angle = [0.0; 3];
+        let mut a = 0.0;
+        for (k, qi) in x[..3].iter().enumerate() {
+            a += qi;
+            angle[k] = a;
+        }
+        for k in 0..3 {
+            // ∂p/∂q_k sums the links from k outwards.
+            for (l, ang) in PUSHER_LINKS.iter().zip(&angle).skip(k) {
+                j_block[(0, k)] -= l * ang.sin();
+                j_block[(1, k)] += l * ang.cos();
+            }
+        }
+        j_block[(0, 4)] = -1.0;
+        j_block[(1, 5)] = -1.0;
+        for (w, r, j) in [
+            (self.goal * ramp, r_goal, j_goal),
+            (self.block, r_block, j_block),
+        ] {
+            let (v, dr, ddr) = self.l12_expansion(&r);
+            c += w * v;
+            g += w * j.transpose() * dr;
+            h += w * j.transpose() * ddr * &j;
+        }
+        (c, g, h)
+    }
+
+    /// `ℓ(‖r‖)` with its gradient and Hessian in `r`.
+    fn l12_expansion(&self, r: &Vector2<f64>) -> (f64, Vector2<f64>, Matrix2<f64>) {
+        let s = (self.alpha + r.norm_squared()).sqrt();
+        let v = 0.5 * self.l2 * r.norm_squared() + self.l1 * s;
+        let grad = r * (self.l2 + self.l1 / s);
+        let hess = Matrix2::identity() * (self.l2 + self.l1 / s)
+            - r * r.transpose() * (self.l1 / (s * s * s));
+        (v, grad, hess)
+    }
+
+    /// The terminal cost: the last step's distance terms (the ramp is 1 there), no action.
+    pub fn terminal(&self, cond: &PusherCondition, x: &[f64]) -> f64 {
+        self.running(cond, 1, x, &[], 0)
+    }
+
+    /// Checks that the weights are finite and non-negative and `α > 0`.
+    pub fn validate(&self) -> Result<(), String> {
+        let fields = [
+            ("goal", self.goal),
+            ("block", self.block),
+            ("action", self.action),
+            ("l1", self.l1),
+            ("l2", self.l2),
+        ];
+        for (name, v) in fields {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("cost weight {name} = {v} must be finite and >= 0"));
+            }
+        }
+        if !(self.alpha.is_finite() && self.alpha > 0.0) {
+            return Err(format!("cost alpha = {} must be > 0", self.alpha));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn gripper_kinematics_of_simple_poses() {
+        let g = pusher_gripper(&[0.0, 0.0, 0.0]);
+        assert_relative_eq!(g[0], 1.05, epsilon = 1e-15);
+        assert_relative_eq!(g[1], 0.0, epsilon = 1e-15);
+        // Shoulder at 90°, elbow back by 90°: (0.4 + 0.15, 0.5).
+        let g = pusher_gripper(&[
+            std::f64::consts::FRAC_PI_2,
+            -std::f64::consts::FRAC_PI_2,
+            0.0,
+        ]);
+        assert_relative_eq!(g[0], 0.55, epsilon = 1e-15);
+        assert_relative_eq!(g[1], 0.5, epsilon = 1e-15);
+    }
+
+    #[test]
+    fn cost_is_the_weighted_sum_of_its_terms() {
+        let c = PusherCost::default();
+        let cond = PUSHER_CONDITIONS[0];
+        // Gripper on the block, block on the goal, no torque: only the l1 floors remain.
+        let mut x = cond.initial_state();
+        x[4] = 1.05;
+        x[5] = 0.0;
+        let on_goal = PusherCondition {
+            block: [1.05, 0.0],
+            goal: [1.05, 0.0],
+        };
+        let floor = c.l1 * c.alpha.sqrt();
+        assert_relative_eq!(
+            c.running(&on_goal, 10, &x, &[0.0; 4], 9),
+            (c.goal + c.block) * floor,
+            epsilon = 1e-15
+        );
+        // Half-way through, the goal term counts a quarter; the torque term adds w_u |u|^2.
+        let d = cond.block_goal_distance(&x);
+        let expect =
+            c.goal * 0.25 * l12(d, c.l1, c.l2, c.alpha) + c.block * floor + c.action * (1.0 + 4.0);
+        assert_relative_eq!(
+            c.running(&cond, 10, &x, &[1.0, 2.0, 0.0, 0.0], 4),
+            expect,
+            epsilon = 1e-12
+        );
+        assert_relative_eq!(
+            c.terminal(&cond, &x),
+            c.goal * l12(d, c.l1, c.l2, c.alpha) + c.block * floor,
+            epsilon = 1e-12
+        );
+    }
+
+    /// The expansion's value and gradient are the cost's (central differences); its Hessian is
+    /// symmetric positive semi-definite, and equals the finite-difference Hessian where the
+    /// kinematics is linear (the block coordinates).
+    #[test]
+    fn state_expansion_matches_the_cost() {
+        let c = PusherCost::default();
+        let cond = PUSHER_CONDITIONS[PUSHER_HARD];
+        let x = [
+            0.4, -0.7, 1.1, 0.01, 0.5, -0.3, 0.2, -0.1, 0.3, 0.0, 0.05, 0.0,
+        ];
+        let (t, hz) = (37, PUSHER_HORIZON);
+        let (v, g, h) = c.state_expansion(&cond, hz, &x, t);
+        assert_relative_eq!(v, c.running(&cond, hz, &x, &[0.0; 4], t), epsilon = 1e-12);
+        let f = |x: &[f64]| c.running(&cond, hz, x, &[0.0; 4], t);
+        let eps = 1e-6;
+        for i in 0..PUSHER_STATE_DIM {
+            let (mut xp, mut xm) = (x, x);
+            xp[i] += eps;
+            xm[i] -= eps;
+            let fd = (f(&xp) - f(&xm)) / (2.0 * eps);
+            assert!(
+                (fd - g[i]).abs() < 1e-6 * (1.0 + fd.abs()),
+                "d/dx{i}: {fd} vs {}",
+                g[i]
+            );
+        }
+        assert_relative_eq!(h.clone(), h.transpose(), epsilon = 1e-12);
+        let eig = h.clone().symmetric_eigen().eigenvalues;
+        assert!(eig.min() > -1e-9, "{eig}");
+        let eps = 1e-4;
+        for (i, k) in [(4, 4), (4, 5), (5, 5)] {
+            let at = |di: f64, dk: f64| {
+                let mut y = x;
+                y[i] += di;
+                y[k] += dk;
+                f(&y)
+            };
+            let fd =
+                (at(eps, eps) - at(eps, -eps) - at(-eps, eps) + at(-eps, -eps)) / (4.0 * eps * eps);
+            assert!(
+                (fd - h[(i, k)]).abs() < 1e-4 * (1.0 + fd.abs()),
+                "({i},{k}): {fd} vs {}",
+                h[(i, k)]
+            );
+        }
+    }
+
+    #[test]
+    fn the_hard_condition_is_far_from_gripper_and_goal() {
+        let start = pusher_gripper(&[0.0; 3]);
+        let far = |c: &PusherCondition| {
+            (
+                (c.block[0] - start[0]).hypot(c.block[1] - start[1]),
+                (c.block[0] - c.goal[0]).hypot(c.block[1] - c.goal[1]),
+            )
+        };
+        let (hard_gripper, hard_goal) = far(&PUSHER_CONDITIONS[PUSHER_HARD]);
+        for (i, c) in PUSHER_CONDITIONS.iter().enumerate() {
+            if i != PUSHER_HARD {
+                let (g, b) = far(c);
+                assert!(hard_gripper > g && hard_goal > b, "condition {i}");
+            }
+        }
+    }
+
+    #[test]
+    fn invalid_cost_weights_are_named() {
+        let bad = PusherCost {
+            goal: f64::NAN,
+            ..PusherCost::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("goal"));
+        let bad = PusherCost {
+            alpha: 0.0,
+            ..PusherCost::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("alpha"));
+    }
+}

@@ -1,0 +1,364 @@
+//! Guided policy search's outer loop for local controllers (p4 §II–III): one time-varying
+//! linear-Gaussian controller per condition (an initial state with its own cost), improved from
+//! its own samples by LQR-FLM, PI² or PILQR, with exact sample counting across conditions.
+//!
+//! Each iteration, for every condition in turn: draw `samples` trajectories of the condition's
+//! controller on the system (real samples: they are counted and they are the only rollouts the
+//! loop makes), record their mean cost and the task's measure of their final states (e.g. the
+//! block–goal distance), then update the controller from them:
+//!
+//! | method | update |
+//! |---|---|
+//! | `lqr_flm` | fit TVLG dynamics to the samples (GMM prior over this condition's recent samples), quadratize the cost around them, LQR-FLM under the KL bound `ε·m` with GPS's step rule for LQR-FLM (`m` from predicted vs actual improvement, [`classic_step_mult`]) |
+//! | `pi2` | PI² on the samples' costs-to-go (the authors' `TrajOptPI2` settings, [`Pilqr::default_pi2`]) |
+//! | `pilqr` | the same fit and quadratization, then PILQR: LQR-FLM with per-step bounds from the residual ratio, PI² on the residual costs-to-go ([`Pilqr`]) |
+//!
+//! The curve's point `i` is the controller after `i` updates, measured on its own `samples`
+//! trajectories, at `(i + 1)·samples` samples of that condition; the last point is the
+//! controller the run ends with. No evaluation episodes are drawn besides.
+//!
+//! A run is minutes long, so it keeps no checkpoints: it polls [`Checkpoints::stop_requested`]
+//! between iterations, and a resumed study reruns an unfinished run from its start (with the same
+//! numbers: the run is a function of its seed).
+
+use ndarray::s;
+use serde::{Deserialize, Serialize};
+use tandem_core::seeding::rng_from_seed;
+use tandem_models::{DynamicsModel, TvlgConfig, TvlgDynamics, TvlgFit};
+use tandem_planners::{
+    classic_step_mult, pi2_update, quadratize_cost, sample_trajectories, LqrFlm, LqrFlmConfig,
+    Objective, Pi2Config, Pilqr, PilqrConfig, QuadraticCost, SampleConfig, TrajectorySamples,
+    TvlgController,
+};
+
+use super::{Checkpoints, PipelineError, Result};
+
+/// How a local controller is updated from its samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LocalMethod {
+    /// LQR-FLM (p4 §II-A) with GPS's step rule for it.
+    LqrFlm,
+    /// PI² (p4 §II-B).
+    Pi2,
+    /// PILQR (p4 §III).
+    Pilqr,
+}
+
+impl LocalMethod {
+    /// All three, in p4's order.
+    pub const ALL: [LocalMethod; 3] = [LocalMethod::LqrFlm, LocalMethod::Pi2, LocalMethod::Pilqr];
+
+    /// The key in records and tables: `lqr_flm`, `pi2`, `pilqr`.
+    pub fn name(self) -> &'static str {
+        match self {
+            LocalMethod::LqrFlm => "lqr_flm",
+            LocalMethod::Pi2 => "pi2",
+            LocalMethod::Pilqr => "pilqr",
+        }
+    }
+
+    /// The method named `name` ([`LocalMethod::name`]).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+/// Settings of the local-controller loop.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LocalConfig {
+    /// Iterations (sample batches) per condition; the samples per condition are
+    /// `iterations · samples`.
+    pub iterations: usize,
+    /// Trajectories per iteration and condition.
+    pub samples: usize,
+    /// Variance of the initial controller's actions (`K = 0`, `k = 0`, `Σ = variance · I`).
+    pub init_variance: f64,
+    /// The base KL bound `ε` per time step of LQR-FLM (alone and in PILQR).
+    pub kl_step: f64,
+    /// The PI² stage (alone and in PILQR).
+    pub pi2: Pi2Config,
+    /// PILQR's step adjustment and bounds (its `lqr.kl_step` and `pi2` are replaced by
+    /// [`LocalConfig::kl_step`] and [`LocalConfig::pi2`]).
+    pub pilqr: PilqrConfig,
+    /// The TVLG dynamics fit of LQR-FLM and PILQR.
+    pub dynamics: TvlgConfig,
+}
+
+impl Default for LocalConfig {
+    /// p4's sample budget (20 iterations of 20 trajectories: 400 per condition), variance 1,
+    /// `ε = 1`, the authors' PI² and PILQR settings, GPS's dynamics fit with its GMM prior.
+    fn default() -> Self {
+        Self {
+            iterations: 20,
+            samples: 20,
+            init_variance: 1.0,
+            kl_step: 1.0,
+            pi2: Pilqr::default_pi2(),
+            pilqr: PilqrConfig::default(),
+            dynamics: TvlgConfig::default(),
+        }
+    }
+}
+
+impl LocalConfig {
+    /// Checks the settings the loop relies on.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(PipelineError::Config(m));
+        if self.iterations == 0 || self.samples < 2 {
+            return bad(format!(
+                "iterations {} must be >= 1 and samples {} >= 2",
+                self.iterations, self.samples
+            ));
+        }
+        for (name, v) in [
+            ("init_variance", self.init_variance),
+            ("kl_step", self.kl_step),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(format!("{name} = {v} must be finite and > 0"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One condition: where trajectories start and what they pay.
+pub struct Condition {
+    /// The initial state.
+    pub x0: Vec<f64>,
+    /// The cost (running, with the time index, and terminal).
+    pub objective: Objective,
+}
+
+/// The task's figure of a trajectory's end: `measure(condition, final_state)`, e.g. the
+/// block–goal distance.
+pub type Measure = Box<dyn Fn(usize, &[f64]) -> f64 + Send + Sync>;
+
+/// What the local controllers are trained on.
+pub struct LocalProblem {
+    /// The system the samples come from (a plant, or any model).
+    pub system: Box<dyn DynamicsModel + Send + Sync>,
+    /// The conditions.
+    pub conditions: Vec<Condition>,
+    /// Control steps per trajectory.
+    pub horizon: usize,
+    /// The task's measure of a final state.
+    pub measure: Measure,
+}
+
+/// One point of a condition's curve.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LocalPoint {
+    /// Samples of this condition so far (including this batch).
+    pub samples: u64,
+    /// Mean total cost of the batch.
+    pub mean_cost: f64,
+    /// Mean of the task's measure of the batch's final states.
+    pub measure: f64,
+}
+
+/// What a run of [`train_local`] leaves.
+#[derive(Debug, Clone)]
+pub struct LocalRun {
+    /// Per condition, one point per iteration.
+    pub curves: Vec<Vec<LocalPoint>>,
+    /// Per condition, updates that failed numerically (the controller was kept).
+    pub failed_updates: Vec<usize>,
+    /// The controllers after the last update.
+    pub controllers: Vec<TvlgController>,
+}
+
+/// The previous LQR-FLM iteration, for GPS's step rule.
+struct LqrState {
+    mult: f64,
+    prev: Option<(TvlgController, TvlgDynamics, Vec<QuadraticCost>)>,
+}
+
+/// One condition's optimizer state.
+struct Local {
+    controller: TvlgController,
+    fit: TvlgFit,
+    lqr: LqrState,
+    pilqr: Pilqr,
+}
+
+/// Trains one local controller per condition of `problem` with `method`, `seed` drawing all
+/// noise. `progress` is called with the samples drawn so far over all conditions.
+pub fn train_local(
+    method: LocalMethod,
+    problem: &LocalProblem,
+    cfg: &LocalConfig,
+    seed: u64,
+    store: &mut dyn Checkpoints,
+    progress: &mut dyn FnMut(u64),
+) -> Result<LocalRun> {
+    cfg.validate()?;
+    check_problem(problem)?;
+    let (system, conditions, horizon) = (&*problem.system, &problem.conditions, problem.horizon);
+    let (n, m) = (system.state_dim(), system.action_dim());
+    let lqr = LqrFlm::new(LqrFlmConfig {
+        kl_step: cfg.kl_step,
+        ..cfg.pilqr.lqr.clone()
+    })?;
+    let pilqr_cfg = PilqrConfig {
+        lqr: lqr.config().clone(),
+        pi2: cfg.pi2.clone(),
+        ..cfg.pilqr.clone()
+    };
+    let mut locals = Vec::with_capacity(conditions.len());
+    for _ in conditions {
+        locals.push(Local {
+            controller: TvlgController::constant(horizon, n, &vec![0.0; m], cfg.init_variance)?,
+            fit: TvlgFit::new(cfg.dynamics.clone()),
+            lqr: LqrState {
+                mult: 1.0,
+                prev: None,
+            },
+            pilqr: Pilqr::new(pilqr_cfg.clone())?,
+        });
+    }
+    let scfg = SampleConfig {
+        samples: cfg.samples,
+        ..SampleConfig::default()
+    };
+    let mut rng = rng_from_seed(seed);
+    let mut curves = vec![Vec::with_capacity(cfg.iterations); conditions.len()];
+    let mut failed = vec![0; conditions.len()];
+    let mut drawn = 0u64;
+    for it in 0..cfg.iterations {
+        if store.stop_requested() {
+            return Err(PipelineError::Stopped);
+        }
+        for (c, (cond, local)) in conditions.iter().zip(locals.iter_mut()).enumerate() {
+            let samples = sample_trajectories(
+                &local.controller,
+                system,
+                &cond.objective,
+                &cond.x0,
+                &scfg,
+                &mut rng,
+            )?;
+            drawn += cfg.samples as u64;
+            progress(drawn);
+            curves[c].push(point(&samples, (it + 1) * cfg.samples, |x| {
+                (problem.measure)(c, x)
+            }));
+            if it + 1 == cfg.iterations {
+                continue;
+            }
+            match update(method, local, &samples, cond, &lqr, cfg) {
+                Ok(next) => local.controller = next,
+                Err(e @ (PipelineError::Planner(_) | PipelineError::Model(_))) => {
+                    if std::env::var_os("TANDEM_GPS_DEBUG").is_some() {
+                        eprintln!("condition {c} iteration {it}: {e}");
+                    }
+                    failed[c] += 1
+                }
+                Err(e) => return Err(e),
+            }
+        }
+    }
+    Ok(LocalRun {
+        curves,
+        failed_updates: failed,
+        controllers: locals.into_iter().map(|l| l.controller).collect(),
+    })
+}
+
+/// Checks that there are conditions, a horizon, and dimensions that fit the system.
+fn check_problem(problem: &LocalProblem) -> Result<()> {
+    let system = &problem.system;
+    if problem.conditions.is_empty() || problem.horizon == 0 {
+        return Err(PipelineError::Config(format!(
+            "{} conditions and a horizon of {}: both must be at least 1",
+            problem.conditions.len(),
+            problem.horizon
+        )));
+    }
+    for (i, c) in problem.conditions.iter().enumerate() {
+        if c.x0.len() != system.state_dim()
+            || c.objective.state_dim() != system.state_dim()
+            || c.objective.action_dim() != system.action_dim()
+        {
+            return Err(PipelineError::Config(format!(
+                "condition {i}: initial state of {} and objective of ({}, {}) do not fit a \
+                 system of state {} and action {}",
+                c.x0.len(),
+                c.objective.state_dim(),
+                c.objective.action_dim(),
+                system.state_dim(),
+                system.action_dim()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The batch's mean cost and mean final-state measure.
+fn point(samples: &TrajectorySamples, total: usize, measure: impl Fn(&[f64]) -> f64) -> LocalPoint {
+    let n = samples.len();
+    let t = samples.states.shape()[1] - 1;
+    let finals: f64 = (0..n)
+        .map(|i| {
+            let x = samples.states.slice(s![i, t, ..]).to_vec();
+            measure(&x)
+        })
+        .sum();
+    LocalPoint {
+        samples: total as u64,
+        mean_cost: samples.mean_cost(),
+        measure: finals / n as f64,
+    }
+}
+
+/// One update of a condition's controller from its samples.
+fn update(
+    method: LocalMethod,
+    local: &mut Local,
+    samples: &TrajectorySamples,
+    cond: &Condition,
+    lqr: &LqrFlm,
+    cfg: &LocalConfig,
+) -> Result<TvlgController> {
+    if method == LocalMethod::Pi2 {
+        let s = pi2_update(
+            &local.controller,
+            &samples.states,
+            &samples.actions,
+            &samples.cost_to_go(),
+            &cfg.pi2,
+        )?;
+        return Ok(s.controller);
+    }
+    let dynamics = local
+        .fit
+        .fit(samples.states.view(), samples.actions.view())?;
+    if method == LocalMethod::Pilqr {
+        return Ok(local
+            .pilqr
+            .update(&local.controller, samples, &dynamics, &cond.objective)?
+            .controller);
+    }
+    let cost = quadratize_cost(&cond.objective, samples)?;
+    if let Some((pc, pd, pq)) = &local.lqr.prev {
+        local.lqr.mult = classic_step_mult(
+            local.lqr.mult,
+            pc,
+            pd,
+            pq,
+            &local.controller,
+            &dynamics,
+            &cost,
+        )?;
+    }
+    let next = lqr.update(
+        &local.controller,
+        &dynamics,
+        &cost,
+        Some(cfg.kl_step * local.lqr.mult),
+    )?;
+    local.lqr.prev = Some((local.controller.clone(), dynamics, cost));
+    Ok(next.controller)
+}
