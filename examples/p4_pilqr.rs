@@ -3,7 +3,9 @@
 //! final block–goal distance of each iteration's trajectories.
 //!
 //! `cargo run --release --features mujoco --example p4_pilqr -- [CONDITION] [SEED] [METHODS]`
-//! (condition 3, the hard one, seed 0 and `lqr_flm,pi2,pilqr` by default).
+//! (condition 3, the hard one, seed 0 and `lqr_flm,pi2,pilqr` by default); `P4_CONFIG=FILE` reads
+//! the loop's settings (`LocalConfig`, every field) from a TOML file; `--print-config` prints the
+//! defaults in that form.
 //!
 //! The loop ([`tandem::pipelines::gps::train_local`]) is GPS's: per iteration, sample the
 //! controller, fit TVLG dynamics to the samples, and update the controller (PILQR: LQR-FLM under
@@ -16,6 +18,10 @@ use tandem::pipelines::Ephemeral;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
+    if args.get(1).map(String::as_str) == Some("--print-config") {
+        print!("{}", toml::to_string(&LocalConfig::default())?);
+        return Ok(());
+    }
     let cond: usize = args.get(1).map_or(Ok(3), |a| a.parse())?;
     let seed: u64 = args.get(2).map_or(Ok(0), |a| a.parse())?;
     let methods = args.get(3).map_or("lqr_flm,pi2,pilqr", |a| a.as_str());
@@ -40,7 +46,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         horizon,
         measure: Box::new(move |_, x| PUSHER_CONDITIONS[cond].block_goal_distance(x)),
     };
-    let cfg = LocalConfig::default();
+    // P4_CONFIG=FILE: a TOML file with LocalConfig's fields (all of them), for experiments.
+    let cfg = match std::env::var_os("P4_CONFIG") {
+        Some(path) => toml::from_str(&std::fs::read_to_string(path)?)?,
+        None => LocalConfig::default(),
+    };
     println!(
         "pusher condition {cond} {:?}, seed {seed}, {} iterations of {} trajectories",
         PUSHER_CONDITIONS[cond], cfg.iterations, cfg.samples

@@ -258,3 +258,59 @@ fn p3_mujoco_runs_with_the_feature_only() {
     );
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn p4_pusher_runs_with_the_feature_only() {
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("mujoco-cli-p4");
+    let _ = std::fs::remove_dir_all(&out);
+    let o = tandem(&[
+        "reproduce",
+        "p4-pusher",
+        "--quick",
+        "--quiet",
+        "--seeds",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    if cfg!(feature = "mujoco") {
+        assert!(o.status.success(), "{}", err_text(&o));
+        let table = std::fs::read_to_string(out.join("table.json")).unwrap();
+        let table: serde_json::Value = serde_json::from_str(&table).unwrap();
+        assert_eq!(table["hard_condition"], 3);
+        // --quick: 3 iterations of 4 trajectories per condition.
+        assert_eq!(table["samples_per_condition"], 12);
+        for m in ["lqr_flm", "pi2", "pilqr"] {
+            let f = &table["methods"][m];
+            assert_eq!(f["samples_to_target"]["target"], 0.1, "{m}");
+            assert_eq!(f["final"]["per_seed"].as_array().unwrap().len(), 2, "{m}");
+            assert_eq!(f["conditions"].as_array().unwrap().len(), 4, "{m}");
+            // The hard condition's final distance is the one in the per-condition list.
+            assert_eq!(f["final"], f["conditions"][3]["final"], "{m}");
+            let curve =
+                std::fs::read_to_string(out.join(format!("runs/{m}__seed1/curve.csv"))).unwrap();
+            let rows: Vec<&str> = curve.lines().collect();
+            assert_eq!(
+                rows[0],
+                "samples_per_condition,distance_c0,distance_c1,distance_c2,distance_c3"
+            );
+            assert_eq!(rows.len(), 4, "{curve}");
+            assert!(rows[3].starts_with("12,"), "{curve}");
+        }
+        assert!(std::fs::read_to_string(out.join("fig3.svg"))
+            .unwrap()
+            .contains("pilqr"));
+        assert!(std::fs::read_to_string(out.join("table.md"))
+            .unwrap()
+            .contains("Hard condition"));
+    } else {
+        assert_eq!(o.status.code(), Some(1));
+        assert!(
+            err_text(&o).contains("--features mujoco"),
+            "{}",
+            err_text(&o)
+        );
+        assert!(!out.exists());
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}

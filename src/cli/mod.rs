@@ -10,6 +10,7 @@ pub mod reproduce_p0;
 pub mod reproduce_p1;
 pub mod reproduce_p2;
 pub mod reproduce_p3;
+pub mod reproduce_p4;
 pub mod rollout;
 pub mod train;
 pub mod urdf;

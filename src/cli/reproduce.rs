@@ -9,6 +9,7 @@ use super::harness;
 use super::reproduce_p0::{P0Args, P0Study, P0Task};
 use super::reproduce_p1::P1Study;
 use super::reproduce_p3::P3Study;
+use super::reproduce_p4::P4PusherStudy;
 use super::{CliError, Result};
 
 /// The reproductions.
@@ -36,7 +37,10 @@ pub enum ReproduceCommand {
     /// and M-DeMoRL with MBPO's settings for the task; p3 Fig. 2, and Fig. 3 with
     /// `--ablate-elites`.
     P3Mujoco(super::reproduce_p3::P3MujocoArgs),
-    /// Combine p0-pendulum, p0-leo, p1, p3-leg or p3-mujoco reproductions of disjoint seeds (e.g. one
+    /// p4 (PILQR) on the gripper pusher (MuJoCo, needs `--features mujoco`): LQR-FLM, PI² and
+    /// PILQR local controllers on four conditions, the same seeds and samples; p4 Fig. 3.
+    P4Pusher(super::reproduce_p4::P4Args),
+    /// Combine p0-pendulum, p0-leo, p1, p3-leg, p3-mujoco or p4-pusher reproductions of disjoint seeds (e.g. one
     /// process per seed, `--first-seed`) into one table and figure; their settings must be equal.
     Merge(MergeArgs),
 }
@@ -74,6 +78,7 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
             &P3Study::mujoco(args.env, args.p3.ablate_elites, args.p3.oracle),
             &args.p3.study,
         ),
+        ReproduceCommand::P4Pusher(args) => harness::run(&P4PusherStudy, &args.study),
         ReproduceCommand::Merge(args) => {
             let Some(first) = args.dirs.first() else {
                 return Err(CliError::input("merge", "no directories given"));
@@ -105,6 +110,12 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
                 ),
                 "p3-mujoco" => harness::merge(
                     &P3Study::mujoco(None, false, false),
+                    &args.dirs,
+                    args.out.as_deref(),
+                    args.overwrite,
+                ),
+                "p4-pusher" => harness::merge(
+                    &P4PusherStudy,
                     &args.dirs,
                     args.out.as_deref(),
                     args.overwrite,

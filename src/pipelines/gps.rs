@@ -26,9 +26,8 @@ use serde::{Deserialize, Serialize};
 use tandem_core::seeding::rng_from_seed;
 use tandem_models::{DynamicsModel, TvlgConfig, TvlgDynamics, TvlgFit};
 use tandem_planners::{
-    classic_step_mult, pi2_update, quadratize_cost, sample_trajectories, LqrFlm, LqrFlmConfig,
-    Objective, Pi2Config, Pilqr, PilqrConfig, QuadraticCost, SampleConfig, TrajectorySamples,
-    TvlgController,
+    classic_step_mult, pi2_update, quadratize_cost, sample_trajectories, LqrFlm, Objective, Pilqr,
+    PilqrConfig, QuadraticCost, SampleConfig, TrajectorySamples, TvlgController,
 };
 
 use super::{Checkpoints, PipelineError, Result};
@@ -75,28 +74,24 @@ pub struct LocalConfig {
     pub samples: usize,
     /// Variance of the initial controller's actions (`K = 0`, `k = 0`, `Σ = variance · I`).
     pub init_variance: f64,
-    /// The base KL bound `ε` per time step of LQR-FLM (alone and in PILQR).
-    pub kl_step: f64,
-    /// The PI² stage (alone and in PILQR).
-    pub pi2: Pi2Config,
-    /// PILQR's step adjustment and bounds (its `lqr.kl_step` and `pi2` are replaced by
-    /// [`LocalConfig::kl_step`] and [`LocalConfig::pi2`]).
-    pub pilqr: PilqrConfig,
+    /// The trajectory optimizers' settings, shared by the three methods where they have the part:
+    /// LQR-FLM (`trajopt.lqr`, whose `kl_step` is the base bound `ε` per time step, alone and in
+    /// PILQR), PI² (`trajopt.pi2`, alone and in PILQR) and PILQR's step rule.
+    pub trajopt: PilqrConfig,
     /// The TVLG dynamics fit of LQR-FLM and PILQR.
     pub dynamics: TvlgConfig,
 }
 
 impl Default for LocalConfig {
     /// p4's sample budget (20 iterations of 20 trajectories: 400 per condition), variance 1,
-    /// `ε = 1`, the authors' PI² and PILQR settings, GPS's dynamics fit with its GMM prior.
+    /// `ε = 1` ([`PilqrConfig::default`]: the authors' PI² and PILQR settings), GPS's dynamics fit
+    /// with its GMM prior.
     fn default() -> Self {
         Self {
             iterations: 20,
             samples: 20,
             init_variance: 1.0,
-            kl_step: 1.0,
-            pi2: Pilqr::default_pi2(),
-            pilqr: PilqrConfig::default(),
+            trajopt: PilqrConfig::default(),
             dynamics: TvlgConfig::default(),
         }
     }
@@ -114,7 +109,7 @@ impl LocalConfig {
         }
         for (name, v) in [
             ("init_variance", self.init_variance),
-            ("kl_step", self.kl_step),
+            ("trajopt.lqr.kl_step", self.trajopt.lqr.kl_step),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return bad(format!("{name} = {v} must be finite and > 0"));
@@ -198,15 +193,7 @@ pub fn train_local(
     check_problem(problem)?;
     let (system, conditions, horizon) = (&*problem.system, &problem.conditions, problem.horizon);
     let (n, m) = (system.state_dim(), system.action_dim());
-    let lqr = LqrFlm::new(LqrFlmConfig {
-        kl_step: cfg.kl_step,
-        ..cfg.pilqr.lqr.clone()
-    })?;
-    let pilqr_cfg = PilqrConfig {
-        lqr: lqr.config().clone(),
-        pi2: cfg.pi2.clone(),
-        ..cfg.pilqr.clone()
-    };
+    let lqr = LqrFlm::new(cfg.trajopt.lqr.clone())?;
     let mut locals = Vec::with_capacity(conditions.len());
     for _ in conditions {
         locals.push(Local {
@@ -216,7 +203,7 @@ pub fn train_local(
                 mult: 1.0,
                 prev: None,
             },
-            pilqr: Pilqr::new(pilqr_cfg.clone())?,
+            pilqr: Pilqr::new(cfg.trajopt.clone())?,
         });
     }
     let scfg = SampleConfig {
@@ -328,7 +315,7 @@ fn update(
             &samples.states,
             &samples.actions,
             &samples.cost_to_go(),
-            &cfg.pi2,
+            &cfg.trajopt.pi2,
         )?;
         return Ok(s.controller);
     }
@@ -357,8 +344,188 @@ fn update(
         &local.controller,
         &dynamics,
         &cost,
-        Some(cfg.kl_step * local.lqr.mult),
+        Some(cfg.trajopt.lqr.kl_step * local.lqr.mult),
     )?;
     local.lqr.prev = Some((local.controller.clone(), dynamics, cost));
     Ok(next.controller)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipelines::{Ephemeral, InMemory};
+    use nalgebra::{dmatrix, DMatrix, DVector};
+    use tandem_dynamics::Plant;
+    use tandem_models::PlantModel;
+
+    const DT: f64 = 0.1;
+    const T: usize = 15;
+
+    /// A double integrator `x' = A x + B u`.
+    struct DoubleIntegrator;
+    impl Plant for DoubleIntegrator {
+        fn state_dim(&self) -> usize {
+            2
+        }
+        fn action_dim(&self) -> usize {
+            1
+        }
+        fn dt(&self) -> f64 {
+            DT
+        }
+        fn step(&self, x: &DVector<f64>, u: &DVector<f64>) -> DVector<f64> {
+            &a() * x + &b() * u
+        }
+    }
+    fn a() -> DMatrix<f64> {
+        dmatrix![1.0, DT; 0.0, 1.0]
+    }
+    fn b() -> DMatrix<f64> {
+        dmatrix![0.5 * DT * DT; DT]
+    }
+    const Q: [f64; 2] = [1.0, 0.1];
+    const R: f64 = 0.01;
+    const QF: [f64; 2] = [10.0, 1.0];
+
+    fn problem(starts: &[[f64; 2]]) -> LocalProblem {
+        let conditions = starts
+            .iter()
+            .map(|x0| Condition {
+                x0: x0.to_vec(),
+                objective: Objective::new(2, 1, |x, u| {
+                    0.5 * (Q[0] * x[0] * x[0] + Q[1] * x[1] * x[1] + R * u[0] * u[0])
+                })
+                .with_terminal(|x| 0.5 * (QF[0] * x[0] * x[0] + QF[1] * x[1] * x[1])),
+            })
+            .collect();
+        LocalProblem {
+            system: Box::new(PlantModel::new(DoubleIntegrator)),
+            conditions,
+            horizon: T,
+            measure: Box::new(|_, x| x[0].abs()),
+        }
+    }
+
+    /// The optimal cost `½ x0ᵀ P_0 x0` by the finite-horizon Riccati recursion.
+    fn riccati_cost(x0: [f64; 2]) -> f64 {
+        let (a, b) = (a(), b());
+        let q = DMatrix::from_diagonal(&DVector::from_column_slice(&Q));
+        let mut p = DMatrix::from_diagonal(&DVector::from_column_slice(&QF));
+        for _ in 0..T {
+            let k = (dmatrix![R] + b.transpose() * &p * &b)
+                .try_inverse()
+                .unwrap()
+                * b.transpose()
+                * &p
+                * &a;
+            p = &q + a.transpose() * &p * (&a - &b * k);
+        }
+        let x = DVector::from_column_slice(&x0);
+        0.5 * (x.transpose() * p * x)[(0, 0)]
+    }
+
+    /// The cost of a controller's mean actions, rolled out on the exact system.
+    fn mean_cost(c: &TvlgController, obj: &Objective, x0: [f64; 2]) -> f64 {
+        let mut x = DVector::from_column_slice(&x0);
+        let mut cost = 0.0;
+        for t in 0..T {
+            let u = c.mean(t, &x);
+            cost += obj.running_cost(x.as_slice(), u.as_slice(), t).unwrap();
+            x = &a() * &x + &b() * &u;
+        }
+        cost + obj.terminal_cost(x.as_slice()).unwrap()
+    }
+
+    fn cfg(iterations: usize) -> LocalConfig {
+        let mut c = LocalConfig {
+            iterations,
+            samples: 10,
+            init_variance: 1.0,
+            ..LocalConfig::default()
+        };
+        c.dynamics.prior = None;
+        c
+    }
+
+    /// On a linear system with a quadratic cost, LQR-FLM's fit is exact, and its controller's
+    /// mean actions reach the Riccati optimum for every condition.
+    #[test]
+    fn lqr_flm_reaches_the_riccati_optimum_on_a_linear_system() {
+        let starts = [[1.0, 0.0], [-0.5, 1.0]];
+        let p = problem(&starts);
+        let run = train_local(
+            LocalMethod::LqrFlm,
+            &p,
+            &cfg(8),
+            3,
+            &mut Ephemeral,
+            &mut |_| {},
+        )
+        .unwrap();
+        for (c, x0) in starts.iter().enumerate() {
+            let opt = riccati_cost(*x0);
+            let got = mean_cost(&run.controllers[c], &p.conditions[c].objective, *x0);
+            assert!(
+                got <= opt * 1.02 && got >= opt * (1.0 - 1e-9),
+                "condition {c}: {got} vs the optimum {opt}"
+            );
+            assert_eq!(run.failed_updates[c], 0);
+        }
+    }
+
+    /// Every method lowers the cost; the curve counts samples exactly, per condition, and the
+    /// progress reports them over all conditions.
+    #[test]
+    fn every_method_improves_and_samples_are_counted_exactly() {
+        let p = problem(&[[1.0, 0.0], [0.0, -1.0]]);
+        let c = cfg(10);
+        for method in LocalMethod::ALL {
+            let mut seen = Vec::new();
+            let run =
+                train_local(method, &p, &c, 0, &mut Ephemeral, &mut |n| seen.push(n)).unwrap();
+            assert_eq!(seen.len(), 20);
+            assert_eq!(*seen.last().unwrap(), 10 * 10 * 2);
+            for curve in &run.curves {
+                let samples: Vec<u64> = curve.iter().map(|p| p.samples).collect();
+                assert_eq!(samples, (1..=10).map(|i| 10 * i).collect::<Vec<u64>>());
+                let (first, last) = (curve[0].mean_cost, curve[9].mean_cost);
+                assert!(
+                    last < 0.7 * first,
+                    "{}: mean cost {first} -> {last}",
+                    method.name()
+                );
+            }
+            // Equal seeds, equal runs.
+            let again = train_local(method, &p, &c, 0, &mut Ephemeral, &mut |_| {}).unwrap();
+            assert_eq!(again.curves, run.curves);
+        }
+    }
+
+    #[test]
+    fn a_stop_request_ends_the_run_and_bad_settings_are_named() {
+        let p = problem(&[[1.0, 0.0]]);
+        let mut store = InMemory::default();
+        store.stop_flag().set(true);
+        let r = train_local(LocalMethod::Pi2, &p, &cfg(3), 0, &mut store, &mut |_| {});
+        assert!(matches!(r, Err(PipelineError::Stopped)));
+        let mut bad = cfg(3);
+        bad.samples = 1;
+        let e = train_local(LocalMethod::Pi2, &p, &bad, 0, &mut Ephemeral, &mut |_| {});
+        assert!(e.unwrap_err().to_string().contains("samples"));
+        let mut bad = cfg(3);
+        bad.init_variance = f64::NAN;
+        let e = train_local(LocalMethod::Pi2, &p, &bad, 0, &mut Ephemeral, &mut |_| {});
+        assert!(e.unwrap_err().to_string().contains("init_variance"));
+        let mut wrong = problem(&[[1.0, 0.0]]);
+        wrong.conditions[0].x0 = vec![1.0];
+        let e = train_local(
+            LocalMethod::Pi2,
+            &wrong,
+            &cfg(3),
+            0,
+            &mut Ephemeral,
+            &mut |_| {},
+        );
+        assert!(e.unwrap_err().to_string().contains("condition 0"));
+    }
 }
