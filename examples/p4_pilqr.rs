@@ -1,9 +1,10 @@
 //! p4 Fig. 3 on one condition: LQR-FLM, PI² and PILQR train a time-varying linear-Gaussian
-//! controller for the gripper pusher (MuJoCo), 20 trajectories per iteration, and print the mean
-//! final block–goal distance of each iteration's trajectories.
+//! controller for the gripper pusher or the door (MuJoCo), 20 trajectories per iteration, and
+//! print the mean final block–goal distance (door angle) of each iteration's trajectories.
 //!
-//! `cargo run --release --features mujoco --example p4_pilqr -- [CONDITION] [SEED] [METHODS]`
-//! (condition 3, the hard one, seed 0 and `lqr_flm,pi2,pilqr` by default); `P4_CONFIG=FILE` reads
+//! `cargo run --release --features mujoco --example p4_pilqr -- [TASK] [CONDITION] [SEED] [METHODS]`
+//! (`pusher` or `door`; the pusher's hard condition 3, seed 0 and `lqr_flm,pi2,pilqr` by
+//! default); `P4_CONFIG=FILE` reads
 //! the loop's settings (`LocalConfig`, every field) from a TOML file; `--print-config` prints the
 //! defaults in that form.
 //!
@@ -11,9 +12,9 @@
 //! controller, fit TVLG dynamics to the samples, and update the controller (PILQR: LQR-FLM under
 //! per-step KL bounds, then PI² on the residual costs-to-go the fitted model does not explain).
 
-use tandem::mujoco::p4::{PusherCost, PUSHER_CONDITIONS};
+use tandem::mujoco::p4::{DoorCost, PusherCost};
 use tandem::pipelines::gps::{train_local, LocalConfig, LocalMethod, LocalProblem};
-use tandem::pipelines::p4::pusher_problem;
+use tandem::pipelines::p4::{door_problem, pusher_problem};
 use tandem::pipelines::Ephemeral;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -22,29 +23,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         print!("{}", toml::to_string(&LocalConfig::default())?);
         return Ok(());
     }
-    let cond: usize = args.get(1).map_or(Ok(3), |a| a.parse())?;
-    let seed: u64 = args.get(2).map_or(Ok(0), |a| a.parse())?;
-    let methods = args.get(3).map_or("lqr_flm,pi2,pilqr", |a| a.as_str());
-    if cond >= PUSHER_CONDITIONS.len() {
-        return Err(format!(
-            "condition {cond}: the pusher has {}",
-            PUSHER_CONDITIONS.len()
-        )
-        .into());
+    let task = args.get(1).map_or("pusher", |a| a.as_str());
+    let cond: usize = args.get(2).map_or(Ok(3), |a| a.parse())?;
+    let seed: u64 = args.get(3).map_or(Ok(0), |a| a.parse())?;
+    let methods = args.get(4).map_or("lqr_flm,pi2,pilqr", |a| a.as_str());
+    let full = match task {
+        "pusher" => pusher_problem(PusherCost::default())?,
+        "door" => door_problem(DoorCost::default())?,
+        other => return Err(format!("unknown task {other}: pusher or door").into()),
+    };
+    if cond >= full.conditions.len() {
+        return Err(format!("condition {cond}: the {task} has {}", full.conditions.len()).into());
     }
-    let full = pusher_problem(PusherCost::default())?;
     // Keep the one condition.
     let LocalProblem {
         system,
         mut conditions,
         horizon,
-        ..
+        measure,
     } = full;
     let problem = LocalProblem {
         system,
         conditions: vec![conditions.swap_remove(cond)],
         horizon,
-        measure: Box::new(move |_, x| PUSHER_CONDITIONS[cond].block_goal_distance(x)),
+        measure: Box::new(move |_, x| measure(cond, x)),
     };
     // P4_CONFIG=FILE: a TOML file with LocalConfig's fields (all of them), for experiments.
     let cfg = match std::env::var_os("P4_CONFIG") {
@@ -52,8 +54,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         None => LocalConfig::default(),
     };
     println!(
-        "pusher condition {cond} {:?}, seed {seed}, {} iterations of {} trajectories",
-        PUSHER_CONDITIONS[cond], cfg.iterations, cfg.samples
+        "{task} condition {cond}, seed {seed}, {} iterations of {} trajectories",
+        cfg.iterations, cfg.samples
     );
     for name in methods.split(',') {
         let method = LocalMethod::from_name(name).ok_or(format!("unknown method {name}"))?;
@@ -64,7 +66,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .map(|p| format!("{:.3}", p.measure))
             .collect();
         println!(
-            "{name:>8}: final distance per iteration {} (cost {:.1} -> {:.1}; {} failed updates; {:.1} s)",
+            "{name:>8}: final measure per iteration {} (cost {:.1} -> {:.1}; {} failed updates; {:.1} s)",
             curve.join(" "),
             run.curves[0][0].mean_cost,
             run.curves[0].last().map_or(f64::NAN, |p| p.mean_cost),

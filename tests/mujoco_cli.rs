@@ -277,7 +277,7 @@ fn p4_pusher_runs_with_the_feature_only() {
         assert!(o.status.success(), "{}", err_text(&o));
         let table = std::fs::read_to_string(out.join("table.json")).unwrap();
         let table: serde_json::Value = serde_json::from_str(&table).unwrap();
-        assert_eq!(table["hard_condition"], 3);
+        assert_eq!(table["lower_is_better"], true);
         // --quick: 3 iterations of 4 trajectories per condition.
         assert_eq!(table["samples_per_condition"], 12);
         for m in ["lqr_flm", "pi2", "pilqr"] {
@@ -292,7 +292,7 @@ fn p4_pusher_runs_with_the_feature_only() {
             let rows: Vec<&str> = curve.lines().collect();
             assert_eq!(
                 rows[0],
-                "samples_per_condition,distance_c0,distance_c1,distance_c2,distance_c3"
+                "samples_per_condition,measure_c0,measure_c1,measure_c2,measure_c3"
             );
             assert_eq!(rows.len(), 4, "{curve}");
             assert!(rows[3].starts_with("12,"), "{curve}");
@@ -302,7 +302,36 @@ fn p4_pusher_runs_with_the_feature_only() {
             .contains("pilqr"));
         assert!(std::fs::read_to_string(out.join("table.md"))
             .unwrap()
-            .contains("Hard condition"));
+            .contains("hard condition"));
+        // The door: its headline is the worst start, a higher angle is better.
+        let door = out.with_file_name("mujoco-cli-p4-door");
+        let _ = std::fs::remove_dir_all(&door);
+        let o = tandem(&[
+            "reproduce",
+            "p4-door",
+            "--quick",
+            "--quiet",
+            "--seeds",
+            "1",
+            "--out",
+            door.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", err_text(&o));
+        let table = std::fs::read_to_string(door.join("table.json")).unwrap();
+        let table: serde_json::Value = serde_json::from_str(&table).unwrap();
+        assert_eq!(table["lower_is_better"], false);
+        for m in ["lqr_flm", "pi2", "pilqr"] {
+            let f = &table["methods"][m];
+            let worst = f["conditions"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c["final"]["mean"].as_f64().unwrap())
+                .fold(f64::INFINITY, f64::min);
+            assert_eq!(f["final"]["mean"].as_f64().unwrap(), worst, "{m}");
+        }
+        assert!(door.join("door.svg").exists());
+        let _ = std::fs::remove_dir_all(&door);
     } else {
         assert_eq!(o.status.code(), Some(1));
         assert!(

@@ -9,7 +9,7 @@ use super::harness;
 use super::reproduce_p0::{P0Args, P0Study, P0Task};
 use super::reproduce_p1::P1Study;
 use super::reproduce_p3::P3Study;
-use super::reproduce_p4::P4PusherStudy;
+use super::reproduce_p4::{Door, P4Study, Pusher};
 use super::{CliError, Result};
 
 /// The reproductions.
@@ -40,7 +40,10 @@ pub enum ReproduceCommand {
     /// p4 (PILQR) on the gripper pusher (MuJoCo, needs `--features mujoco`): LQR-FLM, PI² and
     /// PILQR local controllers on four conditions, the same seeds and samples; p4 Fig. 3.
     P4Pusher(super::reproduce_p4::P4Args),
-    /// Combine p0-pendulum, p0-leo, p1, p3-leg, p3-mujoco or p4-pusher reproductions of disjoint seeds (e.g. one
+    /// p4 (PILQR) on the door (MuJoCo, needs `--features mujoco`): LQR-FLM, PI² and PILQR local
+    /// controllers from four arm starts, the same seeds and samples.
+    P4Door(super::reproduce_p4::P4Args),
+    /// Combine p0-pendulum, p0-leo, p1, p3-leg, p3-mujoco, p4-pusher or p4-door reproductions of disjoint seeds (e.g. one
     /// process per seed, `--first-seed`) into one table and figure; their settings must be equal.
     Merge(MergeArgs),
 }
@@ -78,7 +81,8 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
             &P3Study::mujoco(args.env, args.p3.ablate_elites, args.p3.oracle),
             &args.p3.study,
         ),
-        ReproduceCommand::P4Pusher(args) => harness::run(&P4PusherStudy, &args.study),
+        ReproduceCommand::P4Pusher(args) => harness::run(&P4Study::<Pusher>::new(), &args.study),
+        ReproduceCommand::P4Door(args) => harness::run(&P4Study::<Door>::new(), &args.study),
         ReproduceCommand::Merge(args) => {
             let Some(first) = args.dirs.first() else {
                 return Err(CliError::input("merge", "no directories given"));
@@ -115,7 +119,13 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
                     args.overwrite,
                 ),
                 "p4-pusher" => harness::merge(
-                    &P4PusherStudy,
+                    &P4Study::<Pusher>::new(),
+                    &args.dirs,
+                    args.out.as_deref(),
+                    args.overwrite,
+                ),
+                "p4-door" => harness::merge(
+                    &P4Study::<Door>::new(),
                     &args.dirs,
                     args.out.as_deref(),
                     args.overwrite,

@@ -1,16 +1,19 @@
-//! `tandem reproduce p4-pusher`: p4's Fig. 3 (Chebotar et al., PILQR): LQR-FLM, PI² and PILQR
-//! train one time-varying linear-Gaussian controller per condition of the gripper pusher (MuJoCo),
-//! on the same seeds and sample budget, through the shared [`super::harness`] (separate processes
-//! per seed, merge, resume).
+//! `tandem reproduce p4-pusher` and `p4-door`: p4's local-controller experiments (Chebotar et al.,
+//! PILQR; Fig. 3 and the door): LQR-FLM, PI² and PILQR train one time-varying linear-Gaussian
+//! controller per condition (MuJoCo), on the same seeds and sample budget, through the shared
+//! [`super::harness`] (separate processes per seed, merge, resume).
 //!
-//! Writes, besides the harness' `config.json`, `runs/` and `state/`:
+//! Each task has a measure of a trajectory's final state (the pusher: the block–goal distance,
+//! lower is better; the door: its angle, higher is better), a target that counts a condition as
+//! solved, and a headline: the pusher's hard condition (p4 Fig. 3), the door's worst condition
+//! (it is opened "from all four starts" when the worst one is). Writes, besides the harness'
+//! `config.json`, `runs/` and `state/`:
 //!
-//! - `table.md`, `table.json`: per method (`lqr_flm`, `pi2`, `pilqr`) on the hard condition the
-//!   samples to a mean final block–goal distance at or below the target (`samples_to_target`
-//!   {target, mean, per_seed}) and the final distance (`final` {mean, stderr, per_seed}); per
-//!   condition the final distance and on how many seeds the method solved it (final distance at
-//!   or below the target);
-//! - `fig3.svg`: the mean final block–goal distance against the samples of the hard condition.
+//! - `table.md`, `table.json`: per method (`lqr_flm`, `pi2`, `pilqr`) the samples per condition
+//!   until the headline (an iteration's mean measure) reached the target (`samples_to_target`
+//!   {target, mean, per_seed}) and its final value (`final` {mean, stderr, per_seed}); per
+//!   condition the final measure and on how many seeds the method solved it;
+//! - `fig3.svg` (pusher) or `door.svg`: the headline against the samples per condition.
 //!
 //! A run (one method, one seed, four conditions) takes minutes and keeps no checkpoints: a
 //! resumed study keeps the finished runs and reruns the others from their start.
@@ -19,18 +22,21 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use clap::Args;
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
-use tandem::mujoco::p4::{PusherCost, PUSHER_CONDITIONS, PUSHER_HARD};
-use tandem::pipelines::gps::{train_local, LocalConfig, LocalMethod, LocalPoint};
-use tandem::pipelines::p4::pusher_problem;
-use tandem::pipelines::Checkpoints;
+use tandem::mujoco::p4::{
+    DoorCost, PusherCost, DOOR_CONDITIONS, DOOR_TARGET, PUSHER_CONDITIONS, PUSHER_HARD,
+};
+use tandem::pipelines::gps::{train_local, LocalConfig, LocalMethod, LocalPoint, LocalProblem};
+use tandem::pipelines::p4::{door_problem, pusher_problem};
+use tandem::pipelines::{Checkpoints, Result as PipelineResult};
 use tandem::report::{mean_stderr, to_json_pretty, Curve, Figure, SamplesToTarget};
 use tandem::run::RunDir;
 
 use super::harness::{self, JobError, Study, StudyArgs};
 use super::{CliError, Result};
 
-/// Arguments of `tandem reproduce p4-pusher`.
+/// Arguments of `tandem reproduce p4-pusher` and `p4-door`.
 #[derive(Debug, Clone, Args)]
 pub struct P4Args {
     /// Seeds, output, jobs, resume: as every study.
@@ -38,50 +44,144 @@ pub struct P4Args {
     pub study: StudyArgs,
 }
 
-/// Everything that decides a p4 pusher study's numbers.
+/// What differs between p4's local-controller tasks.
+pub trait P4Task: Sync {
+    /// The cost's weights (recorded in the settings).
+    type Cost: Clone
+        + Copy
+        + PartialEq
+        + std::fmt::Debug
+        + Serialize
+        + DeserializeOwned
+        + Send
+        + Sync;
+    /// The study's name.
+    const NAME: &'static str;
+    /// The figure's file.
+    const FIGURE: &'static str;
+    /// Whether a lower measure is better.
+    const LOWER_IS_BETTER: bool;
+    /// The measure's words, with its unit.
+    const MEASURE: &'static str;
+    /// The default settings.
+    fn defaults() -> P4Settings<Self::Cost>;
+    /// The problem with `cost`.
+    fn problem(cost: Self::Cost) -> PipelineResult<LocalProblem>;
+    /// The cost's own checks.
+    fn validate_cost(cost: &Self::Cost) -> std::result::Result<(), String>;
+    /// One label per condition.
+    fn conditions() -> Vec<String>;
+    /// The headline's words.
+    fn headline() -> String;
+    /// The headline of one iteration's per-condition measures.
+    fn headline_of(measures: &[f64]) -> f64;
+}
+
+/// The gripper pusher (p4 Fig. 3).
+pub struct Pusher;
+
+impl P4Task for Pusher {
+    type Cost = PusherCost;
+    const NAME: &'static str = "p4-pusher";
+    const FIGURE: &'static str = "fig3.svg";
+    const LOWER_IS_BETTER: bool = true;
+    const MEASURE: &'static str = "final block–goal distance (m)";
+    fn defaults() -> P4Settings<PusherCost> {
+        P4Settings {
+            local: LocalConfig::default(),
+            cost: PusherCost::default(),
+            target: 0.1,
+        }
+    }
+    fn problem(cost: PusherCost) -> PipelineResult<LocalProblem> {
+        pusher_problem(cost)
+    }
+    fn validate_cost(cost: &PusherCost) -> std::result::Result<(), String> {
+        cost.validate()
+    }
+    fn conditions() -> Vec<String> {
+        PUSHER_CONDITIONS
+            .iter()
+            .map(|c| format!("block {:?} → goal {:?}", c.block, c.goal))
+            .collect()
+    }
+    fn headline() -> String {
+        format!(
+            "the hard condition (p4 Fig. 3): block at {:?}, goal at {:?}",
+            PUSHER_CONDITIONS[PUSHER_HARD].block, PUSHER_CONDITIONS[PUSHER_HARD].goal
+        )
+    }
+    fn headline_of(measures: &[f64]) -> f64 {
+        measures[PUSHER_HARD]
+    }
+}
+
+/// The door.
+pub struct Door;
+
+impl P4Task for Door {
+    type Cost = DoorCost;
+    const NAME: &'static str = "p4-door";
+    const FIGURE: &'static str = "door.svg";
+    const LOWER_IS_BETTER: bool = false;
+    const MEASURE: &'static str = "final door angle (rad)";
+    fn defaults() -> P4Settings<DoorCost> {
+        P4Settings {
+            local: LocalConfig {
+                // Normalized motor commands in [-1, 1]: exploration of ±0.22 (up to 9 N m).
+                init_variance: 0.05,
+                ..LocalConfig::default()
+            },
+            cost: DoorCost::default(),
+            target: 0.8 * DOOR_TARGET,
+        }
+    }
+    fn problem(cost: DoorCost) -> PipelineResult<LocalProblem> {
+        door_problem(cost)
+    }
+    fn validate_cost(cost: &DoorCost) -> std::result::Result<(), String> {
+        cost.validate()
+    }
+    fn conditions() -> Vec<String> {
+        DOOR_CONDITIONS
+            .iter()
+            .map(|c| format!("start {}", c.0))
+            .collect()
+    }
+    fn headline() -> String {
+        "the worst of the four starts (the door opened from all four)".into()
+    }
+    fn headline_of(measures: &[f64]) -> f64 {
+        measures.iter().copied().fold(f64::INFINITY, f64::min)
+    }
+}
+
+/// Everything that decides a p4 study's numbers.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct P4PusherSettings {
+pub struct P4Settings<C> {
     /// The local-controller loop (iterations, samples per iteration, optimizers, dynamics fit).
     pub local: LocalConfig,
     /// The cost weights.
-    pub cost: PusherCost,
-    /// A condition counts as solved when the mean final block–goal distance of the last
-    /// iteration's trajectories is at or below this (m).
-    pub target_distance: f64,
+    pub cost: C,
+    /// A condition counts as solved when the mean measure of the last iteration's trajectories
+    /// reaches this (at or below for the pusher's distance, at or above for the door's angle).
+    pub target: f64,
 }
 
-impl Default for P4PusherSettings {
-    fn default() -> Self {
-        Self {
-            local: LocalConfig::default(),
-            cost: PusherCost::default(),
-            target_distance: 0.1,
-        }
-    }
-}
-
-impl P4PusherSettings {
-    /// The `--quick` settings: 3 iterations of 4 trajectories.
-    pub fn quick() -> Self {
-        let mut s = Self::default();
-        s.local.iterations = 3;
-        s.local.samples = 4;
-        s
-    }
-
-    fn validate(&self, what: &str) -> Result<()> {
+impl<C> P4Settings<C> {
+    fn validate<T: P4Task<Cost = C>>(&self, what: &str) -> Result<()>
+    where
+        C: Copy,
+    {
         let bad = |m: String| CliError::input(what, m);
         self.local.validate().map_err(|e| bad(e.to_string()))?;
-        self.cost.validate().map_err(bad)?;
-        // Fails early without the `mujoco` feature (or without the scene), before any directory.
-        pusher_problem(self.cost).map_err(|e| bad(e.to_string()))?;
-        if !(self.target_distance.is_finite() && self.target_distance > 0.0) {
-            return Err(bad(format!(
-                "target_distance {} must be finite and > 0",
-                self.target_distance
-            )));
+        T::validate_cost(&self.cost).map_err(bad)?;
+        if !self.target.is_finite() {
+            return Err(bad(format!("target {} must be finite", self.target)));
         }
+        // Fails early without the `mujoco` feature (or without the scene), before any directory.
+        T::problem(self.cost).map_err(|e| bad(e.to_string()))?;
         Ok(())
     }
 }
@@ -94,7 +194,7 @@ pub struct LocalRecord {
     /// The seed.
     pub seed: u64,
     /// Per condition, one point per iteration (samples of that condition, mean cost, mean final
-    /// block–goal distance of the iteration's trajectories).
+    /// measure of the iteration's trajectories).
     pub curves: Vec<Vec<LocalPoint>>,
     /// Per condition, updates that failed numerically (the controller was kept).
     pub failed_updates: Vec<usize>,
@@ -104,45 +204,71 @@ pub struct LocalRecord {
     pub wall_seconds: f64,
 }
 
-/// The p4 pusher study.
-pub struct P4PusherStudy;
+impl LocalRecord {
+    /// The headline of each iteration.
+    fn headlines<T: P4Task>(&self) -> Vec<(u64, f64)> {
+        let iterations = self.curves.first().map_or(0, Vec::len);
+        (0..iterations)
+            .map(|i| {
+                let m: Vec<f64> = self.curves.iter().map(|c| c[i].measure).collect();
+                (self.curves[0][i].samples, T::headline_of(&m))
+            })
+            .collect()
+    }
+}
 
-impl Study for P4PusherStudy {
-    type Settings = P4PusherSettings;
+/// A p4 local-controller study on task `T`.
+pub struct P4Study<T>(std::marker::PhantomData<T>);
+
+impl<T> P4Study<T> {
+    /// The study.
+    pub fn new() -> Self {
+        Self(std::marker::PhantomData)
+    }
+}
+
+impl<T> Default for P4Study<T> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<T: P4Task> Study for P4Study<T> {
+    type Settings = P4Settings<T::Cost>;
     type Record = LocalRecord;
 
     fn name(&self) -> &str {
-        "p4-pusher"
+        T::NAME
     }
 
-    fn settings(&self, quick: bool, config: Option<&Path>) -> Result<P4PusherSettings> {
-        let base = if quick {
-            P4PusherSettings::quick()
-        } else {
-            P4PusherSettings::default()
-        };
+    fn settings(&self, quick: bool, config: Option<&Path>) -> Result<Self::Settings> {
+        let mut base = T::defaults();
+        if quick {
+            base.local.iterations = 3;
+            base.local.samples = 4;
+        }
         let s = harness::read_overrides(base, config)?;
         let what = config.map_or("settings".to_string(), |p| {
             format!("--config {}", p.display())
         });
-        s.validate(&what)?;
+        s.validate::<T>(&what)?;
         Ok(s)
     }
 
-    fn jobs(&self, _s: &P4PusherSettings) -> Vec<Vec<String>> {
+    fn jobs(&self, _s: &Self::Settings) -> Vec<Vec<String>> {
         LocalMethod::ALL
             .iter()
             .map(|m| vec![m.name().to_string()])
             .collect()
     }
 
-    fn length(&self, s: &P4PusherSettings, _run: &str) -> u64 {
-        (s.local.iterations * s.local.samples * PUSHER_CONDITIONS.len()) as u64
+    fn length(&self, s: &Self::Settings, _run: &str) -> u64 {
+        (s.local.iterations * s.local.samples * T::conditions().len()) as u64
     }
 
     fn run(
         &self,
-        s: &P4PusherSettings,
+        s: &Self::Settings,
         run_name: &str,
         seed: u64,
         store: &mut dyn Checkpoints,
@@ -150,7 +276,7 @@ impl Study for P4PusherStudy {
     ) -> std::result::Result<LocalRecord, JobError> {
         let method = LocalMethod::from_name(run_name)
             .ok_or_else(|| JobError::Failed(format!("unknown run {run_name}")))?;
-        let problem = pusher_problem(s.cost)?;
+        let problem = T::problem(s.cost)?;
         let start = std::time::Instant::now();
         let run = train_local(method, &problem, &s.local, seed, store, progress)?;
         Ok(LocalRecord {
@@ -166,10 +292,10 @@ impl Study for P4PusherStudy {
     fn curve(&self, r: &LocalRecord) -> (Vec<&'static str>, Vec<Vec<f64>>) {
         let header = vec![
             "samples_per_condition",
-            "distance_c0",
-            "distance_c1",
-            "distance_c2",
-            "distance_c3",
+            "measure_c0",
+            "measure_c1",
+            "measure_c2",
+            "measure_c3",
         ];
         let iterations = r.curves.first().map_or(0, Vec::len);
         let rows = (0..iterations)
@@ -183,20 +309,24 @@ impl Study for P4PusherStudy {
     }
 
     fn report_files(&self) -> &'static [&'static str] {
-        &["table.json", "table.md", "fig3.svg"]
+        if T::FIGURE == "fig3.svg" {
+            &["table.json", "table.md", "fig3.svg"]
+        } else {
+            &["table.json", "table.md", "door.svg"]
+        }
     }
 
     fn report(
         &self,
         dir: &RunDir,
-        s: &P4PusherSettings,
+        s: &Self::Settings,
         records: &[LocalRecord],
         wall: f64,
     ) -> Result<String> {
-        let table = P4Table::new(s, records);
+        let table = P4Table::new::<T>(s.target, &s.local, records);
         let json = to_json_pretty(&table).map_err(|e| CliError::Other(e.to_string()))?;
         harness::write(dir, "table.json", &json)?;
-        let md = table.markdown(s, records, wall);
+        let md = table.markdown::<T>(&s.local, records, wall);
         harness::write(dir, "table.md", &md)?;
         let curves = LocalMethod::ALL
             .iter()
@@ -204,30 +334,21 @@ impl Study for P4PusherStudy {
                 let seeds: Vec<Vec<(u64, f64)>> = records
                     .iter()
                     .filter(|r| r.method == m.name())
-                    .map(|r| {
-                        r.curves[PUSHER_HARD]
-                            .iter()
-                            .map(|p| (p.samples, p.measure))
-                            .collect()
-                    })
+                    .map(|r| r.headlines::<T>())
                     .collect();
                 (!seeds.is_empty()).then(|| Curve::mean_over_seeds(m.name(), &seeds))
             })
             .collect();
         let fig = Figure {
-            title: format!(
-                "p4 Fig. 3: gripper pusher, hard condition (block at {:?}, goal at {:?})",
-                PUSHER_CONDITIONS[PUSHER_HARD].block, PUSHER_CONDITIONS[PUSHER_HARD].goal
-            ),
-            x_label: "samples (trajectories of this condition)".into(),
-            y_label: "final block-goal distance (m)".into(),
+            title: format!("{}: {}", T::NAME, T::headline()),
+            x_label: "samples (trajectories per condition)".into(),
+            y_label: T::MEASURE.into(),
             curves,
         };
-        harness::write(dir, "fig3.svg", &fig.svg())?;
+        harness::write(dir, T::FIGURE, &fig.svg())?;
         Ok(md)
     }
 }
-
 /// Mean, standard error and per-seed values of a figure.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SeedFigure {
@@ -253,41 +374,45 @@ impl SeedFigure {
 /// One condition's figures for one method.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ConditionFigures {
-    /// The block's start and the goal.
-    pub block: [f64; 2],
-    /// The goal.
-    pub goal: [f64; 2],
-    /// Final block–goal distance (the last iteration's mean).
+    /// The condition.
+    pub condition: String,
+    /// Final measure (the last iteration's mean).
     #[serde(rename = "final")]
-    pub final_distance: SeedFigure,
-    /// Seeds whose final distance is at or below the target.
+    pub final_measure: SeedFigure,
+    /// Seeds whose final measure reached the target.
     pub solved: usize,
 }
 
 /// One method's figures.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct P4MethodFigures {
-    /// Samples of the hard condition until an iteration's mean final distance was at or below the
-    /// target (`null` per seed where it never was).
+    /// Samples per condition until an iteration's headline reached the target (`null` per seed
+    /// where it never did).
     pub samples_to_target: SamplesToTarget,
-    /// The hard condition's final distance.
+    /// The headline's final value.
     #[serde(rename = "final")]
-    pub final_distance: SeedFigure,
+    pub final_measure: SeedFigure,
     /// Per condition.
     pub conditions: Vec<ConditionFigures>,
     /// Conditions solved on every seed.
     pub conditions_solved_on_all_seeds: usize,
+    /// Seeds on which every condition was solved.
+    pub seeds_solving_all: usize,
     /// Seeds.
     pub seeds: Vec<u64>,
 }
 
-/// `table.json` of a p4 pusher study.
+/// `table.json` of a p4 local-controller study.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct P4Table {
-    /// The hard condition's index.
-    pub hard_condition: usize,
-    /// The target distance (m).
-    pub target_distance: f64,
+    /// The measure.
+    pub measure: String,
+    /// Whether lower is better.
+    pub lower_is_better: bool,
+    /// What the headline is.
+    pub headline: String,
+    /// The target.
+    pub target: f64,
     /// Samples per condition (iterations × trajectories per iteration).
     pub samples_per_condition: u64,
     /// Per method key.
@@ -295,9 +420,16 @@ pub struct P4Table {
 }
 
 impl P4Table {
-    fn new(s: &P4PusherSettings, records: &[LocalRecord]) -> Self {
-        let budget = (s.local.iterations * s.local.samples) as u64;
-        let target = s.target_distance;
+    fn new<T: P4Task>(target: f64, local: &LocalConfig, records: &[LocalRecord]) -> Self {
+        let budget = (local.iterations * local.samples) as u64;
+        let reached = |v: f64| {
+            if T::LOWER_IS_BETTER {
+                v <= target
+            } else {
+                v >= target
+            }
+        };
+        let labels = T::conditions();
         let mut methods = BTreeMap::new();
         for m in LocalMethod::ALL {
             let runs: Vec<&LocalRecord> = records.iter().filter(|r| r.method == m.name()).collect();
@@ -306,57 +438,75 @@ impl P4Table {
             }
             let last =
                 |r: &LocalRecord, c: usize| r.curves[c].last().map_or(f64::NAN, |p| p.measure);
-            let conditions: Vec<ConditionFigures> = PUSHER_CONDITIONS
+            let conditions: Vec<ConditionFigures> = labels
                 .iter()
                 .enumerate()
-                .map(|(c, cond)| {
+                .map(|(c, label)| {
                     let finals: Vec<f64> = runs.iter().map(|r| last(r, c)).collect();
                     ConditionFigures {
-                        block: cond.block,
-                        goal: cond.goal,
-                        solved: finals.iter().filter(|d| **d <= target).count(),
-                        final_distance: SeedFigure::new(finals),
+                        condition: label.clone(),
+                        solved: finals.iter().filter(|v| reached(**v)).count(),
+                        final_measure: SeedFigure::new(finals),
                     }
                 })
                 .collect();
-            let reached = runs
+            let to_target = runs
                 .iter()
                 .map(|r| {
-                    r.curves[PUSHER_HARD]
-                        .iter()
-                        .find(|p| p.measure <= target)
-                        .map(|p| p.samples)
+                    r.headlines::<T>()
+                        .into_iter()
+                        .find(|p| reached(p.1))
+                        .map(|p| p.0)
                 })
                 .collect();
+            let finals: Vec<f64> = runs
+                .iter()
+                .map(|r| r.headlines::<T>().last().map_or(f64::NAN, |p| p.1))
+                .collect();
+            let seeds_solving_all = runs
+                .iter()
+                .filter(|r| (0..labels.len()).all(|c| reached(last(r, c))))
+                .count();
             methods.insert(
                 m.name().to_string(),
                 P4MethodFigures {
-                    samples_to_target: SamplesToTarget::from_seeds(target, reached, budget),
-                    final_distance: SeedFigure::new(
-                        runs.iter().map(|r| last(r, PUSHER_HARD)).collect(),
-                    ),
+                    samples_to_target: SamplesToTarget::from_seeds(target, to_target, budget),
+                    final_measure: SeedFigure::new(finals),
                     conditions_solved_on_all_seeds: conditions
                         .iter()
                         .filter(|c| c.solved == runs.len())
                         .count(),
+                    seeds_solving_all,
                     conditions,
                     seeds: runs.iter().map(|r| r.seed).collect(),
                 },
             );
         }
         Self {
-            hard_condition: PUSHER_HARD,
-            target_distance: target,
+            measure: T::MEASURE.into(),
+            lower_is_better: T::LOWER_IS_BETTER,
+            headline: T::headline(),
+            target,
             samples_per_condition: budget,
             methods,
         }
     }
 
-    fn markdown(&self, s: &P4PusherSettings, records: &[LocalRecord], wall: f64) -> String {
+    fn markdown<T: P4Task>(
+        &self,
+        local: &LocalConfig,
+        records: &[LocalRecord],
+        wall: f64,
+    ) -> String {
         let label = |k: &str| match k {
             "lqr_flm" => "LQR-FLM",
             "pi2" => "PI²",
             _ => "PILQR",
+        };
+        let relation = if self.lower_is_better {
+            "at or below"
+        } else {
+            "at or above"
         };
         let seeds = self
             .methods
@@ -365,66 +515,76 @@ impl P4Table {
             .max()
             .unwrap_or(0);
         let mut md = format!(
-            "# p4 gripper pusher ({seeds} seeds)\n\nOne time-varying linear-Gaussian controller per \
-             condition, {} iterations of {} trajectories each ({} samples per condition; every \
-             trajectory counted, no other rollouts). Distances are the mean final block–goal \
-             distance of an iteration's trajectories; a condition is solved at or below {} m. \
-             Mean ± standard error over seeds.\n\n",
-            s.local.iterations, s.local.samples, self.samples_per_condition, self.target_distance
+            "# {} ({seeds} seeds)\n\nOne time-varying linear-Gaussian controller per condition, {} \
+             iterations of {} trajectories each ({} samples per condition; every trajectory \
+             counted, no other rollouts). The measure is the mean {} of an iteration's \
+             trajectories; a condition is solved when the last iteration's is {relation} {}. Mean \
+             ± standard error over seeds.\n\n",
+            T::NAME,
+            local.iterations,
+            local.samples,
+            self.samples_per_condition,
+            self.measure,
+            self.target
         );
         md.push_str(&format!(
-            "## Hard condition (p4 Fig. 3): block at {:?}, goal at {:?}\n\n| method | final distance (m) | samples to {} m | seeds that reached it |\n|---|---|---|---|\n",
-            PUSHER_CONDITIONS[PUSHER_HARD].block,
-            PUSHER_CONDITIONS[PUSHER_HARD].goal,
-            self.target_distance
+            "## Headline: {}\n\n| method | final | samples to {} | seeds that reached it |\n|---|---|---|---|\n",
+            self.headline, self.target
         ));
         for (k, m) in &self.methods {
             let t = &m.samples_to_target;
             md.push_str(&format!(
                 "| {} | {:.3} ± {:.3} | {} | {}/{} |\n",
                 label(k),
-                m.final_distance.mean,
-                m.final_distance.stderr,
+                m.final_measure.mean,
+                m.final_measure.stderr,
                 t.mean.map_or("—".into(), |v| format!("{v:.0}")),
                 t.reached,
                 t.seeds
             ));
         }
-        md.push_str("\n## Every condition: final distance (m), seeds solved\n\n| method |");
-        for (c, cond) in PUSHER_CONDITIONS.iter().enumerate() {
-            md.push_str(&format!(" c{c} {:?}→{:?} |", cond.block, cond.goal));
+        md.push_str("\n## Every condition: final measure, seeds that solved it\n\n| method |");
+        for (c, cond) in T::conditions().iter().enumerate() {
+            md.push_str(&format!(" c{c}: {cond} |"));
         }
-        md.push_str(" solved on all seeds |\n|---|");
-        md.push_str(&"---|".repeat(PUSHER_CONDITIONS.len() + 1));
+        md.push_str(" conditions solved on all seeds | seeds solving all |\n|---|");
+        md.push_str(&"---|".repeat(T::conditions().len() + 2));
         md.push('\n');
         for (k, m) in &self.methods {
             md.push_str(&format!("| {} |", label(k)));
             for c in &m.conditions {
                 md.push_str(&format!(
                     " {:.3} ± {:.3}, {}/{} |",
-                    c.final_distance.mean,
-                    c.final_distance.stderr,
+                    c.final_measure.mean,
+                    c.final_measure.stderr,
                     c.solved,
                     m.seeds.len()
                 ));
             }
-            md.push_str(&format!(" {}/4 |\n", m.conditions_solved_on_all_seeds));
+            md.push_str(&format!(
+                " {}/{} | {}/{} |\n",
+                m.conditions_solved_on_all_seeds,
+                m.conditions.len(),
+                m.seeds_solving_all,
+                m.seeds.len()
+            ));
         }
         let failed: usize = records.iter().flat_map(|r| &r.failed_updates).sum();
         let run_wall: f64 = records.iter().map(|r| r.wall_seconds).sum();
+        let t = &local.trajopt;
         md.push_str(&format!(
             "\nLQR-FLM: base KL bound {} per step with GPS's step rule for LQR-FLM; PI²: KL {}, \
              covariance damping {}, gains {}; PILQR: the same LQR-FLM and PI² stages, per-step \
              bounds from the residual ratio ({} / {}). Initial controllers `K = 0, k = 0, Σ = {} I`. \
              Updates that failed numerically (controller kept): {failed}. Runs took {run_wall:.0} s \
              in all; the study's wall time {wall:.0} s.\n",
-            s.local.trajopt.lqr.kl_step,
-            s.local.trajopt.pi2.kl_step,
-            s.local.trajopt.pi2.covariance_damping,
-            if s.local.trajopt.pi2.update_gains { "refitted" } else { "kept" },
-            s.local.trajopt.res_ratio_dec,
-            s.local.trajopt.res_ratio_inc,
-            s.local.init_variance,
+            t.lqr.kl_step,
+            t.pi2.kl_step,
+            t.pi2.covariance_damping,
+            if t.pi2.update_gains { "refitted" } else { "kept" },
+            t.res_ratio_dec,
+            t.res_ratio_inc,
+            local.init_variance,
         ));
         md
     }

@@ -20,6 +20,22 @@
 //! LQR-based methods (weights in [`PusherCost::default`]). The four conditions
 //! ([`PUSHER_CONDITIONS`]) place the block and the goal; the last one is the hard one of p4's
 //! Fig. 3, the block far from both the gripper and the goal.
+//!
+//! **Door** (`scenes/p4_door.xml`, p4's door opening): a gravity-compensated 6-DoF 3D arm ending
+//! in a hook must get the hook behind the handle of a door (a vertical hinge, closed at 0, opening
+//! towards the arm up to 1.57 rad; pushing cannot open it) and pull it open. State: the six arm
+//! joints, the door angle, and their velocities (14); action: six normalized motor commands in
+//! `[−1, 1]` (gears 40, 40, 15, 20, 5, 5 N m). The cost (p4: "a weighted combination of the
+//! distance of the end effector to the door handle and the angle of the door") is
+//!
+//! ```text
+//! c(x, u) = w_hand ℓ(‖h(q) − g(q)‖) + w_angle (θ − θ*)² + w_u ‖u‖²
+//! ```
+//!
+//! with `h` the hook's point (site `hand`) and `g` the grasp point behind the handle bar (site
+//! `handle`, which moves with the door), both from MuJoCo's kinematics, and `θ* = 1` rad
+//! ([`DoorCost::default`]). The four conditions ([`DOOR_CONDITIONS`]) are arm configurations
+//! 0.32–0.36 m from the grasp point: above, in front of, left of and right of the handle.
 
 use std::path::PathBuf;
 
@@ -255,6 +271,136 @@ impl PusherCost {
     }
 }
 
+/// The door's scene name.
+pub const DOOR_SCENE: &str = "p4_door";
+/// MuJoCo steps per control step (0.01 s each).
+pub const DOOR_FRAME_SKIP: usize = 5;
+/// Control steps per episode (5 s).
+pub const DOOR_HORIZON: usize = 100;
+/// Length of the state `qpos ++ qvel`.
+pub const DOOR_STATE_DIM: usize = 14;
+/// Number of motors.
+pub const DOOR_ACTION_DIM: usize = 6;
+/// The door angle's index in the state.
+pub const DOOR_ANGLE: usize = 6;
+/// The angle the door should be pulled to (rad).
+pub const DOOR_TARGET: f64 = 1.0;
+
+/// The door's four conditions: the six arm joints' start (door closed, all at rest), with the
+/// hook level and its finger down, 0.32–0.36 m from the grasp point (offsets from it in m).
+pub const DOOR_CONDITIONS: [(&str, [f64; 6]); 4] = [
+    (
+        "above (-0.1, 0, 0.3)",
+        [0.5098, 0.3024, -0.0197, -1.3288, 0.0362, 1.0257],
+    ),
+    (
+        "front (-0.3, 0, 0.2)",
+        [0.6823, 0.6805, -0.0255, -1.9626, 0.0686, 1.2809],
+    ),
+    (
+        "left (-0.1, 0.25, 0.2)",
+        [0.7640, 0.1799, -0.0519, -0.6595, 0.0575, 0.4785],
+    ),
+    (
+        "right (-0.1, -0.25, 0.2)",
+        [0.2036, 0.6102, 0.0403, -1.7234, -0.0742, 1.1114],
+    ),
+];
+
+/// The initial state of door condition `c`.
+pub fn door_initial_state(c: usize) -> Vec<f64> {
+    let mut x = vec![0.0; DOOR_STATE_DIM];
+    x[..6].copy_from_slice(&DOOR_CONDITIONS[c].1);
+    x
+}
+
+/// The door's cost weights (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DoorCost {
+    /// Weight of the hand–handle term.
+    pub hand: f64,
+    /// Weight of `(θ − θ*)²`.
+    pub angle: f64,
+    /// The target angle `θ*` (rad).
+    pub target: f64,
+    /// Weight of `‖u‖²`.
+    pub action: f64,
+    /// `l₁` of the penalty.
+    pub l1: f64,
+    /// `l₂` of the penalty.
+    pub l2: f64,
+    /// `α` of the penalty.
+    pub alpha: f64,
+}
+
+impl Default for DoorCost {
+    /// Hand–handle 10, door angle 1 towards 1 rad, `ℓ = ½ d² + 0.1 √(10⁻⁵ + d²)`, `10⁻³ ‖u‖²`
+    /// (with these, the scene's scripted hook-and-pull costs 35–44 per episode against 182–201
+    /// for staying put).
+    fn default() -> Self {
+        Self {
+            hand: 10.0,
+            angle: 1.0,
+            target: DOOR_TARGET,
+            action: 1e-3,
+            l1: 0.1,
+            l2: 1.0,
+            alpha: 1e-5,
+        }
+    }
+}
+
+impl DoorCost {
+    /// `c` given the hand–handle offset `r = h − g`, the door angle and the action.
+    pub fn running(&self, r: &[f64; 3], angle: f64, u: &[f64]) -> f64 {
+        let d = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+        self.hand * l12(d, self.l1, self.l2, self.alpha)
+            + self.angle * (angle - self.target).powi(2)
+            + self.action * u.iter().map(|v| v * v).sum::<f64>()
+    }
+
+    /// The gradient and Hessian of the hand term in `r` (the Hessian positive definite).
+    pub fn hand_expansion(&self, r: &[f64; 3]) -> (f64, [f64; 3], [[f64; 3]; 3]) {
+        let n2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+        let s = (self.alpha + n2).sqrt();
+        let v = self.hand * (0.5 * self.l2 * n2 + self.l1 * s);
+        let k = self.hand * (self.l2 + self.l1 / s);
+        let grad = [k * r[0], k * r[1], k * r[2]];
+        let mut hess = [[0.0; 3]; 3];
+        for (i, row) in hess.iter_mut().enumerate() {
+            for (j, h) in row.iter_mut().enumerate() {
+                *h =
+                    -self.hand * self.l1 * r[i] * r[j] / (s * s * s) + if i == j { k } else { 0.0 };
+            }
+        }
+        (v, grad, hess)
+    }
+
+    /// Checks that the weights are finite and non-negative, `α > 0` and the target finite.
+    pub fn validate(&self) -> Result<(), String> {
+        let fields = [
+            ("hand", self.hand),
+            ("angle", self.angle),
+            ("action", self.action),
+            ("l1", self.l1),
+            ("l2", self.l2),
+        ];
+        for (name, v) in fields {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("cost weight {name} = {v} must be finite and >= 0"));
+            }
+        }
+        if !(self.alpha.is_finite() && self.alpha > 0.0) {
+            return Err(format!("cost alpha = {} must be > 0", self.alpha));
+        }
+        if !self.target.is_finite() {
+            return Err(format!("target angle {} must be finite", self.target));
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -372,6 +518,34 @@ mod tests {
                 assert!(hard_gripper > g && hard_goal > b, "condition {i}");
             }
         }
+    }
+
+    #[test]
+    fn door_hand_expansion_is_the_hand_terms() {
+        let c = DoorCost::default();
+        let r = [0.1, -0.2, 0.05];
+        let (v, g, h) = c.hand_expansion(&r);
+        assert_relative_eq!(v, c.running(&r, c.target, &[0.0; 6]), epsilon = 1e-14);
+        let eps = 1e-6;
+        for i in 0..3 {
+            let (mut rp, mut rm) = (r, r);
+            rp[i] += eps;
+            rm[i] -= eps;
+            let fd = (c.hand_expansion(&rp).0 - c.hand_expansion(&rm).0) / (2.0 * eps);
+            assert!((fd - g[i]).abs() < 1e-6, "{i}: {fd} vs {}", g[i]);
+            let (gp, gm) = (c.hand_expansion(&rp).1, c.hand_expansion(&rm).1);
+            for (j, hij) in h[i].iter().enumerate() {
+                let fd = (gp[j] - gm[j]) / (2.0 * eps);
+                assert!((fd - hij).abs() < 1e-5, "({i},{j}): {fd} vs {hij}");
+            }
+        }
+        // The angle and action terms.
+        assert_relative_eq!(
+            c.running(&[0.0; 3], 0.5, &[1.0, 0.0, 0.0, 0.0, 0.0, 2.0])
+                - c.running(&[0.0; 3], 1.0, &[0.0; 6]),
+            0.25 + 5.0 * c.action,
+            epsilon = 1e-14
+        );
     }
 
     #[test]

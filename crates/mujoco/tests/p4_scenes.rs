@@ -75,3 +75,52 @@ fn pusher_block_moves_only_on_contact() {
     let moved = (x[4] - 0.7).hypot(x[5] - 0.3);
     assert!(moved > 0.1, "block moved only {moved} m");
 }
+
+/// The door scene: the task's dimensions, a gravity-compensated arm that zero torque holds still
+/// from every start with the door closed, and the grasp point where the scene's geometry puts
+/// it (0.0565 m in front of the door face, 0.35 m from the hinge), moving with the door.
+#[test]
+fn door_scene_holds_still_and_its_grasp_point_turns_with_the_door() {
+    use tandem_mujoco::p4::{
+        door_initial_state, DOOR_ACTION_DIM, DOOR_ANGLE, DOOR_CONDITIONS, DOOR_FRAME_SKIP,
+        DOOR_SCENE, DOOR_STATE_DIM,
+    };
+    let p = MujocoPlant::from_xml(scene_path(DOOR_SCENE), DOOR_FRAME_SKIP).unwrap();
+    assert_eq!(
+        (p.state_dim(), p.action_dim()),
+        (DOOR_STATE_DIM, DOOR_ACTION_DIM)
+    );
+    for c in 0..DOOR_CONDITIONS.len() {
+        let x0 = DVector::from_vec(door_initial_state(c));
+        let mut x = x0.clone();
+        for _ in 0..100 {
+            x = p.step(&x, &DVector::zeros(DOOR_ACTION_DIM));
+        }
+        assert!(
+            (&x - &x0).amax() < 1e-9,
+            "condition {c}: drifted by {}",
+            (&x - &x0).amax()
+        );
+    }
+    let scene = Scene::from_xml(scene_path(DOOR_SCENE)).unwrap();
+    let id = scene.site_id("handle").unwrap();
+    let mut q = door_initial_state(0)[..7].to_vec();
+    let closed = scene.site_positions(&q, &[id]).unwrap()[0];
+    let expect = [0.76 - 0.0565, 0.35, 0.9];
+    for k in 0..3 {
+        assert!((closed[k] - expect[k]).abs() < 1e-12, "{closed:?}");
+    }
+    // Opened by θ about the vertical hinge at (0.76, 0): the point turns on its 0.3545 m circle.
+    let theta: f64 = 0.7;
+    q[DOOR_ANGLE] = theta;
+    let open = scene.site_positions(&q, &[id]).unwrap()[0];
+    let (dx, dy) = (-0.0565, 0.35);
+    let turned = [
+        0.76 + dx * theta.cos() - dy * theta.sin(),
+        dx * theta.sin() + dy * theta.cos(),
+    ];
+    assert!(
+        (open[0] - turned[0]).abs() < 1e-12 && (open[1] - turned[1]).abs() < 1e-12,
+        "{open:?} vs {turned:?}"
+    );
+}
