@@ -353,11 +353,17 @@ fn nice_ticks(lo: f64, hi: f64, n: usize) -> Vec<f64> {
         .map(|m| m * mag)
         .find(|s| *s >= raw)
         .unwrap_or(10.0 * mag);
-    let mut t = (lo / step).ceil() * step;
+    // Each tick is k · step rounded to the step's decimals, so that labels read 0.6, not
+    // 0.6000000000000001 (no sum of steps, no accumulated rounding).
+    let scale = 10f64.powi((-step.log10().floor()).max(0.0) as i32);
+    let first = (lo / step).ceil() as i64;
     let mut out = Vec::new();
-    while t <= hi + 1e-9 * span {
+    for k in first.. {
+        let t = ((k as f64 * step) * scale).round() / scale;
+        if t > hi + 1e-9 * span {
+            break;
+        }
         out.push(if t.abs() < 1e-12 * span { 0.0 } else { t });
-        t += step;
     }
     out
 }
@@ -528,6 +534,21 @@ pub fn svg_chart(title: &str, x_label: &str, y_label: &str, series: &[Series]) -
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ticks_are_round_numbers() {
+        let labels: Vec<String> = nice_ticks(0.4, 1.05, 6)
+            .iter()
+            .map(|t| t.to_string())
+            .collect();
+        assert_eq!(labels, ["0.4", "0.6", "0.8", "1"]);
+        let labels: Vec<String> = nice_ticks(-0.35, 0.2, 6)
+            .iter()
+            .map(|t| t.to_string())
+            .collect();
+        assert_eq!(labels, ["-0.3", "-0.2", "-0.1", "0", "0.1", "0.2"]);
+        assert_eq!(nice_ticks(0.0, 400.0, 6), [0.0, 100.0, 200.0, 300.0, 400.0]);
+    }
 
     #[test]
     fn utc_stamp_matches_known_dates() {
