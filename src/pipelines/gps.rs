@@ -255,7 +255,7 @@ pub fn train_local(
 }
 
 /// Checks that there are conditions, a horizon, and dimensions that fit the system.
-fn check_problem(problem: &LocalProblem) -> Result<()> {
+pub(crate) fn check_problem(problem: &LocalProblem) -> Result<()> {
     let system = &problem.system;
     if problem.conditions.is_empty() || problem.horizon == 0 {
         return Err(PipelineError::Config(format!(
@@ -351,18 +351,18 @@ fn update(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::pipelines::{Ephemeral, InMemory};
     use nalgebra::{dmatrix, DMatrix, DVector};
     use tandem_dynamics::Plant;
     use tandem_models::PlantModel;
 
-    const DT: f64 = 0.1;
-    const T: usize = 15;
+    pub(crate) const DT: f64 = 0.1;
+    pub(crate) const T: usize = 15;
 
     /// A double integrator `x' = A x + B u`.
-    struct DoubleIntegrator;
+    pub(crate) struct DoubleIntegrator;
     impl Plant for DoubleIntegrator {
         fn state_dim(&self) -> usize {
             2
@@ -377,17 +377,17 @@ mod tests {
             &a() * x + &b() * u
         }
     }
-    fn a() -> DMatrix<f64> {
+    pub(crate) fn a() -> DMatrix<f64> {
         dmatrix![1.0, DT; 0.0, 1.0]
     }
-    fn b() -> DMatrix<f64> {
+    pub(crate) fn b() -> DMatrix<f64> {
         dmatrix![0.5 * DT * DT; DT]
     }
     const Q: [f64; 2] = [1.0, 0.1];
     const R: f64 = 0.01;
     const QF: [f64; 2] = [10.0, 1.0];
 
-    fn problem(starts: &[[f64; 2]]) -> LocalProblem {
+    pub(crate) fn problem(starts: &[[f64; 2]]) -> LocalProblem {
         let conditions = starts
             .iter()
             .map(|x0| Condition {
@@ -407,7 +407,7 @@ mod tests {
     }
 
     /// The optimal cost `½ x0ᵀ P_0 x0` by the finite-horizon Riccati recursion.
-    fn riccati_cost(x0: [f64; 2]) -> f64 {
+    pub(crate) fn riccati_cost(x0: [f64; 2]) -> f64 {
         let (a, b) = (a(), b());
         let q = DMatrix::from_diagonal(&DVector::from_column_slice(&Q));
         let mut p = DMatrix::from_diagonal(&DVector::from_column_slice(&QF));
@@ -425,7 +425,7 @@ mod tests {
     }
 
     /// The cost of a controller's mean actions, rolled out on the exact system.
-    fn mean_cost(c: &TvlgController, obj: &Objective, x0: [f64; 2]) -> f64 {
+    pub(crate) fn mean_cost(c: &TvlgController, obj: &Objective, x0: [f64; 2]) -> f64 {
         let mut x = DVector::from_column_slice(&x0);
         let mut cost = 0.0;
         for t in 0..T {
@@ -436,7 +436,7 @@ mod tests {
         cost + obj.terminal_cost(x.as_slice()).unwrap()
     }
 
-    fn cfg(iterations: usize) -> LocalConfig {
+    pub(crate) fn cfg(iterations: usize) -> LocalConfig {
         let mut c = LocalConfig {
             iterations,
             samples: 10,

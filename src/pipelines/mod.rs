@@ -9,6 +9,7 @@
 //! | [`p2_maze`] | the same, DQN from pixels | the same loop for an off-policy agent on p2's maze, with the pixel model; the pixel model's F1 experiment |
 //! | [`dyna`] | (shared) | MBPO-style Dyna: branched rollouts of a learned model from real states, acted by the agent's own batched policy, into the loop's second buffer |
 //! | [`gps`] | Chebotar et al., PILQR (and GPS) | one TVLG controller per condition, improved from its own samples by LQR-FLM, PI² or PILQR |
+//! | [`mdgps`] | Montgomery and Levine, MDGPS (p4 §IV) | a neural global policy regressed onto the local controllers, each updated under a KL bound to the linearized global policy |
 //! | [`mbpo`] | Janner et al., MBPO (shared) | SAC on the real system; every 250 steps an ensemble refit and branched rollouts of length `k` into `D_model`; `G` updates per step at real ratio 0.05; the SAC baseline on the same loop |
 //! | [`p3`] | Mishra et al., M-DeMoRL | the MBPO loop with `D_MPC` filled by DMD-MPC plans (CEM elites, SAC's policy as shift, `−V` terminal cost) through the ensemble's elites |
 //! | [`p4`] | Chebotar et al., PILQR | the gripper pusher's conditions and costs on MuJoCo for [`gps`] |
@@ -18,6 +19,7 @@ pub mod adapter;
 pub mod dyna;
 pub mod gps;
 pub mod mbpo;
+pub mod mdgps;
 pub mod p0;
 pub mod p1;
 pub mod p2;

@@ -173,6 +173,32 @@ impl Pilqr {
         dynamics: &TvlgDynamics,
         cost: &[QuadraticCost],
     ) -> Result<PilqrStep> {
+        self.update_anchored(prev, prev, samples, dynamics, cost)
+    }
+
+    /// [`Pilqr::update_with_cost`] with the LQR-FLM stage's KL bound taken against `anchor`
+    /// instead of the controller `prev` that drew the samples: MDGPS (p4 §IV) constrains each local
+    /// controller against the old global policy linearized around its samples. The residuals and
+    /// the reparametrized controls still come from `prev`, which produced the samples.
+    pub fn update_anchored(
+        &mut self,
+        prev: &TvlgController,
+        anchor: &TvlgController,
+        samples: &TrajectorySamples,
+        dynamics: &TvlgDynamics,
+        cost: &[QuadraticCost],
+    ) -> Result<PilqrStep> {
+        crate::error::check_len("anchor horizon", prev.horizon(), anchor.horizon())?;
+        crate::error::check_len(
+            "anchor state dimension",
+            prev.state_dim(),
+            anchor.state_dim(),
+        )?;
+        crate::error::check_len(
+            "anchor action dimension",
+            prev.action_dim(),
+            anchor.action_dim(),
+        )?;
         crate::error::check_len(
             "cost terms (T running + terminal)",
             prev.horizon() + 1,
@@ -209,7 +235,7 @@ impl Pilqr {
             .iter()
             .map(|m| self.cfg.lqr.kl_step * m)
             .collect();
-        let lqr = self.lqr.update_per_step(prev, dynamics, cost, &eps)?;
+        let lqr = self.lqr.update_per_step(anchor, dynamics, cost, &eps)?;
         let u_hat = reparametrize(&lqr.controller, samples);
         let etas: Vec<f64> = (0..t_len)
             .map(|t| pi2_weights(&s.column(t).to_vec(), self.cfg.pi2.kl_step).1)

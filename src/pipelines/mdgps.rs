@@ -1,0 +1,543 @@
+//! Mirror-descent guided policy search (MDGPS; Montgomery and Levine 2016) as p4 §IV uses it: a
+//! neural *global* policy `π_θ(u | x) = N(μ_θ(x), diag(σ²))` trained by supervised regression onto
+//! the per-condition TVLG *local* controllers, each of which is updated under a KL bound against
+//! the previous global policy linearized around its samples.
+//!
+//! One iteration, given the local controllers `p_c` and the global policy `π_θ`:
+//!
+//! 1. draw `samples` trajectories of every `p_c` on the system (the counted samples);
+//! 2. for each condition: fit TVLG dynamics to its samples and linearize `π_θ` around them
+//!    (`K̄_t = ∂μ_θ/∂x` at the samples' mean state, `k̄_t = μ_θ(x̄_t) − K̄_t x̄_t`, `Σ̄_t = diag(σ²)`:
+//!    [`GlobalPolicy::linearize`]);
+//! 3. update `p_c` with the local method: LQR-FLM minimizes the expected cost subject to
+//!    `E[KL(p_c ‖ π̄_c)] ≤ ε` (p4's constraint against the old global policy); PILQR does the
+//!    same in its LQR-FLM stage and then PI² on the residual costs-to-go of its samples; PI²
+//!    reweights the samples as alone. On the first iteration, before the global policy has been
+//!    trained, the bound is taken against `p_c` itself (plain trajectory optimization);
+//! 4. regress `μ_θ` onto the new local controllers' mean actions `K_t x + k_t` at every sampled
+//!    state of every condition (mean squared error, Adam, inputs standardized with the first
+//!    iteration's statistics), and set `σ²` to the mean of the local controllers' action
+//!    variances.
+//!
+//! After each iteration the global policy's deterministic mean is rolled out from every test
+//! start and the task's measure of the final states averaged: p4 Fig. 4 and 5's "averaged across
+//! N random test conditions per iteration". Test rollouts are evaluation, not counted samples.
+
+use nalgebra::{DMatrix, DVector};
+use ndarray::{s, Array2};
+use rand::seq::SliceRandom;
+use serde::{Deserialize, Serialize};
+use tandem_core::seeding::rng_from_seed;
+use tandem_core::Rng;
+use tandem_models::{DynamicsModel, ModelInput, TvlgFit};
+use tandem_nn::{mse, Adam, AdamConfig, Mlp, MlpConfig, MlpWorkspace, Optimizer};
+use tandem_planners::{
+    pi2_update, quadratize_cost, sample_trajectories, LqrFlm, Pilqr, SampleConfig,
+    TrajectorySamples, TvlgController,
+};
+
+use super::gps::{LocalConfig, LocalMethod, LocalProblem};
+use super::{Checkpoints, PipelineError, Result};
+
+/// How the global policy is fitted each iteration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PolicyConfig {
+    /// Hidden layer widths (ReLU).
+    pub hidden: Vec<usize>,
+    /// Passes over the iteration's data set.
+    pub epochs: usize,
+    /// Minibatch size.
+    pub batch_size: usize,
+    /// Adam's learning rate.
+    pub learning_rate: f32,
+}
+
+impl Default for PolicyConfig {
+    /// Two hidden layers of 64, 50 epochs of minibatches of 128 at learning rate 10⁻³.
+    fn default() -> Self {
+        Self {
+            hidden: vec![64, 64],
+            epochs: 50,
+            batch_size: 128,
+            learning_rate: 1e-3,
+        }
+    }
+}
+
+/// Settings of [`train_mdgps`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MdgpsConfig {
+    /// The local controllers' loop: iterations, samples per condition and iteration, initial
+    /// variance, the trajectory optimizers, the dynamics fit.
+    pub local: LocalConfig,
+    /// The global policy's regression.
+    pub policy: PolicyConfig,
+}
+
+impl MdgpsConfig {
+    /// Checks the settings the loop relies on.
+    pub fn validate(&self) -> Result<()> {
+        self.local.validate()?;
+        let p = &self.policy;
+        if p.epochs == 0 || p.batch_size == 0 || p.hidden.contains(&0) {
+            return Err(PipelineError::Config(format!(
+                "policy epochs {}, batch_size {} and hidden widths {:?} must be positive",
+                p.epochs, p.batch_size, p.hidden
+            )));
+        }
+        if !(p.learning_rate.is_finite() && p.learning_rate > 0.0) {
+            return Err(PipelineError::Config(format!(
+                "policy learning_rate {} must be finite and > 0",
+                p.learning_rate
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The task's figure of a final state.
+pub type FinalMeasure = Box<dyn Fn(&[f64]) -> f64 + Send + Sync>;
+
+/// Where the global policy is evaluated: starts and the task's measure of a final state.
+pub struct TestSet {
+    /// Initial states.
+    pub starts: Vec<Vec<f64>>,
+    /// The measure of a final state (e.g. the end effector's distance to the target).
+    pub measure: FinalMeasure,
+}
+
+/// The neural global policy `N(μ_θ(x), diag(σ²))`.
+pub struct GlobalPolicy {
+    net: Mlp,
+    x_mean: Vec<f64>,
+    x_std: Vec<f64>,
+    /// Action variances `σ²`.
+    pub variance: Vec<f64>,
+}
+
+impl GlobalPolicy {
+    /// An untrained policy over `state_dim` states and `action_dim` actions (identity input
+    /// scaling until the first fit), variance `variance` per action.
+    pub fn new(
+        state_dim: usize,
+        action_dim: usize,
+        hidden: &[usize],
+        variance: f64,
+        rng: &mut Rng,
+    ) -> Result<Self> {
+        let mut sizes = vec![state_dim];
+        sizes.extend_from_slice(hidden);
+        sizes.push(action_dim);
+        Ok(Self {
+            net: Mlp::new(MlpConfig::new(&sizes), rng)?,
+            x_mean: vec![0.0; state_dim],
+            x_std: vec![1.0; state_dim],
+            variance: vec![variance; action_dim],
+        })
+    }
+
+    fn input(&self, states: &[f64]) -> Vec<f32> {
+        let n = self.x_mean.len();
+        states
+            .iter()
+            .enumerate()
+            .map(|(i, v)| ((v - self.x_mean[i % n]) / self.x_std[i % n]) as f32)
+            .collect()
+    }
+
+    /// The mean actions of a batch of states (`B × S` row-major in, `B × A` out).
+    pub fn mean(&self, states: &[f64], ws: &mut MlpWorkspace) -> Result<Vec<f64>> {
+        let n = self.x_mean.len();
+        if n == 0 || states.len() % n != 0 {
+            return Err(PipelineError::Config(format!(
+                "{} state values are not rows of {n}",
+                states.len()
+            )));
+        }
+        let out = self
+            .net
+            .forward(&self.input(states), states.len() / n, ws)?;
+        Ok(out.iter().map(|&v| f64::from(v)).collect())
+    }
+
+    /// The TVLG controller that linearizes the policy around the samples' mean state at every
+    /// step: `K̄_t = ∂μ/∂x(x̄_t)` (central differences, step `10⁻³` in each state's scale),
+    /// `k̄_t = μ(x̄_t) − K̄_t x̄_t`, `Σ̄_t = diag(σ²)`.
+    pub fn linearize(&self, samples: &TrajectorySamples) -> Result<TvlgController> {
+        let shape = samples.actions.shape();
+        let (t_len, m) = (shape[1], shape[2]);
+        let n = self.x_mean.len();
+        let mut ws = self.net.workspace();
+        let (mut gains, mut offsets) = (Vec::with_capacity(t_len), Vec::with_capacity(t_len));
+        for t in 0..t_len {
+            let xbar: Vec<f64> = (0..n)
+                .map(|j| samples.states.slice(s![.., t, j]).mean().unwrap_or(0.0))
+                .collect();
+            // Rows: x̄, then x̄ ± h e_j for every j.
+            let mut batch = xbar.clone();
+            let h: Vec<f64> = self.x_std.iter().map(|s| 1e-3 * s).collect();
+            for j in 0..n {
+                for sign in [1.0, -1.0] {
+                    let mut x = xbar.clone();
+                    x[j] += sign * h[j];
+                    batch.extend_from_slice(&x);
+                }
+            }
+            let out = self.mean(&batch, &mut ws)?;
+            let mu = DVector::from_column_slice(&out[..m]);
+            let k = DMatrix::from_fn(m, n, |a, j| {
+                (out[(1 + 2 * j) * m + a] - out[(2 + 2 * j) * m + a]) / (2.0 * h[j])
+            });
+            offsets.push(&mu - &k * DVector::from_column_slice(&xbar));
+            gains.push(k);
+        }
+        let cov = DMatrix::from_diagonal(&DVector::from_column_slice(&self.variance));
+        Ok(TvlgController::new(gains, offsets, vec![cov; t_len])?)
+    }
+
+    /// Regresses the mean onto `targets` at `states` (rows of `S` and `A`); returns the last
+    /// epoch's mean loss. The first call fixes the input standardization.
+    fn fit(
+        &mut self,
+        states: &[f64],
+        targets: &[f64],
+        cfg: &PolicyConfig,
+        opt: &mut Adam,
+        fixed_scale: &mut bool,
+        rng: &mut Rng,
+    ) -> Result<f64> {
+        let (n, m) = (self.x_mean.len(), self.variance.len());
+        let rows = states.len() / n;
+        if !*fixed_scale {
+            for j in 0..n {
+                let col: Vec<f64> = (0..rows).map(|i| states[i * n + j]).collect();
+                let mean = col.iter().sum::<f64>() / rows as f64;
+                let var = col.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / rows as f64;
+                self.x_mean[j] = mean;
+                self.x_std[j] = var.sqrt().max(1e-3);
+            }
+            *fixed_scale = true;
+        }
+        let x = self.input(states);
+        let y: Vec<f32> = targets.iter().map(|&v| v as f32).collect();
+        let mut order: Vec<usize> = (0..rows).collect();
+        let mut ws = self.net.workspace();
+        let mut grads = self.net.zero_grads();
+        let (mut bx, mut by) = (Vec::new(), Vec::new());
+        let mut last = f64::NAN;
+        for _ in 0..cfg.epochs {
+            order.shuffle(rng);
+            let (mut sum, mut batches) = (0.0, 0);
+            for chunk in order.chunks(cfg.batch_size) {
+                bx.clear();
+                by.clear();
+                for &i in chunk {
+                    bx.extend_from_slice(&x[i * n..(i + 1) * n]);
+                    by.extend_from_slice(&y[i * m..(i + 1) * m]);
+                }
+                let pred = self
+                    .net
+                    .forward_train(&bx, chunk.len(), &mut ws, None)?
+                    .to_vec();
+                let mut d = vec![0.0f32; pred.len()];
+                sum += f64::from(mse(&pred, &by, Some(&mut d))?);
+                batches += 1;
+                self.net.backward(&mut ws, &d, Some(&mut grads), None)?;
+                opt.step(self.net.params_mut(), &grads)?;
+            }
+            last = sum / batches as f64;
+        }
+        Ok(last)
+    }
+}
+
+/// One point of an MDGPS run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MdgpsPoint {
+    /// Samples over all training conditions so far.
+    pub samples: u64,
+    /// The global policy's mean measure over the test starts, after this iteration's fit.
+    pub test_measure: f64,
+    /// The local controllers' mean measure over this iteration's samples (all conditions).
+    pub local_measure: f64,
+    /// The regression's last-epoch mean squared error.
+    pub policy_loss: f64,
+}
+
+/// What a run of [`train_mdgps`] leaves.
+pub struct MdgpsRun {
+    /// One point per iteration.
+    pub curve: Vec<MdgpsPoint>,
+    /// Local updates that failed numerically (the controller was kept).
+    pub failed_updates: usize,
+    /// The global policy at the end.
+    pub policy: GlobalPolicy,
+}
+
+/// Trains a global policy with MDGPS on `problem`'s conditions, the local controllers updated by
+/// `method`, evaluating it on `test` after every iteration. `progress` receives the samples
+/// drawn so far.
+pub fn train_mdgps(
+    method: LocalMethod,
+    problem: &LocalProblem,
+    test: &TestSet,
+    cfg: &MdgpsConfig,
+    seed: u64,
+    store: &mut dyn Checkpoints,
+    progress: &mut dyn FnMut(u64),
+) -> Result<MdgpsRun> {
+    cfg.validate()?;
+    super::gps::check_problem(problem)?;
+    if test
+        .starts
+        .iter()
+        .any(|x| x.len() != problem.system.state_dim())
+        || test.starts.is_empty()
+    {
+        return Err(PipelineError::Config(
+            "the test set needs at least one start of the system's state dimension".into(),
+        ));
+    }
+    let local = &cfg.local;
+    let (system, horizon) = (&*problem.system, problem.horizon);
+    let (n, m) = (system.state_dim(), system.action_dim());
+    let mut rng = rng_from_seed(seed);
+    let mut policy = GlobalPolicy::new(n, m, &cfg.policy.hidden, local.init_variance, &mut rng)?;
+    let mut opt = Adam::new(
+        AdamConfig::with_lr(cfg.policy.learning_rate),
+        policy.net.num_params(),
+    )?;
+    let mut fixed_scale = false;
+    let lqr = LqrFlm::new(local.trajopt.lqr.clone())?;
+    let k = problem.conditions.len();
+    let mut controllers =
+        vec![TvlgController::constant(horizon, n, &vec![0.0; m], local.init_variance)?; k];
+    let mut fits: Vec<TvlgFit> = (0..k)
+        .map(|_| TvlgFit::new(local.dynamics.clone()))
+        .collect();
+    let mut pilqrs = (0..k)
+        .map(|_| Pilqr::new(local.trajopt.clone()))
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    let scfg = SampleConfig {
+        samples: local.samples,
+        ..SampleConfig::default()
+    };
+    let mut curve = Vec::with_capacity(local.iterations);
+    let mut failed = 0;
+    let mut drawn = 0u64;
+    for it in 0..local.iterations {
+        if store.stop_requested() {
+            return Err(PipelineError::Stopped);
+        }
+        let (mut states, mut targets) = (Vec::new(), Vec::new());
+        let mut local_sum = 0.0;
+        for (c, cond) in problem.conditions.iter().enumerate() {
+            let samples = sample_trajectories(
+                &controllers[c],
+                system,
+                &cond.objective,
+                &cond.x0,
+                &scfg,
+                &mut rng,
+            )?;
+            drawn += local.samples as u64;
+            progress(drawn);
+            for i in 0..samples.len() {
+                let x = samples.states.slice(s![i, horizon, ..]).to_vec();
+                local_sum += (problem.measure)(c, &x);
+            }
+            let next = match method {
+                LocalMethod::Pi2 => pi2_update(
+                    &controllers[c],
+                    &samples.states,
+                    &samples.actions,
+                    &samples.cost_to_go(),
+                    &local.trajopt.pi2,
+                )
+                .map(|s| s.controller)
+                .map_err(PipelineError::from),
+                _ => (|| {
+                    let dynamics = fits[c].fit(samples.states.view(), samples.actions.view())?;
+                    let anchor = if it == 0 {
+                        controllers[c].clone()
+                    } else {
+                        policy.linearize(&samples)?
+                    };
+                    let cost = quadratize_cost(&cond.objective, &samples)?;
+                    let ctrl = if method == LocalMethod::LqrFlm {
+                        lqr.update(&anchor, &dynamics, &cost, None)?.controller
+                    } else {
+                        pilqrs[c]
+                            .update_anchored(&controllers[c], &anchor, &samples, &dynamics, &cost)?
+                            .controller
+                    };
+                    Ok::<_, PipelineError>(ctrl)
+                })(),
+            };
+            match next {
+                Ok(ctrl) => controllers[c] = ctrl,
+                Err(PipelineError::Planner(_)) | Err(PipelineError::Model(_)) => failed += 1,
+                Err(e) => return Err(e),
+            }
+            // The regression's data: every sampled state with the new controller's mean action.
+            let ctrl = &controllers[c];
+            for i in 0..samples.len() {
+                for t in 0..horizon {
+                    let x = DVector::from_iterator(
+                        n,
+                        samples.states.slice(s![i, t, ..]).iter().copied(),
+                    );
+                    states.extend(x.iter());
+                    targets.extend(ctrl.mean(t, &x).iter());
+                }
+            }
+        }
+        let policy_loss = policy.fit(
+            &states,
+            &targets,
+            &cfg.policy,
+            &mut opt,
+            &mut fixed_scale,
+            &mut rng,
+        )?;
+        // σ²: the local controllers' mean action variance.
+        for a in 0..m {
+            let sum: f64 = controllers
+                .iter()
+                .flat_map(|c| c.cov.iter().map(move |s| s[(a, a)]))
+                .sum();
+            policy.variance[a] = sum / (k * horizon) as f64;
+        }
+        curve.push(MdgpsPoint {
+            samples: drawn,
+            test_measure: evaluate(&policy, system, test, horizon, &mut rng)?,
+            local_measure: local_sum / (k * local.samples) as f64,
+            policy_loss,
+        });
+    }
+    Ok(MdgpsRun {
+        curve,
+        failed_updates: failed,
+        policy,
+    })
+}
+
+/// The mean measure of the policy's deterministic rollouts from the test starts.
+pub fn evaluate(
+    policy: &GlobalPolicy,
+    system: &dyn DynamicsModel,
+    test: &TestSet,
+    horizon: usize,
+    rng: &mut Rng,
+) -> Result<f64> {
+    let (b, n) = (test.starts.len(), system.state_dim());
+    let mut x = Array2::from_shape_vec((b, n), test.starts.concat())
+        .map_err(|e| PipelineError::Config(e.to_string()))?;
+    let mut ws = policy.net.workspace();
+    for _ in 0..horizon {
+        let u = policy.mean(x.as_slice().expect("standard layout"), &mut ws)?;
+        let u = Array2::from_shape_vec((b, system.action_dim()), u)
+            .map_err(|e| PipelineError::Config(e.to_string()))?;
+        x = system
+            .predict(&ModelInput::new(x.view(), u.view()), rng)?
+            .next_states;
+    }
+    Ok(x.rows()
+        .into_iter()
+        .map(|r| (test.measure)(&r.to_vec()))
+        .sum::<f64>()
+        / b as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipelines::gps::tests::{a, b, cfg, problem, riccati_cost, T};
+    use crate::pipelines::Ephemeral;
+
+    /// The cost of the global policy's mean actions from `x0` on the exact double integrator.
+    fn policy_cost(policy: &GlobalPolicy, obj: &tandem_planners::Objective, x0: [f64; 2]) -> f64 {
+        let mut ws = policy.net.workspace();
+        let mut x = DVector::from_column_slice(&x0);
+        let mut cost = 0.0;
+        for t in 0..T {
+            let u = DVector::from_vec(policy.mean(x.as_slice(), &mut ws).unwrap());
+            cost += obj.running_cost(x.as_slice(), u.as_slice(), t).unwrap();
+            x = &a() * &x + &b() * &u;
+        }
+        cost + obj.terminal_cost(x.as_slice()).unwrap()
+    }
+
+    /// On a linear system with a quadratic cost, MDGPS with LQR-FLM trains a global policy whose
+    /// mean actions, from starts it never trained on, cost close to the Riccati optimum there.
+    #[test]
+    fn mdgps_generalizes_the_lqr_solution_to_new_starts() {
+        let train = [[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]];
+        let p = problem(&train);
+        let held_out = [[0.7, 0.3], [-0.4, -0.8], [0.2, -0.5]];
+        let test = TestSet {
+            starts: held_out.iter().map(|x| x.to_vec()).collect(),
+            measure: Box::new(|x| x[0].abs()),
+        };
+        let c = MdgpsConfig {
+            local: cfg(8),
+            policy: PolicyConfig {
+                hidden: vec![32, 32],
+                epochs: 100,
+                batch_size: 64,
+                learning_rate: 3e-3,
+            },
+        };
+        let run = train_mdgps(
+            LocalMethod::LqrFlm,
+            &p,
+            &test,
+            &c,
+            0,
+            &mut Ephemeral,
+            &mut |_| {},
+        )
+        .unwrap();
+        assert_eq!(run.failed_updates, 0);
+        let samples: Vec<u64> = run.curve.iter().map(|p| p.samples).collect();
+        assert_eq!(samples, (1..=8).map(|i| 40 * i).collect::<Vec<u64>>());
+        let obj = &p.conditions[0].objective;
+        for x0 in held_out {
+            let (got, opt) = (policy_cost(&run.policy, obj, x0), riccati_cost(x0));
+            // Measured: within 0.4 %, 6.4 % and 0.9 % of the optimum.
+            assert!(got < 1.1 * opt, "{x0:?}: policy {got}, optimum {opt}");
+        }
+        assert!(run.curve.last().unwrap().test_measure < 0.5 * run.curve[0].test_measure);
+    }
+
+    /// The linearization of a policy is its Jacobian: for a network that is linear (no hidden
+    /// layer) it reproduces the weights exactly.
+    #[test]
+    fn linearizing_a_linear_policy_gives_its_weights() {
+        let mut rng = rng_from_seed(1);
+        let policy = GlobalPolicy::new(2, 1, &[], 0.3, &mut rng).unwrap();
+        let w = policy.net.weight(0).to_vec();
+        let bias = policy.net.bias(0)[0];
+        let p = problem(&[[1.0, 0.0]]);
+        let samples = sample_trajectories(
+            &TvlgController::constant(T, 2, &[0.0], 1.0).unwrap(),
+            &*p.system,
+            &p.conditions[0].objective,
+            &p.conditions[0].x0,
+            &SampleConfig::default(),
+            &mut rng,
+        )
+        .unwrap();
+        let lin = policy.linearize(&samples).unwrap();
+        for t in [0, 7, T - 1] {
+            for (j, wj) in w.iter().enumerate() {
+                let err = (lin.gains[t][(0, j)] - f64::from(*wj)).abs();
+                assert!(err < 1e-3, "step {t}, state {j}: {err}");
+            }
+            assert!((lin.offsets[t][0] - f64::from(bias)).abs() < 1e-5);
+            assert_eq!(lin.cov[t][(0, 0)], 0.3);
+        }
+    }
+}
