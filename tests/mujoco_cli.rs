@@ -24,6 +24,21 @@ fn mujoco_dir(rel: &str) -> String {
     format!("{}/crates/mujoco/tests/{rel}", env!("CARGO_MANIFEST_DIR"))
 }
 
+/// `tandem reproduce STUDY --quick --quiet --seeds SEEDS --out OUT`, with `OUT` removed first.
+fn quick_study(study: &str, seeds: &str, out: &std::path::Path) -> Output {
+    let _ = std::fs::remove_dir_all(out);
+    tandem(&[
+        "reproduce",
+        study,
+        "--quick",
+        "--quiet",
+        "--seeds",
+        seeds,
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
 fn write_temp(name: &str, contents: &str) -> PathBuf {
     let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("mujoco-cli-{name}.json"));
     std::fs::write(&path, contents).unwrap();
@@ -181,17 +196,7 @@ fn replay_runs_any_mjcf_file() {
 #[test]
 fn p3_mujoco_runs_with_the_feature_only() {
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("mujoco-cli-p3");
-    let _ = std::fs::remove_dir_all(&out);
-    let o = tandem(&[
-        "reproduce",
-        "p3-mujoco",
-        "--quick",
-        "--quiet",
-        "--seeds",
-        "1",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = quick_study("p3-mujoco", "1", &out);
     if cfg!(feature = "mujoco") {
         assert!(o.status.success(), "{}", err_text(&o));
         let table = std::fs::read_to_string(out.join("table.json")).unwrap();
@@ -209,17 +214,7 @@ fn p3_mujoco_runs_with_the_feature_only() {
         // p1 on the same task: its SAC and MBPO are p3's runs, number for number; its target
         // is SAC's mean return at the budget.
         let p1 = out.with_file_name("mujoco-cli-p1");
-        let _ = std::fs::remove_dir_all(&p1);
-        let o = tandem(&[
-            "reproduce",
-            "p1",
-            "--quick",
-            "--quiet",
-            "--seeds",
-            "1",
-            "--out",
-            p1.to_str().unwrap(),
-        ]);
+        let o = quick_study("p1", "1", &p1);
         assert!(o.status.success(), "{}", err_text(&o));
         let t1 = std::fs::read_to_string(p1.join("table.json")).unwrap();
         let t1: serde_json::Value = serde_json::from_str(&t1).unwrap();
@@ -262,17 +257,7 @@ fn p3_mujoco_runs_with_the_feature_only() {
 #[test]
 fn p4_pusher_runs_with_the_feature_only() {
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("mujoco-cli-p4");
-    let _ = std::fs::remove_dir_all(&out);
-    let o = tandem(&[
-        "reproduce",
-        "p4-pusher",
-        "--quick",
-        "--quiet",
-        "--seeds",
-        "2",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = quick_study("p4-pusher", "2", &out);
     if cfg!(feature = "mujoco") {
         assert!(o.status.success(), "{}", err_text(&o));
         let table = std::fs::read_to_string(out.join("table.json")).unwrap();
@@ -305,17 +290,7 @@ fn p4_pusher_runs_with_the_feature_only() {
             .contains("hard condition"));
         // The door: its headline is the worst start, a higher angle is better.
         let door = out.with_file_name("mujoco-cli-p4-door");
-        let _ = std::fs::remove_dir_all(&door);
-        let o = tandem(&[
-            "reproduce",
-            "p4-door",
-            "--quick",
-            "--quiet",
-            "--seeds",
-            "1",
-            "--out",
-            door.to_str().unwrap(),
-        ]);
+        let o = quick_study("p4-door", "1", &door);
         assert!(o.status.success(), "{}", err_text(&o));
         let table = std::fs::read_to_string(door.join("table.json")).unwrap();
         let table: serde_json::Value = serde_json::from_str(&table).unwrap();

@@ -59,6 +59,8 @@ pub trait P4Task: Sync {
     const NAME: &'static str;
     /// The figure's file.
     const FIGURE: &'static str;
+    /// The report's files: the tables and [`P4Task::FIGURE`].
+    const REPORT_FILES: &'static [&'static str];
     /// Whether a lower measure is better.
     const LOWER_IS_BETTER: bool;
     /// The measure's words, with its unit.
@@ -84,6 +86,7 @@ impl P4Task for Pusher {
     type Cost = PusherCost;
     const NAME: &'static str = "p4-pusher";
     const FIGURE: &'static str = "fig3.svg";
+    const REPORT_FILES: &'static [&'static str] = &["table.json", "table.md", "fig3.svg"];
     const LOWER_IS_BETTER: bool = true;
     const MEASURE: &'static str = "final block–goal distance (m)";
     fn defaults() -> P4Settings<PusherCost> {
@@ -123,6 +126,7 @@ impl P4Task for Door {
     type Cost = DoorCost;
     const NAME: &'static str = "p4-door";
     const FIGURE: &'static str = "door.svg";
+    const REPORT_FILES: &'static [&'static str] = &["table.json", "table.md", "door.svg"];
     const LOWER_IS_BETTER: bool = false;
     const MEASURE: &'static str = "final door angle (rad)";
     fn defaults() -> P4Settings<DoorCost> {
@@ -309,11 +313,7 @@ impl<T: P4Task> Study for P4Study<T> {
     }
 
     fn report_files(&self) -> &'static [&'static str] {
-        if T::FIGURE == "fig3.svg" {
-            &["table.json", "table.md", "fig3.svg"]
-        } else {
-            &["table.json", "table.md", "door.svg"]
-        }
+        T::REPORT_FILES
     }
 
     fn report(

@@ -171,12 +171,106 @@ struct LqrState {
     prev: Option<(TvlgController, TvlgDynamics, Vec<QuadraticCost>)>,
 }
 
-/// One condition's optimizer state.
-struct Local {
-    controller: TvlgController,
+/// One condition's controller and the state of its optimizers (shared with MDGPS).
+pub(crate) struct Local {
+    /// The current controller.
+    pub(crate) controller: TvlgController,
     fit: TvlgFit,
     lqr: LqrState,
     pilqr: Pilqr,
+}
+
+impl Local {
+    /// The initial controller (`K = 0`, `k = 0`, `Σ = init_variance · I`) and fresh optimizers.
+    pub(crate) fn new(horizon: usize, n: usize, m: usize, cfg: &LocalConfig) -> Result<Self> {
+        Ok(Self {
+            controller: TvlgController::constant(horizon, n, &vec![0.0; m], cfg.init_variance)?,
+            fit: TvlgFit::new(cfg.dynamics.clone()),
+            lqr: LqrState {
+                mult: 1.0,
+                prev: None,
+            },
+            pilqr: Pilqr::new(cfg.trajopt.clone())?,
+        })
+    }
+
+    /// Updates the controller from its `samples` with `method`. With an `anchor` (MDGPS: the
+    /// global policy linearized around the samples) LQR-FLM's KL bound, alone or as PILQR's
+    /// first stage, is taken against it at the configured `ε`; without one, against the
+    /// controller itself, LQR-FLM with GPS's step rule. A numerical failure of the fit or of the
+    /// optimizer keeps the controller and returns `false`.
+    pub(crate) fn improve(
+        &mut self,
+        method: LocalMethod,
+        samples: &TrajectorySamples,
+        objective: &Objective,
+        lqr: &LqrFlm,
+        cfg: &LocalConfig,
+        anchor: Option<&TvlgController>,
+    ) -> Result<bool> {
+        match self.next(method, samples, objective, lqr, cfg, anchor) {
+            Ok(next) => {
+                self.controller = next;
+                Ok(true)
+            }
+            Err(PipelineError::Planner(_) | PipelineError::Model(_)) => Ok(false),
+            Err(e) => Err(e),
+        }
+    }
+
+    fn next(
+        &mut self,
+        method: LocalMethod,
+        samples: &TrajectorySamples,
+        objective: &Objective,
+        lqr: &LqrFlm,
+        cfg: &LocalConfig,
+        anchor: Option<&TvlgController>,
+    ) -> Result<TvlgController> {
+        if method == LocalMethod::Pi2 {
+            let s = pi2_update(
+                &self.controller,
+                &samples.states,
+                &samples.actions,
+                &samples.cost_to_go(),
+                &cfg.trajopt.pi2,
+            )?;
+            return Ok(s.controller);
+        }
+        let dynamics = self
+            .fit
+            .fit(samples.states.view(), samples.actions.view())?;
+        let cost = quadratize_cost(objective, samples)?;
+        if method == LocalMethod::Pilqr {
+            let anchor = anchor.unwrap_or(&self.controller);
+            return Ok(self
+                .pilqr
+                .update_anchored(&self.controller, anchor, samples, &dynamics, &cost)?
+                .controller);
+        }
+        if let Some(anchor) = anchor {
+            return Ok(lqr.update(anchor, &dynamics, &cost, None)?.controller);
+        }
+        if let Some((pc, pd, pq)) = &self.lqr.prev {
+            self.lqr.mult = classic_step_mult(
+                self.lqr.mult,
+                pc,
+                pd,
+                pq,
+                &self.controller,
+                &dynamics,
+                &cost,
+            )?;
+        }
+        let next = lqr.update(
+            &self.controller,
+            &dynamics,
+            &cost,
+            Some(cfg.trajopt.lqr.kl_step * self.lqr.mult),
+        )?;
+        self.lqr.prev = Some((self.controller.clone(), dynamics, cost));
+        Ok(next.controller)
+    }
 }
 
 /// Trains one local controller per condition of `problem` with `method`, `seed` drawing all
@@ -194,18 +288,10 @@ pub fn train_local(
     let (system, conditions, horizon) = (&*problem.system, &problem.conditions, problem.horizon);
     let (n, m) = (system.state_dim(), system.action_dim());
     let lqr = LqrFlm::new(cfg.trajopt.lqr.clone())?;
-    let mut locals = Vec::with_capacity(conditions.len());
-    for _ in conditions {
-        locals.push(Local {
-            controller: TvlgController::constant(horizon, n, &vec![0.0; m], cfg.init_variance)?,
-            fit: TvlgFit::new(cfg.dynamics.clone()),
-            lqr: LqrState {
-                mult: 1.0,
-                prev: None,
-            },
-            pilqr: Pilqr::new(cfg.trajopt.clone())?,
-        });
-    }
+    let mut locals = conditions
+        .iter()
+        .map(|_| Local::new(horizon, n, m, cfg))
+        .collect::<Result<Vec<_>>>()?;
     let scfg = SampleConfig {
         samples: cfg.samples,
         ..SampleConfig::default()
@@ -235,15 +321,8 @@ pub fn train_local(
             if it + 1 == cfg.iterations {
                 continue;
             }
-            match update(method, local, &samples, cond, &lqr, cfg) {
-                Ok(next) => local.controller = next,
-                Err(e @ (PipelineError::Planner(_) | PipelineError::Model(_))) => {
-                    if std::env::var_os("TANDEM_GPS_DEBUG").is_some() {
-                        eprintln!("condition {c} iteration {it}: {e}");
-                    }
-                    failed[c] += 1
-                }
-                Err(e) => return Err(e),
+            if !local.improve(method, &samples, &cond.objective, &lqr, cfg, None)? {
+                failed[c] += 1;
             }
         }
     }
@@ -298,56 +377,6 @@ fn point(samples: &TrajectorySamples, total: usize, measure: impl Fn(&[f64]) -> 
         mean_cost: samples.mean_cost(),
         measure: finals / n as f64,
     }
-}
-
-/// One update of a condition's controller from its samples.
-fn update(
-    method: LocalMethod,
-    local: &mut Local,
-    samples: &TrajectorySamples,
-    cond: &Condition,
-    lqr: &LqrFlm,
-    cfg: &LocalConfig,
-) -> Result<TvlgController> {
-    if method == LocalMethod::Pi2 {
-        let s = pi2_update(
-            &local.controller,
-            &samples.states,
-            &samples.actions,
-            &samples.cost_to_go(),
-            &cfg.trajopt.pi2,
-        )?;
-        return Ok(s.controller);
-    }
-    let dynamics = local
-        .fit
-        .fit(samples.states.view(), samples.actions.view())?;
-    if method == LocalMethod::Pilqr {
-        return Ok(local
-            .pilqr
-            .update(&local.controller, samples, &dynamics, &cond.objective)?
-            .controller);
-    }
-    let cost = quadratize_cost(&cond.objective, samples)?;
-    if let Some((pc, pd, pq)) = &local.lqr.prev {
-        local.lqr.mult = classic_step_mult(
-            local.lqr.mult,
-            pc,
-            pd,
-            pq,
-            &local.controller,
-            &dynamics,
-            &cost,
-        )?;
-    }
-    let next = lqr.update(
-        &local.controller,
-        &dynamics,
-        &cost,
-        Some(cfg.trajopt.lqr.kl_step * local.lqr.mult),
-    )?;
-    local.lqr.prev = Some((local.controller.clone(), dynamics, cost));
-    Ok(next.controller)
 }
 
 #[cfg(test)]

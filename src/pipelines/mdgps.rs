@@ -29,14 +29,13 @@ use rand::seq::SliceRandom;
 use serde::{Deserialize, Serialize};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
-use tandem_models::{DynamicsModel, ModelInput, TvlgFit};
+use tandem_models::{DynamicsModel, ModelInput};
 use tandem_nn::{mse, Adam, AdamConfig, Mlp, MlpConfig, MlpWorkspace, Optimizer};
 use tandem_planners::{
-    pi2_update, quadratize_cost, sample_trajectories, LqrFlm, Pilqr, SampleConfig,
-    TrajectorySamples, TvlgController,
+    sample_trajectories, LqrFlm, SampleConfig, TrajectorySamples, TvlgController,
 };
 
-use super::gps::{LocalConfig, LocalMethod, LocalProblem};
+use super::gps::{Local, LocalConfig, LocalMethod, LocalProblem};
 use super::{Checkpoints, PipelineError, Result};
 
 /// How the global policy is fitted each iteration.
@@ -113,6 +112,8 @@ pub struct GlobalPolicy {
     net: Mlp,
     x_mean: Vec<f64>,
     x_std: Vec<f64>,
+    /// Whether the input standardization has been fixed (by the first fit).
+    scaled: bool,
     /// Action variances `σ²`.
     pub variance: Vec<f64>,
 }
@@ -134,6 +135,7 @@ impl GlobalPolicy {
             net: Mlp::new(MlpConfig::new(&sizes), rng)?,
             x_mean: vec![0.0; state_dim],
             x_std: vec![1.0; state_dim],
+            scaled: false,
             variance: vec![variance; action_dim],
         })
     }
@@ -205,12 +207,11 @@ impl GlobalPolicy {
         targets: &[f64],
         cfg: &PolicyConfig,
         opt: &mut Adam,
-        fixed_scale: &mut bool,
         rng: &mut Rng,
     ) -> Result<f64> {
         let (n, m) = (self.x_mean.len(), self.variance.len());
         let rows = states.len() / n;
-        if !*fixed_scale {
+        if !self.scaled {
             for j in 0..n {
                 let col: Vec<f64> = (0..rows).map(|i| states[i * n + j]).collect();
                 let mean = col.iter().sum::<f64>() / rows as f64;
@@ -218,7 +219,7 @@ impl GlobalPolicy {
                 self.x_mean[j] = mean;
                 self.x_std[j] = var.sqrt().max(1e-3);
             }
-            *fixed_scale = true;
+            self.scaled = true;
         }
         let x = self.input(states);
         let y: Vec<f32> = targets.iter().map(|&v| v as f32).collect();
@@ -309,17 +310,11 @@ pub fn train_mdgps(
         AdamConfig::with_lr(cfg.policy.learning_rate),
         policy.net.num_params(),
     )?;
-    let mut fixed_scale = false;
     let lqr = LqrFlm::new(local.trajopt.lqr.clone())?;
     let k = problem.conditions.len();
-    let mut controllers =
-        vec![TvlgController::constant(horizon, n, &vec![0.0; m], local.init_variance)?; k];
-    let mut fits: Vec<TvlgFit> = (0..k)
-        .map(|_| TvlgFit::new(local.dynamics.clone()))
-        .collect();
-    let mut pilqrs = (0..k)
-        .map(|_| Pilqr::new(local.trajopt.clone()))
-        .collect::<std::result::Result<Vec<_>, _>>()?;
+    let mut locals = (0..k)
+        .map(|_| Local::new(horizon, n, m, local))
+        .collect::<Result<Vec<_>>>()?;
     let scfg = SampleConfig {
         samples: local.samples,
         ..SampleConfig::default()
@@ -335,7 +330,7 @@ pub fn train_mdgps(
         let mut local_sum = 0.0;
         for (c, cond) in problem.conditions.iter().enumerate() {
             let samples = sample_trajectories(
-                &controllers[c],
+                &locals[c].controller,
                 system,
                 &cond.objective,
                 &cond.x0,
@@ -348,41 +343,25 @@ pub fn train_mdgps(
                 let x = samples.states.slice(s![i, horizon, ..]).to_vec();
                 local_sum += (problem.measure)(c, &x);
             }
-            let next = match method {
-                LocalMethod::Pi2 => pi2_update(
-                    &controllers[c],
-                    &samples.states,
-                    &samples.actions,
-                    &samples.cost_to_go(),
-                    &local.trajopt.pi2,
-                )
-                .map(|s| s.controller)
-                .map_err(PipelineError::from),
-                _ => (|| {
-                    let dynamics = fits[c].fit(samples.states.view(), samples.actions.view())?;
-                    let anchor = if it == 0 {
-                        controllers[c].clone()
-                    } else {
-                        policy.linearize(&samples)?
-                    };
-                    let cost = quadratize_cost(&cond.objective, &samples)?;
-                    let ctrl = if method == LocalMethod::LqrFlm {
-                        lqr.update(&anchor, &dynamics, &cost, None)?.controller
-                    } else {
-                        pilqrs[c]
-                            .update_anchored(&controllers[c], &anchor, &samples, &dynamics, &cost)?
-                            .controller
-                    };
-                    Ok::<_, PipelineError>(ctrl)
-                })(),
+            // Bounded against the global policy once it has been trained.
+            let anchor = if it == 0 || method == LocalMethod::Pi2 {
+                None
+            } else {
+                Some(policy.linearize(&samples)?)
             };
-            match next {
-                Ok(ctrl) => controllers[c] = ctrl,
-                Err(PipelineError::Planner(_)) | Err(PipelineError::Model(_)) => failed += 1,
-                Err(e) => return Err(e),
+            let l = &mut locals[c];
+            if !l.improve(
+                method,
+                &samples,
+                &cond.objective,
+                &lqr,
+                local,
+                anchor.as_ref(),
+            )? {
+                failed += 1;
             }
             // The regression's data: every sampled state with the new controller's mean action.
-            let ctrl = &controllers[c];
+            let ctrl = &locals[c].controller;
             for i in 0..samples.len() {
                 for t in 0..horizon {
                     let x = DVector::from_iterator(
@@ -394,19 +373,12 @@ pub fn train_mdgps(
                 }
             }
         }
-        let policy_loss = policy.fit(
-            &states,
-            &targets,
-            &cfg.policy,
-            &mut opt,
-            &mut fixed_scale,
-            &mut rng,
-        )?;
+        let policy_loss = policy.fit(&states, &targets, &cfg.policy, &mut opt, &mut rng)?;
         // σ²: the local controllers' mean action variance.
         for a in 0..m {
-            let sum: f64 = controllers
+            let sum: f64 = locals
                 .iter()
-                .flat_map(|c| c.cov.iter().map(move |s| s[(a, a)]))
+                .flat_map(|l| l.controller.cov.iter().map(move |s| s[(a, a)]))
                 .sum();
             policy.variance[a] = sum / (k * horizon) as f64;
         }

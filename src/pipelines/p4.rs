@@ -20,25 +20,30 @@ use tandem_planners::{Objective, QuadCost, QuadTerminal};
 use super::gps::{Condition, LocalProblem};
 use super::{PipelineError, Result};
 
+/// The expansion of a cost whose state part is `(c, cx, cxx)` plus `w_u ‖u‖²` (no cross term).
+fn with_action_cost(c: f64, cx: DVector<f64>, cxx: DMatrix<f64>, u: &[f64], w_u: f64) -> QuadCost {
+    let (n, m) = (cx.len(), u.len());
+    let u = DVector::from_column_slice(u);
+    QuadCost {
+        c: c + w_u * u.norm_squared(),
+        cx,
+        cu: &u * (2.0 * w_u),
+        cxx,
+        cuu: DMatrix::identity(m, m) * (2.0 * w_u),
+        cux: DMatrix::zeros(m, n),
+    }
+}
+
 /// The pusher's objective for one condition, with the cost's Gauss–Newton expansion
 /// ([`PusherCost::state_expansion`]) as its derivatives.
 pub fn pusher_objective(cond: PusherCondition, cost: PusherCost, horizon: usize) -> Objective {
-    let m = PUSHER_ACTION_DIM;
-    Objective::time_varying(PUSHER_STATE_DIM, m, move |x, u, t| {
+    Objective::time_varying(PUSHER_STATE_DIM, PUSHER_ACTION_DIM, move |x, u, t| {
         cost.running(&cond, horizon, x, u, t)
     })
     .with_terminal(move |x| cost.terminal(&cond, x))
     .with_running_derivatives(move |x, u, t| {
         let (c, cx, cxx) = cost.state_expansion(&cond, horizon, x, t);
-        let u = DVector::from_column_slice(u);
-        QuadCost {
-            c: c + cost.action * u.norm_squared(),
-            cx,
-            cu: &u * (2.0 * cost.action),
-            cxx,
-            cuu: DMatrix::identity(m, m) * (2.0 * cost.action),
-            cux: DMatrix::zeros(m, PUSHER_STATE_DIM),
-        }
+        with_action_cost(c, cx, cxx, u, cost.action)
     })
     .with_terminal_derivatives(move |x| {
         let (c, cx, cxx) = cost.state_expansion(&cond, 1, x, 0);
@@ -95,7 +100,7 @@ mod door {
         DOOR_FRAME_SKIP, DOOR_HORIZON, DOOR_SCENE, DOOR_STATE_DIM,
     };
     use tandem_mujoco::{MujocoPlant, Scene};
-    use tandem_planners::{Objective, QuadCost, QuadTerminal};
+    use tandem_planners::{Objective, QuadTerminal};
 
     use super::super::gps::{Condition, LocalProblem};
     use super::super::{PipelineError, Result};
@@ -122,6 +127,10 @@ mod door {
     ) -> (f64, DVector<f64>, DMatrix<f64>) {
         let r = offset(scene, ids, x);
         let (v, g, h) = cost.hand_expansion(&r);
+        let (g, h) = (
+            DVector::from_column_slice(&g),
+            DMatrix::from_fn(3, 3, |i, j| h[i][j]),
+        );
         // ∂r/∂q by central differences of the kinematics.
         let eps = 1e-6;
         let mut jac = DMatrix::zeros(3, DOOR_STATE_DIM);
@@ -137,8 +146,6 @@ mod door {
                 jac[(i, j)] = (rp[i] - rm[i]) / (2.0 * eps);
             }
         }
-        let g = DVector::from_column_slice(&g);
-        let h = DMatrix::from_fn(3, 3, |i, j| h[i][j]);
         let mut cx = jac.transpose() * g;
         let mut cxx = jac.transpose() * h * &jac;
         let e = x[DOOR_ANGLE] - cost.target;
@@ -154,27 +161,18 @@ mod door {
             scene.site_id("hand").map_err(bad)?,
             scene.site_id("handle").map_err(bad)?,
         ];
-        let m = DOOR_ACTION_DIM;
         let conditions = (0..DOOR_CONDITIONS.len())
             .map(|c| {
                 let (s1, s2, s3, s4) = (scene.clone(), scene.clone(), scene.clone(), scene.clone());
                 Condition {
                     x0: door_initial_state(c),
-                    objective: Objective::new(DOOR_STATE_DIM, m, move |x, u| {
+                    objective: Objective::new(DOOR_STATE_DIM, DOOR_ACTION_DIM, move |x, u| {
                         cost.running(&offset(&s1, &ids, x), x[DOOR_ANGLE], u)
                     })
                     .with_terminal(move |x| cost.running(&offset(&s2, &ids, x), x[DOOR_ANGLE], &[]))
                     .with_running_derivatives(move |x, u, _| {
                         let (c, cx, cxx) = expansion(&s3, &ids, &cost, x);
-                        let u = DVector::from_column_slice(u);
-                        QuadCost {
-                            c: c + cost.action * u.norm_squared(),
-                            cx,
-                            cu: &u * (2.0 * cost.action),
-                            cxx,
-                            cuu: DMatrix::identity(m, m) * (2.0 * cost.action),
-                            cux: DMatrix::zeros(m, DOOR_STATE_DIM),
-                        }
+                        super::with_action_cost(c, cx, cxx, u, cost.action)
                     })
                     .with_terminal_derivatives(move |x| {
                         let (c, cx, cxx) = expansion(&s4, &ids, &cost, x);

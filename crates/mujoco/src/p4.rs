@@ -39,7 +39,7 @@
 
 use std::path::PathBuf;
 
-use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
+use nalgebra::{DMatrix, DVector};
 
 /// The folder of p4's MJCF scenes (`crates/mujoco/scenes` of the repository this crate was built
 /// from).
@@ -133,6 +133,30 @@ pub fn l12(d: f64, l1: f64, l2: f64, alpha: f64) -> f64 {
     0.5 * l2 * d * d + l1 * (alpha + d * d).sqrt()
 }
 
+/// `ℓ(‖r‖)` with its gradient and Hessian in `r` (positive definite: `l₂ I + l₁ (s² I − r rᵀ)/s³`
+/// with `s² = α + ‖r‖² > ‖r‖²`).
+pub fn l12_expansion(r: &[f64], l1: f64, l2: f64, alpha: f64) -> (f64, DVector<f64>, DMatrix<f64>) {
+    let r = DVector::from_column_slice(r);
+    let s = (alpha + r.norm_squared()).sqrt();
+    let v = 0.5 * l2 * r.norm_squared() + l1 * s;
+    let k = l2 + l1 / s;
+    let hess = DMatrix::identity(r.len(), r.len()) * k - &r * r.transpose() * (l1 / (s * s * s));
+    (v, r * k, hess)
+}
+
+/// Checks that cost weights are finite and non-negative and the penalty's `α` positive.
+fn check_weights(weights: &[(&str, f64)], alpha: f64) -> Result<(), String> {
+    for &(name, v) in weights {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(format!("cost weight {name} = {v} must be finite and >= 0"));
+        }
+    }
+    if !(alpha.is_finite() && alpha > 0.0) {
+        return Err(format!("cost alpha = {alpha} must be > 0"));
+    }
+    Ok(())
+}
+
 /// The pusher's cost weights (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -203,10 +227,10 @@ impl PusherCost {
         let mut j_goal = DMatrix::zeros(2, n);
         j_goal[(0, 4)] = 1.0;
         j_goal[(1, 5)] = 1.0;
-        let r_goal = Vector2::new(x[4] - cond.goal[0], x[5] - cond.goal[1]);
+        let r_goal = [x[4] - cond.goal[0], x[5] - cond.goal[1]];
         // Gripper–block: r = p(q) − b, J = [∂p/∂q, 0, −I, 0].
         let p = pusher_gripper(x);
-        let r_block = Vector2::new(p[0] - x[4], p[1] - x[5]);
+        let r_block = [p[0] - x[4], p[1] - x[5]];
         let mut j_block = DMatrix::zeros(2, n);
         let mut angle = [0.0; 3];
         let mut a = 0.0;
@@ -227,22 +251,12 @@ impl PusherCost {
             (self.goal * ramp, r_goal, j_goal),
             (self.block, r_block, j_block),
         ] {
-            let (v, dr, ddr) = self.l12_expansion(&r);
+            let (v, dr, ddr) = l12_expansion(&r, self.l1, self.l2, self.alpha);
             c += w * v;
             g += w * j.transpose() * dr;
             h += w * j.transpose() * ddr * &j;
         }
         (c, g, h)
-    }
-
-    /// `ℓ(‖r‖)` with its gradient and Hessian in `r`.
-    fn l12_expansion(&self, r: &Vector2<f64>) -> (f64, Vector2<f64>, Matrix2<f64>) {
-        let s = (self.alpha + r.norm_squared()).sqrt();
-        let v = 0.5 * self.l2 * r.norm_squared() + self.l1 * s;
-        let grad = r * (self.l2 + self.l1 / s);
-        let hess = Matrix2::identity() * (self.l2 + self.l1 / s)
-            - r * r.transpose() * (self.l1 / (s * s * s));
-        (v, grad, hess)
     }
 
     /// The terminal cost: the last step's distance terms (the ramp is 1 there), no action.
@@ -252,22 +266,16 @@ impl PusherCost {
 
     /// Checks that the weights are finite and non-negative and `α > 0`.
     pub fn validate(&self) -> Result<(), String> {
-        let fields = [
-            ("goal", self.goal),
-            ("block", self.block),
-            ("action", self.action),
-            ("l1", self.l1),
-            ("l2", self.l2),
-        ];
-        for (name, v) in fields {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("cost weight {name} = {v} must be finite and >= 0"));
-            }
-        }
-        if !(self.alpha.is_finite() && self.alpha > 0.0) {
-            return Err(format!("cost alpha = {} must be > 0", self.alpha));
-        }
-        Ok(())
+        check_weights(
+            &[
+                ("goal", self.goal),
+                ("block", self.block),
+                ("action", self.action),
+                ("l1", self.l1),
+                ("l2", self.l2),
+            ],
+            self.alpha,
+        )
     }
 }
 
@@ -360,7 +368,9 @@ impl DoorCost {
             + self.action * u.iter().map(|v| v * v).sum::<f64>()
     }
 
-    /// The gradient and Hessian of the hand term in `r` (the Hessian positive definite).
+    /// The hand term `w_hand ℓ(‖r‖)` with its gradient and (positive definite) Hessian in `r`:
+    /// [`l12_expansion`] scaled by `w_hand`, written out with the weight inside so that its
+    /// rounding, and with it the door runs in `results/p4-door`, stay as they were measured.
     pub fn hand_expansion(&self, r: &[f64; 3]) -> (f64, [f64; 3], [[f64; 3]; 3]) {
         let n2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
         let s = (self.alpha + n2).sqrt();
@@ -379,21 +389,16 @@ impl DoorCost {
 
     /// Checks that the weights are finite and non-negative, `α > 0` and the target finite.
     pub fn validate(&self) -> Result<(), String> {
-        let fields = [
-            ("hand", self.hand),
-            ("angle", self.angle),
-            ("action", self.action),
-            ("l1", self.l1),
-            ("l2", self.l2),
-        ];
-        for (name, v) in fields {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("cost weight {name} = {v} must be finite and >= 0"));
-            }
-        }
-        if !(self.alpha.is_finite() && self.alpha > 0.0) {
-            return Err(format!("cost alpha = {} must be > 0", self.alpha));
-        }
+        check_weights(
+            &[
+                ("hand", self.hand),
+                ("angle", self.angle),
+                ("action", self.action),
+                ("l1", self.l1),
+                ("l2", self.l2),
+            ],
+            self.alpha,
+        )?;
         if !self.target.is_finite() {
             return Err(format!("target angle {} must be finite", self.target));
         }
@@ -537,6 +542,15 @@ mod tests {
             for (j, hij) in h[i].iter().enumerate() {
                 let fd = (gp[j] - gm[j]) / (2.0 * eps);
                 assert!((fd - hij).abs() < 1e-5, "({i},{j}): {fd} vs {hij}");
+            }
+        }
+        // It is the shared penalty's expansion scaled by the weight.
+        let (v1, g1, h1) = l12_expansion(&r, c.l1, c.l2, c.alpha);
+        assert_relative_eq!(v, c.hand * v1, epsilon = 1e-14);
+        for i in 0..3 {
+            assert_relative_eq!(g[i], c.hand * g1[i], epsilon = 1e-12);
+            for j in 0..3 {
+                assert_relative_eq!(h[i][j], c.hand * h1[(i, j)], epsilon = 1e-10);
             }
         }
         // The angle and action terms.
