@@ -107,11 +107,27 @@ pub struct TestSet {
     pub measure: FinalMeasure,
 }
 
-/// The neural global policy `N(μ_θ(x), diag(σ²))`.
+/// What the global policy sees of a state: `dim` features written by `map(state, out)` (e.g. a
+/// task's observation: angles as cosines and sines, the end effector's offset to the target).
+/// Without one the policy sees the state itself.
+#[derive(Clone)]
+pub struct PolicyInput {
+    /// Number of features.
+    pub dim: usize,
+    /// Writes the features of a state into `out` (`dim` long).
+    pub map: std::sync::Arc<dyn Fn(&[f64], &mut [f64]) + Send + Sync>,
+}
+
+/// The neural global policy `N(μ_θ(o(x)), diag(σ²))` over the features `o(x)` of the state
+/// ([`PolicyInput`], or the state itself).
 pub struct GlobalPolicy {
     net: Mlp,
+    input: Option<PolicyInput>,
+    state_dim: usize,
     x_mean: Vec<f64>,
     x_std: Vec<f64>,
+    /// The states' standard deviations: the linearization's step scale.
+    state_std: Vec<f64>,
     /// Whether the input standardization has been fixed (by the first fit).
     scaled: bool,
     /// Action variances `σ²`.
@@ -119,39 +135,60 @@ pub struct GlobalPolicy {
 }
 
 impl GlobalPolicy {
-    /// An untrained policy over `state_dim` states and `action_dim` actions (identity input
-    /// scaling until the first fit), variance `variance` per action.
+    /// An untrained policy over `state_dim` states (seen through `input`, if given) and
+    /// `action_dim` actions (identity input scaling until the first fit), variance `variance` per
+    /// action.
     pub fn new(
         state_dim: usize,
         action_dim: usize,
         hidden: &[usize],
         variance: f64,
+        input: Option<PolicyInput>,
         rng: &mut Rng,
     ) -> Result<Self> {
-        let mut sizes = vec![state_dim];
+        let d = input.as_ref().map_or(state_dim, |i| i.dim);
+        let mut sizes = vec![d];
         sizes.extend_from_slice(hidden);
         sizes.push(action_dim);
         Ok(Self {
             net: Mlp::new(MlpConfig::new(&sizes), rng)?,
-            x_mean: vec![0.0; state_dim],
-            x_std: vec![1.0; state_dim],
+            input,
+            state_dim,
+            x_mean: vec![0.0; d],
+            x_std: vec![1.0; d],
+            state_std: vec![1.0; state_dim],
             scaled: false,
             variance: vec![variance; action_dim],
         })
     }
 
-    fn input(&self, states: &[f64]) -> Vec<f32> {
-        let n = self.x_mean.len();
-        states
+    /// The features of a batch of states (rows of `state_dim`), not yet standardized.
+    fn features(&self, states: &[f64]) -> Vec<f64> {
+        match &self.input {
+            None => states.to_vec(),
+            Some(input) => {
+                let rows = states.len() / self.state_dim;
+                let mut out = vec![0.0; rows * input.dim];
+                for (x, o) in states.chunks(self.state_dim).zip(out.chunks_mut(input.dim)) {
+                    (input.map)(x, o);
+                }
+                out
+            }
+        }
+    }
+
+    fn standardized(&self, states: &[f64]) -> Vec<f32> {
+        let d = self.x_mean.len();
+        self.features(states)
             .iter()
             .enumerate()
-            .map(|(i, v)| ((v - self.x_mean[i % n]) / self.x_std[i % n]) as f32)
+            .map(|(i, v)| ((v - self.x_mean[i % d]) / self.x_std[i % d]) as f32)
             .collect()
     }
 
     /// The mean actions of a batch of states (`B × S` row-major in, `B × A` out).
     pub fn mean(&self, states: &[f64], ws: &mut MlpWorkspace) -> Result<Vec<f64>> {
-        let n = self.x_mean.len();
+        let n = self.state_dim;
         if n == 0 || states.len() % n != 0 {
             return Err(PipelineError::Config(format!(
                 "{} state values are not rows of {n}",
@@ -160,7 +197,7 @@ impl GlobalPolicy {
         }
         let out = self
             .net
-            .forward(&self.input(states), states.len() / n, ws)?;
+            .forward(&self.standardized(states), states.len() / n, ws)?;
         Ok(out.iter().map(|&v| f64::from(v)).collect())
     }
 
@@ -170,7 +207,7 @@ impl GlobalPolicy {
     pub fn linearize(&self, samples: &TrajectorySamples) -> Result<TvlgController> {
         let shape = samples.actions.shape();
         let (t_len, m) = (shape[1], shape[2]);
-        let n = self.x_mean.len();
+        let n = self.state_dim;
         let mut ws = self.net.workspace();
         let (mut gains, mut offsets) = (Vec::with_capacity(t_len), Vec::with_capacity(t_len));
         for t in 0..t_len {
@@ -179,7 +216,7 @@ impl GlobalPolicy {
                 .collect();
             // Rows: x̄, then x̄ ± h e_j for every j.
             let mut batch = xbar.clone();
-            let h: Vec<f64> = self.x_std.iter().map(|s| 1e-3 * s).collect();
+            let h: Vec<f64> = self.state_std.iter().map(|s| 1e-3 * s).collect();
             for j in 0..n {
                 for sign in [1.0, -1.0] {
                     let mut x = xbar.clone();
@@ -209,19 +246,25 @@ impl GlobalPolicy {
         opt: &mut Adam,
         rng: &mut Rng,
     ) -> Result<f64> {
-        let (n, m) = (self.x_mean.len(), self.variance.len());
+        let (n, d, m) = (self.state_dim, self.x_mean.len(), self.variance.len());
         let rows = states.len() / n;
         if !self.scaled {
-            for j in 0..n {
-                let col: Vec<f64> = (0..rows).map(|i| states[i * n + j]).collect();
+            let stats = |data: &[f64], w: usize, j: usize| {
+                let col: Vec<f64> = (0..rows).map(|i| data[i * w + j]).collect();
                 let mean = col.iter().sum::<f64>() / rows as f64;
                 let var = col.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / rows as f64;
-                self.x_mean[j] = mean;
-                self.x_std[j] = var.sqrt().max(1e-3);
+                (mean, var.sqrt().max(1e-3))
+            };
+            let feats = self.features(states);
+            for j in 0..d {
+                (self.x_mean[j], self.x_std[j]) = stats(&feats, d, j);
+            }
+            for j in 0..n {
+                self.state_std[j] = stats(states, n, j).1;
             }
             self.scaled = true;
         }
-        let x = self.input(states);
+        let x = self.standardized(states);
         let y: Vec<f32> = targets.iter().map(|&v| v as f32).collect();
         let mut order: Vec<usize> = (0..rows).collect();
         let mut ws = self.net.workspace();
@@ -235,7 +278,7 @@ impl GlobalPolicy {
                 bx.clear();
                 by.clear();
                 for &i in chunk {
-                    bx.extend_from_slice(&x[i * n..(i + 1) * n]);
+                    bx.extend_from_slice(&x[i * d..(i + 1) * d]);
                     by.extend_from_slice(&y[i * m..(i + 1) * m]);
                 }
                 let pred = self
@@ -284,6 +327,7 @@ pub fn train_mdgps(
     method: LocalMethod,
     problem: &LocalProblem,
     test: &TestSet,
+    input: Option<PolicyInput>,
     cfg: &MdgpsConfig,
     seed: u64,
     store: &mut dyn Checkpoints,
@@ -305,7 +349,14 @@ pub fn train_mdgps(
     let (system, horizon) = (&*problem.system, problem.horizon);
     let (n, m) = (system.state_dim(), system.action_dim());
     let mut rng = rng_from_seed(seed);
-    let mut policy = GlobalPolicy::new(n, m, &cfg.policy.hidden, local.init_variance, &mut rng)?;
+    let mut policy = GlobalPolicy::new(
+        n,
+        m,
+        &cfg.policy.hidden,
+        local.init_variance,
+        input,
+        &mut rng,
+    )?;
     let mut opt = Adam::new(
         AdamConfig::with_lr(cfg.policy.learning_rate),
         policy.net.num_params(),
@@ -404,23 +455,39 @@ pub fn evaluate(
     horizon: usize,
     rng: &mut Rng,
 ) -> Result<f64> {
-    let (b, n) = (test.starts.len(), system.state_dim());
-    let mut x = Array2::from_shape_vec((b, n), test.starts.concat())
-        .map_err(|e| PipelineError::Config(e.to_string()))?;
     let mut ws = policy.net.workspace();
-    for _ in 0..horizon {
-        let u = policy.mean(x.as_slice().expect("standard layout"), &mut ws)?;
-        let u = Array2::from_shape_vec((b, system.action_dim()), u)
+    test.measure_policy(system, horizon, rng, &mut |x| {
+        policy.mean(x.as_slice().expect("standard layout"), &mut ws)
+    })
+}
+
+impl TestSet {
+    /// The mean measure of the final states of `horizon`-step rollouts on `system` from every
+    /// start, all starts stepped as one batch: `act` maps the batch's states (`B × S`) to its
+    /// actions (`B × A`, row-major). Rollouts are evaluation: they are not counted as samples.
+    pub fn measure_policy(
+        &self,
+        system: &dyn DynamicsModel,
+        horizon: usize,
+        rng: &mut Rng,
+        act: &mut dyn FnMut(&Array2<f64>) -> Result<Vec<f64>>,
+    ) -> Result<f64> {
+        let (b, n) = (self.starts.len(), system.state_dim());
+        let mut x = Array2::from_shape_vec((b, n), self.starts.concat())
             .map_err(|e| PipelineError::Config(e.to_string()))?;
-        x = system
-            .predict(&ModelInput::new(x.view(), u.view()), rng)?
-            .next_states;
+        for _ in 0..horizon {
+            let u = Array2::from_shape_vec((b, system.action_dim()), act(&x)?)
+                .map_err(|e| PipelineError::Config(e.to_string()))?;
+            x = system
+                .predict(&ModelInput::new(x.view(), u.view()), rng)?
+                .next_states;
+        }
+        Ok(x.rows()
+            .into_iter()
+            .map(|r| (self.measure)(&r.to_vec()))
+            .sum::<f64>()
+            / b as f64)
     }
-    Ok(x.rows()
-        .into_iter()
-        .map(|r| (test.measure)(&r.to_vec()))
-        .sum::<f64>()
-        / b as f64)
 }
 
 #[cfg(test)]
@@ -466,6 +533,7 @@ mod tests {
             LocalMethod::LqrFlm,
             &p,
             &test,
+            None,
             &c,
             0,
             &mut Ephemeral,
@@ -489,7 +557,7 @@ mod tests {
     #[test]
     fn linearizing_a_linear_policy_gives_its_weights() {
         let mut rng = rng_from_seed(1);
-        let policy = GlobalPolicy::new(2, 1, &[], 0.3, &mut rng).unwrap();
+        let policy = GlobalPolicy::new(2, 1, &[], 0.3, None, &mut rng).unwrap();
         let w = policy.net.weight(0).to_vec();
         let bias = policy.net.bias(0)[0];
         let p = problem(&[[1.0, 0.0]]);

@@ -12,12 +12,14 @@
 
 use nalgebra::{DMatrix, DVector};
 use tandem_mujoco::p4::{
-    DoorCost, PusherCondition, PusherCost, PUSHER_ACTION_DIM, PUSHER_CONDITIONS, PUSHER_HORIZON,
-    PUSHER_STATE_DIM,
+    reacher_distance, reacher_starts, DoorCost, PusherCondition, PusherCost, ReacherCost,
+    PUSHER_ACTION_DIM, PUSHER_CONDITIONS, PUSHER_HORIZON, PUSHER_STATE_DIM, REACHER_ACTION_DIM,
+    REACHER_HORIZON, REACHER_STATE_DIM,
 };
 use tandem_planners::{Objective, QuadCost, QuadTerminal};
 
 use super::gps::{Condition, LocalProblem};
+use super::mdgps::TestSet;
 use super::{PipelineError, Result};
 
 /// The expansion of a cost whose state part is `(c, cx, cxx)` plus `w_u ‖u‖²` (no cross term).
@@ -82,6 +84,110 @@ fn pusher_system() -> Result<Box<dyn tandem_models::DynamicsModel + Send + Sync>
 fn pusher_system() -> Result<Box<dyn tandem_models::DynamicsModel + Send + Sync>> {
     Err(PipelineError::Config(
         "p4's pusher needs a build with `--features mujoco` after scripts/setup-mujoco.sh".into(),
+    ))
+}
+
+/// The reacher's objective: [`ReacherCost`] at every step, its distance term at the end, with the
+/// Gauss–Newton expansion ([`ReacherCost::state_expansion`]).
+pub fn reacher_objective(cost: ReacherCost) -> Objective {
+    Objective::new(REACHER_STATE_DIM, REACHER_ACTION_DIM, move |x, u| {
+        cost.running(x, u)
+    })
+    .with_terminal(move |x| cost.running(x, &[]))
+    .with_running_derivatives(move |x, u, _| {
+        let (c, cx, cxx) = cost.state_expansion(x);
+        with_action_cost(c, cx, cxx, u, cost.action)
+    })
+    .with_terminal_derivatives(move |x| {
+        let (c, cx, cxx) = cost.state_expansion(x);
+        QuadTerminal { c, cx, cxx }
+    })
+}
+
+/// The reacher with `conditions` training starts drawn from `Reacher-v5`'s reset distribution by
+/// `seed`'s generator, and `cost`. Needs the feature `mujoco`; without it, an error saying so.
+pub fn reacher_problem(cost: ReacherCost, conditions: usize, seed: u64) -> Result<LocalProblem> {
+    cost.validate().map_err(PipelineError::Config)?;
+    if conditions == 0 {
+        return Err(PipelineError::Config(
+            "the reacher needs at least one condition".into(),
+        ));
+    }
+    let mut rng = tandem_core::seeding::rng_from_seed(seed);
+    let conditions = reacher_starts(conditions, &mut rng)
+        .into_iter()
+        .map(|x0| Condition {
+            x0,
+            objective: reacher_objective(cost),
+        })
+        .collect();
+    Ok(LocalProblem {
+        system: reacher_system()?,
+        conditions,
+        horizon: REACHER_HORIZON,
+        measure: Box::new(|_, x| reacher_distance(x)),
+    })
+}
+
+/// The reacher's global policy sees `Reacher-v5`'s observation
+/// ([`tandem_mujoco::p4::reacher_observation`]), as DDPG does.
+pub fn reacher_policy_input() -> super::mdgps::PolicyInput {
+    super::mdgps::PolicyInput {
+        dim: tandem_mujoco::p4::REACHER_OBS_DIM,
+        map: std::sync::Arc::new(tandem_mujoco::p4::reacher_observation),
+    }
+}
+
+/// MDGPS's settings for the reacher: 15 iterations of 3 trajectories per condition, initial
+/// action variance 0.02 (standard deviation 0.14: the commands that matter are a few tenths),
+/// KL bound `ε = 0.1` per step (with 0.5 or 1 the local controllers, bounded against a global
+/// policy that still fits them loosely, lost more than they gained), a policy of two hidden
+/// layers of 64.
+pub fn reacher_config() -> super::mdgps::MdgpsConfig {
+    let mut local = super::gps::LocalConfig {
+        iterations: 15,
+        samples: 3,
+        init_variance: 0.02,
+        ..Default::default()
+    };
+    local.trajopt.lqr.kl_step = 0.1;
+    super::mdgps::MdgpsConfig {
+        local,
+        policy: Default::default(),
+    }
+}
+
+/// `n` test starts of the reacher drawn by `seed`'s generator, measured by the final
+/// fingertip–target distance.
+pub fn reacher_test_set(n: usize, seed: u64) -> TestSet {
+    let mut rng = tandem_core::seeding::rng_from_seed(seed);
+    TestSet {
+        starts: reacher_starts(n, &mut rng),
+        measure: Box::new(reacher_distance),
+    }
+}
+
+/// gymnasium's `reacher.xml` as a plant (`$TANDEM_MUJOCO_ASSETS` or the setup script's assets).
+#[cfg(feature = "mujoco")]
+pub fn reacher_plant() -> Result<tandem_mujoco::MujocoPlant> {
+    let kind = tandem_mujoco::TaskKind::Reacher;
+    let path = tandem_mujoco::assets_dir().join(kind.spec().xml);
+    tandem_mujoco::MujocoPlant::from_xml(&path, kind.spec().frame_skip).map_err(|e| {
+        PipelineError::Config(format!(
+            "{e} (gymnasium's assets: run scripts/setup-mujoco.sh)"
+        ))
+    })
+}
+
+#[cfg(feature = "mujoco")]
+fn reacher_system() -> Result<Box<dyn tandem_models::DynamicsModel + Send + Sync>> {
+    Ok(Box::new(tandem_models::PlantModel::new(reacher_plant()?)))
+}
+
+#[cfg(not(feature = "mujoco"))]
+fn reacher_system() -> Result<Box<dyn tandem_models::DynamicsModel + Send + Sync>> {
+    Err(PipelineError::Config(
+        "p4's reacher needs a build with `--features mujoco` after scripts/setup-mujoco.sh".into(),
     ))
 }
 
@@ -199,6 +305,210 @@ mod door {
     pub(super) fn problem(_cost: tandem_mujoco::p4::DoorCost) -> Result<LocalProblem> {
         Err(PipelineError::Config(
             "p4's door needs a build with `--features mujoco` after scripts/setup-mujoco.sh".into(),
+        ))
+    }
+}
+
+/// A point of a neural policy's curve on a test set: after `samples` real steps, the mean
+/// measure of its deterministic rollouts from the test starts.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TestedPoint {
+    /// Real environment steps so far.
+    pub samples: u64,
+    /// The mean final measure over the test starts.
+    pub test_measure: f64,
+}
+
+/// DDPG's settings on the reacher: the agent, the step budget and how often it is measured.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReacherDdpg {
+    /// The agent (with its off-policy schedule).
+    pub agent: tandem_agents::DdpgConfig,
+    /// Real steps to train for.
+    pub steps: u64,
+    /// Measure on the test set (and checkpoint) every this many steps.
+    pub eval_every: u64,
+}
+
+impl Default for ReacherDdpg {
+    /// stable-baselines3's DDPG defaults (two hidden layers of 400 and 300, Adam 10⁻³ for both
+    /// networks, τ = 0.005, γ = 0.99, minibatch 256, one update per step after 100 random steps)
+    /// with Gaussian exploration noise σ = 0.1 (rl-baselines3-zoo's usual choice for MuJoCo);
+    /// 200,000 steps, measured every 5,000.
+    fn default() -> Self {
+        Self {
+            agent: tandem_agents::DdpgConfig {
+                actor_hidden: vec![400, 300],
+                critic_hidden: vec![400, 300],
+                actor_lr: 1e-3,
+                critic_lr: 1e-3,
+                tau: 0.005,
+                gamma: 0.99,
+                noise: tandem_agents::NoiseConfig::Gaussian { sigma: 0.1 },
+                buffer_size: 1_000_000,
+                learning_starts: 100,
+                batch_size: 256,
+                train_freq: 1,
+                gradient_steps: 1,
+            },
+            steps: 200_000,
+            eval_every: 5_000,
+        }
+    }
+}
+
+/// Trains DDPG on the reacher (episodes from `Reacher-v5`'s reset distribution, reward `−c`,
+/// observing the whole state) with the loop `tandem train` runs, measuring its deterministic
+/// policy on `test` at the start and every `eval_every` steps. Checkpoints (under `"ddpg"`) at
+/// every measurement, so an interrupted run resumes with exactly its numbers. `progress`
+/// receives the steps taken so far. Needs the feature `mujoco`.
+pub fn train_ddpg_reacher(
+    cost: ReacherCost,
+    cfg: &ReacherDdpg,
+    test: &TestSet,
+    seed: u64,
+    store: &mut dyn super::Checkpoints,
+    progress: &mut dyn FnMut(u64),
+) -> Result<Vec<TestedPoint>> {
+    if cfg.eval_every == 0 || cfg.steps == 0 {
+        return Err(PipelineError::Config(format!(
+            "ddpg steps {} and eval_every {} must be positive",
+            cfg.steps, cfg.eval_every
+        )));
+    }
+    cfg.agent.validate()?;
+    ddpg::train(cost, cfg, test, seed, store, progress)
+}
+
+#[cfg(feature = "mujoco")]
+mod ddpg {
+    use std::ops::ControlFlow;
+
+    use ndarray::Array2;
+    use tandem_agents::{AlgoConfig, BatchPolicy, Learner, Mode, Pause, TrainSettings, Trainer};
+    use tandem_envs::{PlantEnv, TimeLimit};
+    use tandem_mujoco::p4::{ReacherCost, ReacherTask, REACHER_HORIZON};
+
+    use super::super::mdgps::TestSet;
+    use super::super::{ensure_same_run, Checkpoints, PipelineError, Result};
+    use super::{reacher_plant, ReacherDdpg, TestedPoint};
+
+    const KEY: &str = "ddpg";
+
+    fn measure(trainer: &mut Trainer, test: &TestSet, seed: u64) -> Result<TestedPoint> {
+        let system = tandem_models::PlantModel::new(reacher_plant()?);
+        let samples = trainer.steps();
+        let Learner::Ddpg(agent) = trainer.learner() else {
+            unreachable!("the trainer was built for DDPG");
+        };
+        // Deterministic acting draws nothing; the generator only satisfies the signature.
+        let (mut rng, mut unused) = (
+            tandem_core::seeding::rng_from_seed(seed),
+            tandem_core::seeding::rng_from_seed(seed),
+        );
+        let test_measure =
+            test.measure_policy(&system, REACHER_HORIZON, &mut rng, &mut |x: &Array2<
+                f64,
+            >| {
+                let a = agent.act_batch(x.view(), Mode::Deterministic, &mut unused)?;
+                Ok(a.iter().copied().collect())
+            })?;
+        Ok(TestedPoint {
+            samples,
+            test_measure,
+        })
+    }
+
+    pub(super) fn train(
+        cost: ReacherCost,
+        cfg: &ReacherDdpg,
+        test: &TestSet,
+        seed: u64,
+        store: &mut dyn Checkpoints,
+        progress: &mut dyn FnMut(u64),
+    ) -> Result<Vec<TestedPoint>> {
+        let task = ReacherTask::new(cost).map_err(PipelineError::Config)?;
+        let make = || -> Result<TimeLimit<PlantEnv<_, _>>> {
+            Ok(TimeLimit::new(
+                PlantEnv::from_parts(reacher_plant()?, task.clone())?,
+                REACHER_HORIZON,
+            ))
+        };
+        let (mut env, mut unused) = (make()?, make()?);
+        let settings = TrainSettings {
+            eval_interval: 0,
+            checkpoint_interval: cfg.eval_every,
+            max_episode_steps: Some(REACHER_HORIZON),
+            ..TrainSettings::default()
+        };
+        let mut trainer = Trainer::new(AlgoConfig::Ddpg(cfg.agent.clone()), settings, &env, seed)?;
+        let mut curve: Vec<TestedPoint> = match store.load(KEY)? {
+            Some(ckpt) => {
+                let (name, saved_seed): (String, u64) = ckpt
+                    .get_json("run")
+                    .map_err(|e| PipelineError::Checkpoint(e.to_string()))?;
+                ensure_same_run((&name, saved_seed), (KEY, seed))?;
+                trainer.load(&ckpt, &mut env)?;
+                ckpt.get_json("curve")
+                    .map_err(|e| PipelineError::Checkpoint(e.to_string()))?
+            }
+            None => vec![measure(&mut trainer, test, seed)?],
+        };
+        progress(trainer.steps());
+        loop {
+            let pause = {
+                let stop = &*store;
+                trainer.run_until_pause(&mut env, &mut unused, cfg.steps, &mut |t| {
+                    if t.steps() % 1000 == 0 {
+                        progress(t.steps());
+                    }
+                    if stop.stop_requested() {
+                        ControlFlow::Break(())
+                    } else {
+                        ControlFlow::Continue(())
+                    }
+                })?
+            };
+            match pause {
+                Pause::Stopped => return Err(PipelineError::Stopped),
+                Pause::Checkpoint | Pause::Finished => {
+                    if curve.last().map(|p| p.samples) != Some(trainer.steps()) {
+                        curve.push(measure(&mut trainer, test, seed)?);
+                    }
+                    if pause == Pause::Finished {
+                        return Ok(curve);
+                    }
+                    let mut ckpt = trainer.save(&env)?;
+                    let bad = |e: tandem_nn::NnError| PipelineError::Checkpoint(e.to_string());
+                    ckpt.put_json("run", &(KEY, seed)).map_err(bad)?;
+                    ckpt.put_json("curve", &curve).map_err(bad)?;
+                    store.save(KEY, &ckpt)?;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(not(feature = "mujoco"))]
+mod ddpg {
+    use tandem_mujoco::p4::ReacherCost;
+
+    use super::super::mdgps::TestSet;
+    use super::super::{Checkpoints, PipelineError, Result};
+    use super::{ReacherDdpg, TestedPoint};
+
+    pub(super) fn train(
+        _cost: ReacherCost,
+        _cfg: &ReacherDdpg,
+        _test: &TestSet,
+        _seed: u64,
+        _store: &mut dyn Checkpoints,
+        _progress: &mut dyn FnMut(u64),
+    ) -> Result<Vec<TestedPoint>> {
+        Err(PipelineError::Config(
+            "p4's reacher needs a build with `--features mujoco` after scripts/setup-mujoco.sh"
+                .into(),
         ))
     }
 }

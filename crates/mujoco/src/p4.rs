@@ -406,6 +406,207 @@ impl DoorCost {
     }
 }
 
+/// Control steps per episode of gymnasium's `Reacher-v5` (1 s at 50 Hz: frame skip 2 of 0.01 s).
+pub const REACHER_HORIZON: usize = 50;
+/// Length of the reacher's state `qpos ++ qvel`: the two arm joints, the target's x and y (slide
+/// joints that never move), and their velocities.
+pub const REACHER_STATE_DIM: usize = 8;
+/// Number of motors.
+pub const REACHER_ACTION_DIM: usize = 2;
+/// Link lengths of `reacher.xml`: shoulder to elbow, elbow to fingertip (m).
+pub const REACHER_LINKS: [f64; 2] = [0.1, 0.11];
+/// `qpos0` of `reacher.xml`: arm straight, target at its slide joints' reference `(0.1, −0.1)`.
+pub const REACHER_QPOS0: [f64; 4] = [0.0, 0.0, 0.1, -0.1];
+
+/// The reacher's fingertip in the plane of arm angles `q = [q_0, q_1, ..]`.
+pub fn reacher_fingertip(q: &[f64]) -> [f64; 2] {
+    let (a0, a1) = (q[0], q[0] + q[1]);
+    let [l0, l1] = REACHER_LINKS;
+    [l0 * a0.cos() + l1 * a1.cos(), l0 * a0.sin() + l1 * a1.sin()]
+}
+
+/// Fingertip–target distance of a reacher state (the target's position is `qpos[2..4]`).
+pub fn reacher_distance(x: &[f64]) -> f64 {
+    let p = reacher_fingertip(x);
+    (p[0] - x[2]).hypot(p[1] - x[3])
+}
+
+/// Length of `Reacher-v5`'s observation.
+pub const REACHER_OBS_DIM: usize = 10;
+
+/// `Reacher-v5`'s observation of a state: `cos q`, `sin q` (both joints), the target's position,
+/// the joint velocities, and the fingertip minus the target (x, y).
+pub fn reacher_observation(x: &[f64], out: &mut [f64]) {
+    let p = reacher_fingertip(x);
+    out[..REACHER_OBS_DIM].copy_from_slice(&[
+        x[0].cos(),
+        x[1].cos(),
+        x[0].sin(),
+        x[1].sin(),
+        x[2],
+        x[3],
+        x[4],
+        x[5],
+        p[0] - x[2],
+        p[1] - x[3],
+    ]);
+}
+
+/// `n` reacher starts from gymnasium's `Reacher-v5` reset distribution: arm angles
+/// `U(−0.1, 0.1)`, target uniform in the disc of radius 0.2, arm velocities `U(−0.005, 0.005)`.
+pub fn reacher_starts(n: usize, rng: &mut tandem_core::Rng) -> Vec<Vec<f64>> {
+    (0..n)
+        .map(|_| {
+            let (mut q, v) = crate::TaskKind::Reacher.reset_state(&REACHER_QPOS0, &[0.0; 4], rng);
+            q.extend(v);
+            q
+        })
+        .collect()
+}
+
+/// p4's reacher cost: gymnasium's fingertip–target distance through the smooth l1-l2
+/// ("Huber-style") penalty, plus the torques:
+///
+/// ```text
+/// c(x, u) = w_dist ℓ(‖p(q) − g‖) + w_u ‖u‖²,   terminal  w_dist ℓ(‖p(q) − g‖)
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReacherCost {
+    /// Weight of the distance term.
+    pub distance: f64,
+    /// Weight of `‖u‖²` (`u` the normalized motor commands in `[−1, 1]`).
+    pub action: f64,
+    /// `l₁` of the penalty.
+    pub l1: f64,
+    /// `l₂` of the penalty.
+    pub l2: f64,
+    /// `α` of the penalty.
+    pub alpha: f64,
+}
+
+impl Default for ReacherCost {
+    /// Distance 1 with the pusher's penalty `ℓ = 5 d² + 0.1 √(10⁻⁵ + d²)`, commands
+    /// `0.1 ‖u‖²` (the arm turns 0.1 rad in 0.1 s under a command of 0.1, so useful commands are
+    /// a few tenths; with `10⁻²` LQR-FLM's first updates asked for saturated ones).
+    fn default() -> Self {
+        Self {
+            distance: 1.0,
+            action: 1e-1,
+            l1: 0.1,
+            l2: 10.0,
+            alpha: 1e-5,
+        }
+    }
+}
+
+impl ReacherCost {
+    /// `c(x, u)`; with an empty `u`, the terminal cost.
+    pub fn running(&self, x: &[f64], u: &[f64]) -> f64 {
+        self.distance * l12(reacher_distance(x), self.l1, self.l2, self.alpha)
+            + self.action * u.iter().map(|v| v * v).sum::<f64>()
+    }
+
+    /// The distance term with its gradient and Gauss–Newton Hessian in `x` (as
+    /// [`PusherCost::state_expansion`]: `Jᵀ ∇ℓ`, `Jᵀ ∇²ℓ J`, `J = ∂(p − g)/∂x`).
+    pub fn state_expansion(&self, x: &[f64]) -> (f64, DVector<f64>, DMatrix<f64>) {
+        let p = reacher_fingertip(x);
+        let r = [p[0] - x[2], p[1] - x[3]];
+        let (a0, a1) = (x[0], x[0] + x[1]);
+        let [l0, l1] = REACHER_LINKS;
+        let mut j = DMatrix::zeros(2, REACHER_STATE_DIM);
+        j[(0, 0)] = -l0 * a0.sin() - l1 * a1.sin();
+        j[(1, 0)] = l0 * a0.cos() + l1 * a1.cos();
+        j[(0, 1)] = -l1 * a1.sin();
+        j[(1, 1)] = l1 * a1.cos();
+        j[(0, 2)] = -1.0;
+        j[(1, 3)] = -1.0;
+        let (v, g, h) = l12_expansion(&r, self.l1, self.l2, self.alpha);
+        let w = self.distance;
+        (w * v, j.transpose() * g * w, j.transpose() * h * &j * w)
+    }
+
+    /// Checks that the weights are finite and non-negative and `α > 0`.
+    pub fn validate(&self) -> Result<(), String> {
+        check_weights(
+            &[
+                ("distance", self.distance),
+                ("action", self.action),
+                ("l1", self.l1),
+                ("l2", self.l2),
+            ],
+            self.alpha,
+        )
+    }
+}
+
+/// p4's reacher as an environment's [`tandem_envs::Task`] over `reacher.xml`'s state (with
+/// frame skip 2, e.g. `PlantEnv::from_parts(MujocoPlant, ReacherTask)`): episodes start from
+/// gymnasium's reset distribution ([`reacher_starts`]), the agent observes what `Reacher-v5`'s
+/// agents observe ([`reacher_observation`], as MDGPS's global policy does), and the reward of a step is minus the cost
+/// of the state it reaches and the command: `−c(x', u)`. 50 steps, no termination.
+#[derive(Debug, Clone)]
+pub struct ReacherTask {
+    cost: ReacherCost,
+    observation_space: tandem_core::Space,
+    action_space: tandem_core::Space,
+}
+
+impl ReacherTask {
+    /// The task with `cost`; an error for invalid weights.
+    pub fn new(cost: ReacherCost) -> Result<Self, String> {
+        cost.validate()?;
+        Ok(Self {
+            cost,
+            observation_space: tandem_core::Space::boxed(
+                vec![f64::NEG_INFINITY; REACHER_OBS_DIM],
+                vec![f64::INFINITY; REACHER_OBS_DIM],
+            ),
+            action_space: tandem_core::Space::symmetric(REACHER_ACTION_DIM, 1.0),
+        })
+    }
+
+    /// The cost.
+    pub fn cost(&self) -> &ReacherCost {
+        &self.cost
+    }
+}
+
+impl tandem_envs::Task for ReacherTask {
+    fn id(&self) -> &str {
+        "p4-Reacher"
+    }
+    fn observation_space(&self) -> &tandem_core::Space {
+        &self.observation_space
+    }
+    fn action_space(&self) -> &tandem_core::Space {
+        &self.action_space
+    }
+    fn state_dim(&self) -> usize {
+        REACHER_STATE_DIM
+    }
+    fn control(&self, action: &tandem_core::Action) -> Vec<f64> {
+        match action {
+            tandem_core::Action::Continuous(a) => tandem_envs::clip_to(&self.action_space, a),
+            tandem_core::Action::Discrete(_) => vec![0.0; REACHER_ACTION_DIM],
+        }
+    }
+    fn initial_state(&self, rng: &mut tandem_core::Rng) -> Vec<f64> {
+        reacher_starts(1, rng).remove(0)
+    }
+    fn observe(&self, state: &[f64]) -> Vec<f64> {
+        let mut o = vec![0.0; REACHER_OBS_DIM];
+        reacher_observation(state, &mut o);
+        o
+    }
+    fn reward(&self, _state: &[f64], u: &[f64], next: &[f64]) -> f64 {
+        -self.cost.running(next, u)
+    }
+    fn max_episode_steps(&self) -> Option<usize> {
+        Some(REACHER_HORIZON)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -574,5 +775,111 @@ mod tests {
             ..PusherCost::default()
         };
         assert!(bad.validate().unwrap_err().contains("alpha"));
+    }
+    #[test]
+    fn reacher_kinematics_and_distance_of_simple_poses() {
+        let p = reacher_fingertip(&[0.0, 0.0]);
+        assert_relative_eq!(p[0], 0.21, epsilon = 1e-15);
+        assert_relative_eq!(p[1], 0.0, epsilon = 1e-15);
+        // Shoulder at 90°, elbow back by 90°: (0.11, 0.1).
+        let p = reacher_fingertip(&[std::f64::consts::FRAC_PI_2, -std::f64::consts::FRAC_PI_2]);
+        assert_relative_eq!(p[0], 0.11, epsilon = 1e-15);
+        assert_relative_eq!(p[1], 0.1, epsilon = 1e-15);
+        // Target 3-4-5 away from the straight arm's tip.
+        let x = [0.0, 0.0, 0.21 + 0.03, 0.04, 1.0, 2.0, 0.0, 0.0];
+        assert_relative_eq!(reacher_distance(&x), 0.05, epsilon = 1e-15);
+        let c = ReacherCost::default();
+        assert_relative_eq!(
+            c.running(&x, &[0.5, -1.0]),
+            c.distance * l12(0.05, c.l1, c.l2, c.alpha) + c.action * 1.25,
+            epsilon = 1e-15
+        );
+        assert_relative_eq!(
+            c.running(&x, &[]),
+            c.distance * l12(0.05, c.l1, c.l2, c.alpha),
+            epsilon = 1e-15
+        );
+        assert!(ReacherCost { alpha: 0.0, ..c }.validate().is_err());
+        assert!(ReacherTask::new(ReacherCost {
+            action: f64::NAN,
+            ..c
+        })
+        .is_err());
+    }
+
+    /// Value and gradient of the reacher's expansion are the cost's (central differences); the
+    /// Hessian is symmetric positive semi-definite and exact in the target's coordinates (where
+    /// the residual is linear).
+    #[test]
+    fn reacher_expansion_matches_the_cost() {
+        let c = ReacherCost::default();
+        let x = [0.7, -1.3, 0.05, 0.12, 0.3, -0.2, 0.0, 0.0];
+        let f = |x: &[f64]| c.running(x, &[]);
+        let (v, g, h) = c.state_expansion(&x);
+        assert_relative_eq!(v, f(&x), epsilon = 1e-15);
+        let eps = 1e-6;
+        for i in 0..REACHER_STATE_DIM {
+            let (mut xp, mut xm) = (x, x);
+            xp[i] += eps;
+            xm[i] -= eps;
+            let fd = (f(&xp) - f(&xm)) / (2.0 * eps);
+            assert!(
+                (fd - g[i]).abs() < 1e-7 * (1.0 + fd.abs()),
+                "d/dx{i}: {fd} vs {}",
+                g[i]
+            );
+        }
+        assert_relative_eq!(h.clone(), h.transpose(), epsilon = 1e-12);
+        assert!(h.clone().symmetric_eigen().eigenvalues.min() > -1e-9);
+        let eps = 1e-4;
+        for (i, k) in [(2, 2), (2, 3), (3, 3)] {
+            let at = |di: f64, dk: f64| {
+                let mut y = x;
+                y[i] += di;
+                y[k] += dk;
+                f(&y)
+            };
+            let fd =
+                (at(eps, eps) - at(eps, -eps) - at(-eps, eps) + at(-eps, -eps)) / (4.0 * eps * eps);
+            assert!(
+                (fd - h[(i, k)]).abs() < 1e-4 * (1.0 + fd.abs()),
+                "({i},{k}): {fd} vs {}",
+                h[(i, k)]
+            );
+        }
+    }
+
+    /// The starts follow gymnasium's reset: arm within 0.1 rad of straight, target in the disc
+    /// of radius 0.2, still target, small arm velocities; the task observes them whole and pays
+    /// minus the cost of the state reached.
+    #[test]
+    fn reacher_starts_follow_gymnasiums_reset() {
+        use tandem_envs::Task;
+        let mut rng = tandem_core::seeding::rng_from_seed(3);
+        let starts = reacher_starts(500, &mut rng);
+        let mut far = 0usize;
+        for x in &starts {
+            assert_eq!(x.len(), REACHER_STATE_DIM);
+            assert!(x[0].abs() <= 0.1 && x[1].abs() <= 0.1);
+            assert!(x[2].hypot(x[3]) < 0.2);
+            assert!(x[4].abs() <= 0.005 && x[5].abs() <= 0.005);
+            assert_eq!((x[6], x[7]), (0.0, 0.0));
+            far += usize::from(x[2].hypot(x[3]) > 0.1);
+        }
+        // Uniform in the disc: three quarters of the targets lie beyond half the radius.
+        assert!((far as f64 / 500.0 - 0.75).abs() < 0.06, "{far}");
+        let task = ReacherTask::new(ReacherCost::default()).unwrap();
+        let x = &starts[0];
+        let o = task.observe(x);
+        let tip = reacher_fingertip(x);
+        assert_eq!(o.len(), REACHER_OBS_DIM);
+        assert_relative_eq!(o[8], tip[0] - x[2], epsilon = 1e-15);
+        assert_relative_eq!(o[9], tip[1] - x[3], epsilon = 1e-15);
+        assert_relative_eq!(
+            task.reward(&starts[1], &[0.3, 0.1], x),
+            -task.cost().running(x, &[0.3, 0.1]),
+            epsilon = 1e-15
+        );
+        assert_eq!(task.max_episode_steps(), Some(REACHER_HORIZON));
     }
 }

@@ -124,3 +124,45 @@ fn door_scene_holds_still_and_its_grasp_point_turns_with_the_door() {
         "{open:?} vs {turned:?}"
     );
 }
+
+/// p4's reacher is gymnasium's `reacher.xml`: its `qpos0`, dimensions and control period, and a
+/// fingertip–target offset equal to the one gymnasium observes (MuJoCo's body positions), and
+/// gymnasium's whole observation.
+#[test]
+fn reacher_kinematics_is_gymnasiums() {
+    use tandem_envs::Env;
+    use tandem_mujoco::p4::{
+        reacher_fingertip, reacher_observation, REACHER_ACTION_DIM, REACHER_OBS_DIM, REACHER_QPOS0,
+        REACHER_STATE_DIM,
+    };
+    use tandem_mujoco::{assets_dir, MujocoEnv, TaskKind};
+    let mut env = MujocoEnv::task(TaskKind::Reacher, &assets_dir()).unwrap();
+    assert_eq!(env.scene_ref().qpos0(), &REACHER_QPOS0);
+    let plant = env.plant();
+    assert_eq!(plant.state_dim(), REACHER_STATE_DIM);
+    assert_eq!(plant.action_dim(), REACHER_ACTION_DIM);
+    assert!((plant.dt() - 0.02).abs() < 1e-15);
+    for x in [
+        [0.0, 0.0, 0.1, -0.1, 0.0, 0.0, 0.0, 0.0],
+        [0.7, -1.9, -0.05, 0.15, 0.1, 0.2, 0.0, 0.0],
+        [-2.8, 2.5, 0.12, 0.02, 0.0, 0.0, 0.0, 0.0],
+    ] {
+        let obs = env.set_state(&x).unwrap();
+        let p = reacher_fingertip(&x);
+        let (dx, dy) = (p[0] - x[2], p[1] - x[3]);
+        assert!(
+            (obs[8] - dx).abs() < 1e-12 && (obs[9] - dy).abs() < 1e-12,
+            "{x:?}: gymnasium ({}, {}), ours ({dx}, {dy})",
+            obs[8],
+            obs[9]
+        );
+        let mut ours = [0.0; REACHER_OBS_DIM];
+        reacher_observation(&x, &mut ours);
+        for (a, b) in obs.iter().zip(ours) {
+            assert!(
+                (a - b).abs() < 1e-12,
+                "{x:?}: gymnasium {obs:?}, ours {ours:?}"
+            );
+        }
+    }
+}

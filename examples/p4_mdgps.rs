@@ -1,0 +1,103 @@
+//! p4 Fig. 4 for one seed: MDGPS trains a neural policy for gymnasium's reacher (MuJoCo) from
+//! per-condition local controllers updated by LQR-FLM, PI² or PILQR, and prints, per iteration,
+//! the samples drawn so far and the global policy's mean final fingertip–target distance on 300
+//! random test targets.
+//!
+//! `cargo run --release --features mujoco --example p4_mdgps -- [METHODS] [SEED] [CONDITIONS]`
+//! (`lqr_flm,pi2,pilqr`, seed 0, 24 training conditions by default); `P4_CONFIG=FILE` reads the
+//! loop's settings (`MdgpsConfig`, every field) from a TOML file; `--print-config` prints the
+//! defaults in that form. The method `ddpg` trains p4's model-free baseline on the same task
+//! (`P4_DDPG=FILE` for its settings, `ReacherDdpg`), measured on the same test targets.
+//!
+//! One MDGPS iteration ([`tandem::pipelines::mdgps::train_mdgps`]):
+//!
+//! 1. sample every condition's local controller on the system;
+//! 2. fit TVLG dynamics per condition and linearize the global policy around the samples;
+//! 3. update each local controller, its step bounded by KL against the linearized policy;
+//! 4. regress the global policy onto the local controllers' actions at the sampled states.
+
+use tandem::mujoco::p4::ReacherCost;
+use tandem::pipelines::gps::LocalMethod;
+use tandem::pipelines::mdgps::{train_mdgps, MdgpsConfig};
+use tandem::pipelines::p4::{
+    reacher_config, reacher_policy_input, reacher_problem, reacher_test_set, train_ddpg_reacher,
+    ReacherDdpg,
+};
+use tandem::pipelines::Ephemeral;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    if args.get(1).map(String::as_str) == Some("--print-config") {
+        print!("{}", toml::to_string(&reacher_config())?);
+        return Ok(());
+    }
+    let methods = args.get(1).map_or("lqr_flm,pi2,pilqr", |a| a.as_str());
+    let seed: u64 = args.get(2).map_or(Ok(0), |a| a.parse())?;
+    let conditions: usize = args.get(3).map_or(Ok(24), |a| a.parse())?;
+    let cfg: MdgpsConfig = match std::env::var_os("P4_CONFIG") {
+        Some(path) => toml::from_str(&std::fs::read_to_string(path)?)?,
+        None => reacher_config(),
+    };
+    let problem = reacher_problem(ReacherCost::default(), conditions, seed)?;
+    let test = reacher_test_set(300, 1_000_000 + seed);
+    println!(
+        "reacher, seed {seed}, {conditions} conditions, {} iterations of {} trajectories each",
+        cfg.local.iterations, cfg.local.samples
+    );
+    for name in methods.split(',') {
+        if name == "ddpg" {
+            let ddpg: ReacherDdpg = match std::env::var_os("P4_DDPG") {
+                Some(path) => toml::from_str(&std::fs::read_to_string(path)?)?,
+                None => ReacherDdpg::default(),
+            };
+            let t0 = std::time::Instant::now();
+            let curve = train_ddpg_reacher(
+                ReacherCost::default(),
+                &ddpg,
+                &test,
+                seed,
+                &mut Ephemeral,
+                &mut |_| {},
+            )?;
+            let curve: Vec<String> = curve
+                .iter()
+                .map(|p| format!("{}:{:.4}", p.samples, p.test_measure))
+                .collect();
+            println!(
+                "    ddpg: samples:test {} ({:.1} s)",
+                curve.join(" "),
+                t0.elapsed().as_secs_f64()
+            );
+            continue;
+        }
+        let method = LocalMethod::from_name(name).ok_or(format!("unknown method {name}"))?;
+        let t0 = std::time::Instant::now();
+        let run = train_mdgps(
+            method,
+            &problem,
+            &test,
+            Some(reacher_policy_input()),
+            &cfg,
+            seed,
+            &mut Ephemeral,
+            &mut |_| {},
+        )?;
+        let curve: Vec<String> = run
+            .curve
+            .iter()
+            .map(|p| {
+                format!(
+                    "{}:{:.4}/{:.4}/{:.1e}",
+                    p.samples, p.test_measure, p.local_measure, p.policy_loss
+                )
+            })
+            .collect();
+        println!(
+            "{name:>8}: samples:test/local/loss {} ({} failed updates; {:.1} s)",
+            curve.join(" "),
+            run.failed_updates,
+            t0.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
+}
