@@ -20,8 +20,7 @@ use tandem::mujoco::p4::ReacherCost;
 use tandem::pipelines::gps::LocalMethod;
 use tandem::pipelines::mdgps::{train_mdgps, MdgpsConfig};
 use tandem::pipelines::p4::{
-    reacher_config, reacher_policy_input, reacher_problem, reacher_test_set, train_ddpg_reacher,
-    ReacherDdpg,
+    reacher_config, reacher_problem, reacher_test_set, train_ddpg_reacher, ReacherDdpg,
 };
 use tandem::pipelines::Ephemeral;
 
@@ -76,7 +75,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             method,
             &problem,
             &test,
-            Some(reacher_policy_input()),
             &cfg,
             seed,
             &mut Ephemeral,

@@ -41,12 +41,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         mut conditions,
         horizon,
         measure,
+        ..
     } = full;
     let problem = LocalProblem {
         system,
         conditions: vec![conditions.swap_remove(cond)],
         horizon,
         measure: Box::new(move |_, x| measure(cond, x)),
+        policy_input: None,
     };
     // P4_CONFIG=FILE: a TOML file with LocalConfig's fields (all of them), for experiments.
     let cfg = match std::env::var_os("P4_CONFIG") {

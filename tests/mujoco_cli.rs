@@ -318,3 +318,59 @@ fn p4_pusher_runs_with_the_feature_only() {
     }
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn p4_reacher_runs_with_the_feature_only() {
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("mujoco-cli-p4-reacher");
+    let o = quick_study("p4-reacher", "2", &out);
+    if cfg!(feature = "mujoco") {
+        assert!(o.status.success(), "{}", err_text(&o));
+        let table = std::fs::read_to_string(out.join("table.json")).unwrap();
+        let table: serde_json::Value = serde_json::from_str(&table).unwrap();
+        assert_eq!(table["test_conditions"], 20);
+        for m in ["mdgps_lqr_flm", "mdgps_pi2", "mdgps_pilqr", "ddpg"] {
+            let f = &table["methods"][m];
+            assert_eq!(f["samples_to_target"]["target"], 0.08, "{m}");
+            let finals = f["final"]["per_seed"].as_array().unwrap();
+            assert_eq!(finals.len(), 2, "{m}");
+            // The final figure is the curve's last point, a distance within the arm's reach.
+            let curve =
+                std::fs::read_to_string(out.join(format!("runs/{m}__seed1/curve.csv"))).unwrap();
+            let rows: Vec<&str> = curve.lines().collect();
+            assert_eq!(rows[0], "samples,test_distance");
+            let last: Vec<f64> = rows
+                .last()
+                .unwrap()
+                .split(',')
+                .map(|v| v.parse().unwrap())
+                .collect();
+            assert_eq!(last[1], finals[1].as_f64().unwrap(), "{m}");
+            assert!(last[1] > 0.0 && last[1] < 0.45, "{m}: {last:?}");
+            // --quick: MDGPS 2 conditions x 2 iterations x 2 trajectories x 50 steps; DDPG 400
+            // steps, measured at 0, 200 and 400.
+            let (budget, points) = if m == "ddpg" { (400.0, 3) } else { (400.0, 2) };
+            assert_eq!(last[0], budget, "{m}");
+            assert_eq!(rows.len(), 1 + points, "{m}: {curve}");
+        }
+        let ratio = &table["ddpg_over_mdgps_pilqr"];
+        assert_eq!(
+            ratio["level"],
+            table["methods"]["mdgps_pilqr"]["final"]["mean"]
+        );
+        assert!(std::fs::read_to_string(out.join("fig4.svg"))
+            .unwrap()
+            .contains("mdgps_pilqr"));
+        assert!(std::fs::read_to_string(out.join("table.md"))
+            .unwrap()
+            .contains("p4's comparison"));
+    } else {
+        assert_eq!(o.status.code(), Some(1));
+        assert!(
+            err_text(&o).contains("--features mujoco"),
+            "{}",
+            err_text(&o)
+        );
+        assert!(!out.exists());
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -11,6 +11,7 @@ pub mod reproduce_p1;
 pub mod reproduce_p2;
 pub mod reproduce_p3;
 pub mod reproduce_p4;
+pub mod reproduce_p4_reacher;
 pub mod rollout;
 pub mod train;
 pub mod urdf;

@@ -10,6 +10,7 @@ use super::reproduce_p0::{P0Args, P0Study, P0Task};
 use super::reproduce_p1::P1Study;
 use super::reproduce_p3::P3Study;
 use super::reproduce_p4::{Door, P4Study, Pusher};
+use super::reproduce_p4_reacher::ReacherStudy;
 use super::{CliError, Result};
 
 /// The reproductions.
@@ -43,7 +44,10 @@ pub enum ReproduceCommand {
     /// p4 (PILQR) on the door (MuJoCo, needs `--features mujoco`): LQR-FLM, PI² and PILQR local
     /// controllers from four arm starts, the same seeds and samples.
     P4Door(super::reproduce_p4::P4Args),
-    /// Combine p0-pendulum, p0-leo, p1, p3-leg, p3-mujoco, p4-pusher or p4-door reproductions of disjoint seeds (e.g. one
+    /// p4 (PILQR) Fig. 4 on gymnasium's reacher (MuJoCo, needs `--features mujoco`): neural
+    /// policies by MDGPS with LQR-FLM, PI² or PILQR and by DDPG, final distance on 300 test targets.
+    P4Reacher(super::reproduce_p4_reacher::ReacherArgs),
+    /// Combine p0-pendulum, p0-leo, p1, p3-leg, p3-mujoco, p4-pusher, p4-door or p4-reacher reproductions of disjoint seeds (e.g. one
     /// process per seed, `--first-seed`) into one table and figure; their settings must be equal.
     Merge(MergeArgs),
 }
@@ -83,6 +87,7 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
         ),
         ReproduceCommand::P4Pusher(args) => harness::run(&P4Study::<Pusher>::new(), &args.study),
         ReproduceCommand::P4Door(args) => harness::run(&P4Study::<Door>::new(), &args.study),
+        ReproduceCommand::P4Reacher(args) => harness::run(&ReacherStudy, &args.study),
         ReproduceCommand::Merge(args) => {
             let Some(first) = args.dirs.first() else {
                 return Err(CliError::input("merge", "no directories given"));
@@ -126,6 +131,12 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
                 ),
                 "p4-door" => harness::merge(
                     &P4Study::<Door>::new(),
+                    &args.dirs,
+                    args.out.as_deref(),
+                    args.overwrite,
+                ),
+                "p4-reacher" => harness::merge(
+                    &ReacherStudy,
                     &args.dirs,
                     args.out.as_deref(),
                     args.overwrite,

@@ -361,7 +361,7 @@ pub struct SeedFigure {
 }
 
 impl SeedFigure {
-    fn new(per_seed: Vec<f64>) -> Self {
+    pub(crate) fn new(per_seed: Vec<f64>) -> Self {
         let (mean, stderr) = mean_stderr(&per_seed);
         Self {
             mean,

@@ -35,7 +35,7 @@ use tandem_planners::{
     sample_trajectories, LqrFlm, SampleConfig, TrajectorySamples, TvlgController,
 };
 
-use super::gps::{Local, LocalConfig, LocalMethod, LocalProblem};
+use super::gps::{Local, LocalConfig, LocalMethod, LocalProblem, PolicyInput};
 use super::{Checkpoints, PipelineError, Result};
 
 /// How the global policy is fitted each iteration.
@@ -105,17 +105,6 @@ pub struct TestSet {
     pub starts: Vec<Vec<f64>>,
     /// The measure of a final state (e.g. the end effector's distance to the target).
     pub measure: FinalMeasure,
-}
-
-/// What the global policy sees of a state: `dim` features written by `map(state, out)` (e.g. a
-/// task's observation: angles as cosines and sines, the end effector's offset to the target).
-/// Without one the policy sees the state itself.
-#[derive(Clone)]
-pub struct PolicyInput {
-    /// Number of features.
-    pub dim: usize,
-    /// Writes the features of a state into `out` (`dim` long).
-    pub map: std::sync::Arc<dyn Fn(&[f64], &mut [f64]) + Send + Sync>,
 }
 
 /// The neural global policy `N(μ_θ(o(x)), diag(σ²))` over the features `o(x)` of the state
@@ -327,7 +316,6 @@ pub fn train_mdgps(
     method: LocalMethod,
     problem: &LocalProblem,
     test: &TestSet,
-    input: Option<PolicyInput>,
     cfg: &MdgpsConfig,
     seed: u64,
     store: &mut dyn Checkpoints,
@@ -354,7 +342,7 @@ pub fn train_mdgps(
         m,
         &cfg.policy.hidden,
         local.init_variance,
-        input,
+        problem.policy_input.clone(),
         &mut rng,
     )?;
     let mut opt = Adam::new(
@@ -533,7 +521,6 @@ mod tests {
             LocalMethod::LqrFlm,
             &p,
             &test,
-            None,
             &c,
             0,
             &mut Ephemeral,
@@ -579,5 +566,45 @@ mod tests {
             assert!((lin.offsets[t][0] - f64::from(bias)).abs() < 1e-5);
             assert_eq!(lin.cov[t][(0, 0)], 0.3);
         }
+    }
+
+    /// Through features `o(x) = (x₀ + x₁, x₀ − x₁, 2x₀)`, a linear net `w·o + b` is the linear
+    /// policy `(w₀ + w₁ + 2w₂) x₀ + (w₀ − w₁) x₁ + b` of the state, and the linearization is
+    /// taken in the state.
+    #[test]
+    fn a_policy_over_features_linearizes_in_the_state() {
+        let mut rng = rng_from_seed(2);
+        let input = PolicyInput {
+            dim: 3,
+            map: std::sync::Arc::new(|x: &[f64], o: &mut [f64]| {
+                o.copy_from_slice(&[x[0] + x[1], x[0] - x[1], 2.0 * x[0]]);
+            }),
+        };
+        let policy = GlobalPolicy::new(2, 1, &[], 0.3, Some(input), &mut rng).unwrap();
+        let w: Vec<f64> = policy.net.weight(0).iter().map(|&v| f64::from(v)).collect();
+        let bias = f64::from(policy.net.bias(0)[0]);
+        let gains = [w[0] + w[1] + 2.0 * w[2], w[0] - w[1]];
+        let mut ws = policy.net.workspace();
+        let x = [0.3, -1.2];
+        let mean = policy.mean(&x, &mut ws).unwrap()[0];
+        assert!((mean - (gains[0] * x[0] + gains[1] * x[1] + bias)).abs() < 1e-5);
+        let p = problem(&[[1.0, 0.0]]);
+        let samples = sample_trajectories(
+            &TvlgController::constant(T, 2, &[0.0], 1.0).unwrap(),
+            &*p.system,
+            &p.conditions[0].objective,
+            &p.conditions[0].x0,
+            &SampleConfig::default(),
+            &mut rng,
+        )
+        .unwrap();
+        let lin = policy.linearize(&samples).unwrap();
+        for t in [0, T - 1] {
+            for (j, g) in gains.iter().enumerate() {
+                let err = (lin.gains[t][(0, j)] - g).abs();
+                assert!(err < 1e-3, "step {t}, state {j}: {err}");
+            }
+        }
+        assert!(policy.mean(&[0.0; 3], &mut ws).is_err());
     }
 }

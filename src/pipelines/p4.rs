@@ -69,6 +69,7 @@ pub fn pusher_problem(cost: PusherCost) -> Result<LocalProblem> {
         conditions,
         horizon: PUSHER_HORIZON,
         measure: Box::new(|c, x| PUSHER_CONDITIONS[c].block_goal_distance(x)),
+        policy_input: None,
     })
 }
 
@@ -126,13 +127,14 @@ pub fn reacher_problem(cost: ReacherCost, conditions: usize, seed: u64) -> Resul
         conditions,
         horizon: REACHER_HORIZON,
         measure: Box::new(|_, x| reacher_distance(x)),
+        policy_input: Some(reacher_policy_input()),
     })
 }
 
 /// The reacher's global policy sees `Reacher-v5`'s observation
 /// ([`tandem_mujoco::p4::reacher_observation`]), as DDPG does.
-pub fn reacher_policy_input() -> super::mdgps::PolicyInput {
-    super::mdgps::PolicyInput {
+pub fn reacher_policy_input() -> super::gps::PolicyInput {
+    super::gps::PolicyInput {
         dim: tandem_mujoco::p4::REACHER_OBS_DIM,
         map: std::sync::Arc::new(tandem_mujoco::p4::reacher_observation),
     }
@@ -293,6 +295,7 @@ mod door {
             conditions,
             horizon: DOOR_HORIZON,
             measure: Box::new(|_, x| x[DOOR_ANGLE]),
+            policy_input: None,
         })
     }
 }
@@ -388,7 +391,9 @@ mod ddpg {
     use ndarray::Array2;
     use tandem_agents::{AlgoConfig, BatchPolicy, Learner, Mode, Pause, TrainSettings, Trainer};
     use tandem_envs::{PlantEnv, TimeLimit};
-    use tandem_mujoco::p4::{ReacherCost, ReacherTask, REACHER_HORIZON};
+    use tandem_mujoco::p4::{
+        reacher_observation, ReacherCost, ReacherTask, REACHER_HORIZON, REACHER_OBS_DIM,
+    };
 
     use super::super::mdgps::TestSet;
     use super::super::{ensure_same_run, Checkpoints, PipelineError, Result};
@@ -411,7 +416,14 @@ mod ddpg {
             test.measure_policy(&system, REACHER_HORIZON, &mut rng, &mut |x: &Array2<
                 f64,
             >| {
-                let a = agent.act_batch(x.view(), Mode::Deterministic, &mut unused)?;
+                let mut obs = Array2::zeros((x.nrows(), REACHER_OBS_DIM));
+                for (s, mut o) in x.rows().into_iter().zip(obs.rows_mut()) {
+                    reacher_observation(
+                        s.as_slice().expect("standard layout"),
+                        o.as_slice_mut().expect("standard layout"),
+                    );
+                }
+                let a = agent.act_batch(obs.view(), Mode::Deterministic, &mut unused)?;
                 Ok(a.iter().copied().collect())
             })?;
         Ok(TestedPoint {
