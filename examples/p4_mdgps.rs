@@ -1,4 +1,4 @@
-//! p4 Fig. 4 for one seed: MDGPS trains a neural policy for gymnasium's reacher (MuJoCo) from
+//! p4 Fig. 4 for one seed, with the settings of `tandem reproduce p4-reacher`: MDGPS trains a neural policy for gymnasium's reacher (MuJoCo) from
 //! per-condition local controllers updated by LQR-FLM, PI² or PILQR, and prints, per iteration,
 //! the samples drawn so far and the global policy's mean final fingertip–target distance on 300
 //! random test targets.
@@ -21,6 +21,7 @@ use tandem::pipelines::gps::LocalMethod;
 use tandem::pipelines::mdgps::{train_mdgps, MdgpsConfig};
 use tandem::pipelines::p4::{
     reacher_config, reacher_problem, reacher_test_set, train_ddpg_reacher, ReacherDdpg,
+    REACHER_TEST_CONDITIONS, REACHER_TEST_SEED,
 };
 use tandem::pipelines::Ephemeral;
 
@@ -38,7 +39,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         None => reacher_config(),
     };
     let problem = reacher_problem(ReacherCost::default(), conditions, seed)?;
-    let test = reacher_test_set(300, 1_000_000 + seed);
+    let test = reacher_test_set(REACHER_TEST_CONDITIONS, REACHER_TEST_SEED);
     println!(
         "reacher, seed {seed}, {conditions} conditions, {} iterations of {} trajectories each",
         cfg.local.iterations, cfg.local.samples

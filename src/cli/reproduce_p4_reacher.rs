@@ -26,7 +26,8 @@ use tandem::mujoco::p4::{ReacherCost, REACHER_HORIZON};
 use tandem::pipelines::gps::LocalMethod;
 use tandem::pipelines::mdgps::{train_mdgps, MdgpsConfig};
 use tandem::pipelines::p4::{
-    reacher_config, reacher_problem, reacher_test_set, train_ddpg_reacher, ReacherDdpg, TestedPoint,
+    reacher_config, reacher_problem, reacher_test_set, train_ddpg_reacher, ReacherDdpg,
+    TestedPoint, REACHER_TEST_CONDITIONS, REACHER_TEST_SEED,
 };
 use tandem::pipelines::Checkpoints;
 use tandem::report::{to_json_pretty, Curve, Figure, SamplesToTarget};
@@ -70,18 +71,14 @@ pub struct ReacherSettings {
 
 impl Default for ReacherSettings {
     /// MDGPS with [`reacher_config`] on 24 training conditions; DDPG with [`ReacherDdpg`]'s
-    /// defaults for 50,000 steps measured every 2,500; 300 test targets; target 0.08 m.
+    /// defaults (50,000 steps measured every 2,500); 300 test targets; target 0.08 m.
     fn default() -> Self {
         Self {
             mdgps: reacher_config(),
             conditions: 24,
-            ddpg: ReacherDdpg {
-                steps: 50_000,
-                eval_every: 2_500,
-                ..ReacherDdpg::default()
-            },
-            test_conditions: 300,
-            test_seed: 2017,
+            ddpg: ReacherDdpg::default(),
+            test_conditions: REACHER_TEST_CONDITIONS,
+            test_seed: REACHER_TEST_SEED,
             cost: ReacherCost::default(),
             target: 0.08,
         }

@@ -12,7 +12,7 @@
 //! | [`mdgps`] | Montgomery and Levine, MDGPS (p4 §IV) | a neural global policy regressed onto the local controllers, each updated under a KL bound to the linearized global policy |
 //! | [`mbpo`] | Janner et al., MBPO (shared) | SAC on the real system; every 250 steps an ensemble refit and branched rollouts of length `k` into `D_model`; `G` updates per step at real ratio 0.05; the SAC baseline on the same loop |
 //! | [`p3`] | Mishra et al., M-DeMoRL | the MBPO loop with `D_MPC` filled by DMD-MPC plans (CEM elites, SAC's policy as shift, `−V` terminal cost) through the ensemble's elites |
-//! | [`p4`] | Chebotar et al., PILQR | the gripper pusher's conditions and costs on MuJoCo for [`gps`] |
+//! | [`p4`] | Chebotar et al., PILQR | the gripper pusher's, the door's and the reacher's conditions and costs on MuJoCo for [`gps`] and [`mdgps`]; DDPG on the reacher, measured on the same test targets |
 //! | [`adapter`] | (shared) | observation features, reward scale and settable exploration noise in front of any off-policy agent |
 
 pub mod adapter;

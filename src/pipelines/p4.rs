@@ -159,6 +159,11 @@ pub fn reacher_config() -> super::mdgps::MdgpsConfig {
     }
 }
 
+/// p4's number of reacher test starts.
+pub const REACHER_TEST_CONDITIONS: usize = 300;
+/// The generator of the reacher's test starts in `tandem reproduce p4-reacher` and the example.
+pub const REACHER_TEST_SEED: u64 = 2017;
+
 /// `n` test starts of the reacher drawn by `seed`'s generator, measured by the final
 /// fingertip–target distance.
 pub fn reacher_test_set(n: usize, seed: u64) -> TestSet {
@@ -338,7 +343,7 @@ impl Default for ReacherDdpg {
     /// stable-baselines3's DDPG defaults (two hidden layers of 400 and 300, Adam 10⁻³ for both
     /// networks, τ = 0.005, γ = 0.99, minibatch 256, one update per step after 100 random steps)
     /// with Gaussian exploration noise σ = 0.1 (rl-baselines3-zoo's usual choice for MuJoCo);
-    /// 200,000 steps, measured every 5,000.
+    /// 50,000 steps, measured every 2,500.
     fn default() -> Self {
         Self {
             agent: tandem_agents::DdpgConfig {
@@ -355,8 +360,8 @@ impl Default for ReacherDdpg {
                 train_freq: 1,
                 gradient_steps: 1,
             },
-            steps: 200_000,
-            eval_every: 5_000,
+            steps: 50_000,
+            eval_every: 2_500,
         }
     }
 }

@@ -36,6 +36,13 @@
 //! `handle`, which moves with the door), both from MuJoCo's kinematics, and `θ* = 1` rad
 //! ([`DoorCost::default`]). The four conditions ([`DOOR_CONDITIONS`]) are arm configurations
 //! 0.32–0.36 m from the grasp point: above, in front of, left of and right of the handle.
+//!
+//! **Reacher** (gymnasium's own `reacher.xml`, p4 Fig. 4): a two-link planar arm brings its
+//! fingertip to a target. State `[q_0, q_1, g_x, g_y]` and their velocities (8; the target's slide
+//! joints never move), action two commands in `[−1, 1]`. p4 replaces gym's distance by a
+//! Huber-style penalty: `c(x, u) = w_dist ℓ(‖p(q) − g‖) + w_u ‖u‖²` ([`ReacherCost`]). Starts
+//! follow `Reacher-v5`'s reset ([`reacher_starts`]); [`reacher_observation`] is `Reacher-v5`'s
+//! observation as a function of the state; [`ReacherTask`] makes it an environment's task.
 
 use std::path::PathBuf;
 
