@@ -39,6 +39,14 @@ fn quick_study(study: &str, seeds: &str, out: &std::path::Path) -> Output {
     ])
 }
 
+/// A study refused by a build without MuJoCo: exit code 1, a message saying how to enable it,
+/// and no output directory.
+fn refused_without_the_feature(o: &Output, out: &std::path::Path) {
+    assert_eq!(o.status.code(), Some(1));
+    assert!(err_text(o).contains("--features mujoco"), "{}", err_text(o));
+    assert!(!out.exists());
+}
+
 fn write_temp(name: &str, contents: &str) -> PathBuf {
     let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("mujoco-cli-{name}.json"));
     std::fs::write(&path, contents).unwrap();
@@ -236,13 +244,7 @@ fn p3_mujoco_runs_with_the_feature_only() {
             .contains("incremental"));
         let _ = std::fs::remove_dir_all(&p1);
     } else {
-        assert_eq!(o.status.code(), Some(1));
-        assert!(
-            err_text(&o).contains("--features mujoco"),
-            "{}",
-            err_text(&o)
-        );
-        assert!(!out.exists());
+        refused_without_the_feature(&o, &out);
     }
     let o = tandem(&["reproduce", "p3-mujoco", "--env", "Ant-v5", "--quick"]);
     assert_eq!(o.status.code(), Some(1));
@@ -308,13 +310,7 @@ fn p4_pusher_runs_with_the_feature_only() {
         assert!(door.join("door.svg").exists());
         let _ = std::fs::remove_dir_all(&door);
     } else {
-        assert_eq!(o.status.code(), Some(1));
-        assert!(
-            err_text(&o).contains("--features mujoco"),
-            "{}",
-            err_text(&o)
-        );
-        assert!(!out.exists());
+        refused_without_the_feature(&o, &out);
     }
     let _ = std::fs::remove_dir_all(&out);
 }
@@ -364,13 +360,7 @@ fn p4_reacher_runs_with_the_feature_only() {
             .unwrap()
             .contains("p4's comparison"));
     } else {
-        assert_eq!(o.status.code(), Some(1));
-        assert!(
-            err_text(&o).contains("--features mujoco"),
-            "{}",
-            err_text(&o)
-        );
-        assert!(!out.exists());
+        refused_without_the_feature(&o, &out);
     }
     let _ = std::fs::remove_dir_all(&out);
 }

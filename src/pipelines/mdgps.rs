@@ -541,23 +541,28 @@ mod tests {
 
     /// The linearization of a policy is its Jacobian: for a network that is linear (no hidden
     /// layer) it reproduces the weights exactly.
+    /// Trajectories of unit-variance noise on the double integrator from `(1, 0)`: states to
+    /// linearize a policy around.
+    fn noise_samples(rng: &mut Rng) -> TrajectorySamples {
+        let p = problem(&[[1.0, 0.0]]);
+        sample_trajectories(
+            &TvlgController::constant(T, 2, &[0.0], 1.0).unwrap(),
+            &*p.system,
+            &p.conditions[0].objective,
+            &p.conditions[0].x0,
+            &SampleConfig::default(),
+            rng,
+        )
+        .unwrap()
+    }
+
     #[test]
     fn linearizing_a_linear_policy_gives_its_weights() {
         let mut rng = rng_from_seed(1);
         let policy = GlobalPolicy::new(2, 1, &[], 0.3, None, &mut rng).unwrap();
         let w = policy.net.weight(0).to_vec();
         let bias = policy.net.bias(0)[0];
-        let p = problem(&[[1.0, 0.0]]);
-        let samples = sample_trajectories(
-            &TvlgController::constant(T, 2, &[0.0], 1.0).unwrap(),
-            &*p.system,
-            &p.conditions[0].objective,
-            &p.conditions[0].x0,
-            &SampleConfig::default(),
-            &mut rng,
-        )
-        .unwrap();
-        let lin = policy.linearize(&samples).unwrap();
+        let lin = policy.linearize(&noise_samples(&mut rng)).unwrap();
         for t in [0, 7, T - 1] {
             for (j, wj) in w.iter().enumerate() {
                 let err = (lin.gains[t][(0, j)] - f64::from(*wj)).abs();
@@ -588,17 +593,7 @@ mod tests {
         let x = [0.3, -1.2];
         let mean = policy.mean(&x, &mut ws).unwrap()[0];
         assert!((mean - (gains[0] * x[0] + gains[1] * x[1] + bias)).abs() < 1e-5);
-        let p = problem(&[[1.0, 0.0]]);
-        let samples = sample_trajectories(
-            &TvlgController::constant(T, 2, &[0.0], 1.0).unwrap(),
-            &*p.system,
-            &p.conditions[0].objective,
-            &p.conditions[0].x0,
-            &SampleConfig::default(),
-            &mut rng,
-        )
-        .unwrap();
-        let lin = policy.linearize(&samples).unwrap();
+        let lin = policy.linearize(&noise_samples(&mut rng)).unwrap();
         for t in [0, T - 1] {
             for (j, g) in gains.iter().enumerate() {
                 let err = (lin.gains[t][(0, j)] - g).abs();
