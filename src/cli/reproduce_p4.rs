@@ -371,6 +371,26 @@ impl SeedFigure {
     }
 }
 
+/// A method's table row `| label | final ± s.e. | samples to target | seeds that reached it |`,
+/// the final figure with `decimals` decimals.
+pub(crate) fn figure_row(
+    label: &str,
+    fin: &SeedFigure,
+    t: &SamplesToTarget,
+    decimals: usize,
+) -> String {
+    format!(
+        "| {label} | {:.*} ± {:.*} | {} | {}/{} |\n",
+        decimals,
+        fin.mean,
+        decimals,
+        fin.stderr,
+        t.mean.map_or("—".into(), |v| format!("{v:.0}")),
+        t.reached,
+        t.seeds
+    )
+}
+
 /// One condition's figures for one method.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ConditionFigures {
@@ -532,15 +552,11 @@ impl P4Table {
             self.headline, self.target
         ));
         for (k, m) in &self.methods {
-            let t = &m.samples_to_target;
-            md.push_str(&format!(
-                "| {} | {:.3} ± {:.3} | {} | {}/{} |\n",
+            md.push_str(&figure_row(
                 label(k),
-                m.final_measure.mean,
-                m.final_measure.stderr,
-                t.mean.map_or("—".into(), |v| format!("{v:.0}")),
-                t.reached,
-                t.seeds
+                &m.final_measure,
+                &m.samples_to_target,
+                3,
             ));
         }
         md.push_str("\n## Every condition: final measure, seeds that solved it\n\n| method |");

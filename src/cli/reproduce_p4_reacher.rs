@@ -34,7 +34,7 @@ use tandem::report::{to_json_pretty, Curve, Figure, SamplesToTarget};
 use tandem::run::RunDir;
 
 use super::harness::{self, JobError, Study, StudyArgs};
-use super::reproduce_p4::SeedFigure;
+use super::reproduce_p4::{figure_row, SeedFigure};
 use super::{CliError, Result};
 
 /// Arguments of `tandem reproduce p4-reacher`.
@@ -90,12 +90,9 @@ impl ReacherSettings {
         let bad = |m: String| CliError::input(what, m);
         self.mdgps.validate().map_err(|e| bad(e.to_string()))?;
         self.cost.validate().map_err(bad)?;
-        self.ddpg.agent.validate().map_err(|e| bad(e.to_string()))?;
+        self.ddpg.validate().map_err(|e| bad(e.to_string()))?;
         if self.conditions == 0 || self.test_conditions == 0 {
             return Err(bad("conditions and test_conditions must be positive".into()));
-        }
-        if self.ddpg.steps == 0 || self.ddpg.eval_every == 0 {
-            return Err(bad("ddpg steps and eval_every must be positive".into()));
         }
         if !(self.target.is_finite() && self.target > 0.0) {
             return Err(bad(format!(
@@ -112,6 +109,15 @@ impl ReacherSettings {
     fn mdgps_samples(&self) -> u64 {
         let l = &self.mdgps.local;
         (l.iterations * l.samples * self.conditions * REACHER_HORIZON) as u64
+    }
+
+    /// Real samples (time steps) of one run of `method`.
+    fn budget(&self, method: &str) -> u64 {
+        if method == "ddpg" {
+            self.ddpg.steps
+        } else {
+            self.mdgps_samples()
+        }
     }
 }
 
@@ -189,11 +195,7 @@ impl Study for ReacherStudy {
     }
 
     fn length(&self, s: &ReacherSettings, run: &str) -> u64 {
-        if run == "ddpg" {
-            s.ddpg.steps
-        } else {
-            s.mdgps_samples()
-        }
+        s.budget(run)
     }
 
     fn run(
@@ -370,11 +372,7 @@ impl ReacherTable {
             if rs.is_empty() {
                 continue;
             }
-            let budget = if m == "ddpg" {
-                s.ddpg.steps
-            } else {
-                s.mdgps_samples()
-            };
+            let budget = s.budget(m);
             methods.insert(
                 m.to_string(),
                 ReacherMethodFigures {
@@ -388,8 +386,8 @@ impl ReacherTable {
         let ratio = match (methods.get("mdgps_pilqr"), methods.get("ddpg")) {
             (Some(p), Some(_)) if p.final_measure.mean.is_finite() => {
                 let level = p.final_measure.mean;
-                let pilqr = to(&runs("mdgps_pilqr"), level, s.mdgps_samples());
-                let ddpg = to(&runs("ddpg"), level, s.ddpg.steps);
+                let pilqr = to(&runs("mdgps_pilqr"), level, s.budget("mdgps_pilqr"));
+                let ddpg = to(&runs("ddpg"), level, s.budget("ddpg"));
                 let ratio = match (ddpg.mean, pilqr.mean) {
                     (Some(d), Some(p)) if p > 0.0 => Some(d / p),
                     _ => None,
@@ -445,15 +443,11 @@ impl ReacherTable {
             let Some(f) = self.methods.get(m) else {
                 continue;
             };
-            let t = &f.samples_to_target;
-            md.push_str(&format!(
-                "| {} | {:.4} ± {:.4} | {} | {}/{} |\n",
+            md.push_str(&figure_row(
                 label(m),
-                f.final_measure.mean,
-                f.final_measure.stderr,
-                t.mean.map_or("—".into(), |v| format!("{v:.0}")),
-                t.reached,
-                t.seeds
+                &f.final_measure,
+                &f.samples_to_target,
+                4,
             ));
         }
         if let Some(r) = &self.ddpg_over_mdgps_pilqr {

@@ -211,6 +211,29 @@ impl Local {
         })
     }
 
+    /// `cfg.samples` trajectories of the controller on `system` from `cond`'s start, with its
+    /// costs.
+    pub(crate) fn sample(
+        &self,
+        system: &dyn DynamicsModel,
+        cond: &Condition,
+        cfg: &LocalConfig,
+        rng: &mut tandem_core::Rng,
+    ) -> Result<TrajectorySamples> {
+        let scfg = SampleConfig {
+            samples: cfg.samples,
+            ..SampleConfig::default()
+        };
+        Ok(sample_trajectories(
+            &self.controller,
+            system,
+            &cond.objective,
+            &cond.x0,
+            &scfg,
+            rng,
+        )?)
+    }
+
     /// Updates the controller from its `samples` with `method`. With an `anchor` (MDGPS: the
     /// global policy linearized around the samples) LQR-FLM's KL bound, alone or as PILQR's
     /// first stage, is taken against it at the configured `ε`; without one, against the
@@ -302,17 +325,8 @@ pub fn train_local(
 ) -> Result<LocalRun> {
     cfg.validate()?;
     check_problem(problem)?;
-    let (system, conditions, horizon) = (&*problem.system, &problem.conditions, problem.horizon);
-    let (n, m) = (system.state_dim(), system.action_dim());
-    let lqr = LqrFlm::new(cfg.trajopt.lqr.clone())?;
-    let mut locals = conditions
-        .iter()
-        .map(|_| Local::new(horizon, n, m, cfg))
-        .collect::<Result<Vec<_>>>()?;
-    let scfg = SampleConfig {
-        samples: cfg.samples,
-        ..SampleConfig::default()
-    };
+    let (system, conditions) = (&*problem.system, &problem.conditions);
+    let (lqr, mut locals) = start_locals(problem, cfg)?;
     let mut rng = rng_from_seed(seed);
     let mut curves = vec![Vec::with_capacity(cfg.iterations); conditions.len()];
     let mut failed = vec![0; conditions.len()];
@@ -322,14 +336,7 @@ pub fn train_local(
             return Err(PipelineError::Stopped);
         }
         for (c, (cond, local)) in conditions.iter().zip(locals.iter_mut()).enumerate() {
-            let samples = sample_trajectories(
-                &local.controller,
-                system,
-                &cond.objective,
-                &cond.x0,
-                &scfg,
-                &mut rng,
-            )?;
+            let samples = local.sample(system, cond, cfg, &mut rng)?;
             drawn += cfg.samples as u64;
             progress(drawn);
             curves[c].push(point(&samples, (it + 1) * cfg.samples, |x| {
@@ -348,6 +355,21 @@ pub fn train_local(
         failed_updates: failed,
         controllers: locals.into_iter().map(|l| l.controller).collect(),
     })
+}
+
+/// What both loops (the local controllers alone, MDGPS) start from: LQR-FLM with the configured
+/// settings and one fresh controller per condition of `problem`.
+pub(crate) fn start_locals(
+    problem: &LocalProblem,
+    cfg: &LocalConfig,
+) -> Result<(LqrFlm, Vec<Local>)> {
+    let (n, m) = (problem.system.state_dim(), problem.system.action_dim());
+    let locals = problem
+        .conditions
+        .iter()
+        .map(|_| Local::new(problem.horizon, n, m, cfg))
+        .collect::<Result<Vec<_>>>()?;
+    Ok((LqrFlm::new(cfg.trajopt.lqr.clone())?, locals))
 }
 
 /// Checks that there are conditions, a horizon, and dimensions that fit the system.

@@ -31,11 +31,9 @@ use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
 use tandem_models::{DynamicsModel, ModelInput};
 use tandem_nn::{mse, Adam, AdamConfig, Mlp, MlpConfig, MlpWorkspace, Optimizer};
-use tandem_planners::{
-    sample_trajectories, LqrFlm, SampleConfig, TrajectorySamples, TvlgController,
-};
+use tandem_planners::{TrajectorySamples, TvlgController};
 
-use super::gps::{Local, LocalConfig, LocalMethod, LocalProblem, PolicyInput};
+use super::gps::{start_locals, LocalConfig, LocalMethod, LocalProblem, PolicyInput};
 use super::{Checkpoints, PipelineError, Result};
 
 /// How the global policy is fitted each iteration.
@@ -349,15 +347,8 @@ pub fn train_mdgps(
         AdamConfig::with_lr(cfg.policy.learning_rate),
         policy.net.num_params(),
     )?;
-    let lqr = LqrFlm::new(local.trajopt.lqr.clone())?;
     let k = problem.conditions.len();
-    let mut locals = (0..k)
-        .map(|_| Local::new(horizon, n, m, local))
-        .collect::<Result<Vec<_>>>()?;
-    let scfg = SampleConfig {
-        samples: local.samples,
-        ..SampleConfig::default()
-    };
+    let (lqr, mut locals) = start_locals(problem, local)?;
     let mut curve = Vec::with_capacity(local.iterations);
     let mut failed = 0;
     let mut drawn = 0u64;
@@ -368,14 +359,7 @@ pub fn train_mdgps(
         let (mut states, mut targets) = (Vec::new(), Vec::new());
         let mut local_sum = 0.0;
         for (c, cond) in problem.conditions.iter().enumerate() {
-            let samples = sample_trajectories(
-                &locals[c].controller,
-                system,
-                &cond.objective,
-                &cond.x0,
-                &scfg,
-                &mut rng,
-            )?;
+            let samples = locals[c].sample(system, cond, local, &mut rng)?;
             drawn += local.samples as u64;
             progress(drawn);
             for i in 0..samples.len() {
@@ -483,6 +467,7 @@ mod tests {
     use super::*;
     use crate::pipelines::gps::tests::{a, b, cfg, problem, riccati_cost, T};
     use crate::pipelines::Ephemeral;
+    use tandem_planners::{sample_trajectories, SampleConfig};
 
     /// The cost of the global policy's mean actions from `x0` on the exact double integrator.
     fn policy_cost(policy: &GlobalPolicy, obj: &tandem_planners::Objective, x0: [f64; 2]) -> f64 {

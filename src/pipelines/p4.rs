@@ -366,6 +366,20 @@ impl Default for ReacherDdpg {
     }
 }
 
+impl ReacherDdpg {
+    /// Checks the agent's settings and that the budget and the measurement interval are
+    /// positive.
+    pub fn validate(&self) -> Result<()> {
+        if self.eval_every == 0 || self.steps == 0 {
+            return Err(PipelineError::Config(format!(
+                "ddpg steps {} and eval_every {} must be positive",
+                self.steps, self.eval_every
+            )));
+        }
+        Ok(self.agent.validate()?)
+    }
+}
+
 /// Trains DDPG on the reacher (episodes from `Reacher-v5`'s reset distribution, reward `−c`,
 /// observing the whole state) with the loop `tandem train` runs, measuring its deterministic
 /// policy on `test` at the start and every `eval_every` steps. Checkpoints (under `"ddpg"`) at
@@ -379,13 +393,7 @@ pub fn train_ddpg_reacher(
     store: &mut dyn super::Checkpoints,
     progress: &mut dyn FnMut(u64),
 ) -> Result<Vec<TestedPoint>> {
-    if cfg.eval_every == 0 || cfg.steps == 0 {
-        return Err(PipelineError::Config(format!(
-            "ddpg steps {} and eval_every {} must be positive",
-            cfg.steps, cfg.eval_every
-        )));
-    }
-    cfg.agent.validate()?;
+    cfg.validate()?;
     ddpg::train(cost, cfg, test, seed, store, progress)
 }
 
@@ -406,8 +414,12 @@ mod ddpg {
 
     const KEY: &str = "ddpg";
 
-    fn measure(trainer: &mut Trainer, test: &TestSet, seed: u64) -> Result<TestedPoint> {
-        let system = tandem_models::PlantModel::new(reacher_plant()?);
+    fn measure(
+        trainer: &mut Trainer,
+        system: &tandem_models::PlantModel<tandem_mujoco::MujocoPlant>,
+        test: &TestSet,
+        seed: u64,
+    ) -> Result<TestedPoint> {
         let samples = trainer.steps();
         let Learner::Ddpg(agent) = trainer.learner() else {
             unreachable!("the trainer was built for DDPG");
@@ -418,9 +430,7 @@ mod ddpg {
             tandem_core::seeding::rng_from_seed(seed),
         );
         let test_measure =
-            test.measure_policy(&system, REACHER_HORIZON, &mut rng, &mut |x: &Array2<
-                f64,
-            >| {
+            test.measure_policy(system, REACHER_HORIZON, &mut rng, &mut |x: &Array2<f64>| {
                 let mut obs = Array2::zeros((x.nrows(), REACHER_OBS_DIM));
                 for (s, mut o) in x.rows().into_iter().zip(obs.rows_mut()) {
                     reacher_observation(
@@ -446,13 +456,17 @@ mod ddpg {
         progress: &mut dyn FnMut(u64),
     ) -> Result<Vec<TestedPoint>> {
         let task = ReacherTask::new(cost).map_err(PipelineError::Config)?;
+        // The scene is read once: the training environment, the trainer's (unused) evaluation
+        // environment and the test rollouts step copies of one plant.
+        let plant = reacher_plant()?;
         let make = || -> Result<TimeLimit<PlantEnv<_, _>>> {
             Ok(TimeLimit::new(
-                PlantEnv::from_parts(reacher_plant()?, task.clone())?,
+                PlantEnv::from_parts(plant.clone(), task.clone())?,
                 REACHER_HORIZON,
             ))
         };
         let (mut env, mut unused) = (make()?, make()?);
+        let system = tandem_models::PlantModel::new(plant);
         let settings = TrainSettings {
             eval_interval: 0,
             checkpoint_interval: cfg.eval_every,
@@ -470,7 +484,7 @@ mod ddpg {
                 ckpt.get_json("curve")
                     .map_err(|e| PipelineError::Checkpoint(e.to_string()))?
             }
-            None => vec![measure(&mut trainer, test, seed)?],
+            None => vec![measure(&mut trainer, &system, test, seed)?],
         };
         progress(trainer.steps());
         loop {
@@ -491,7 +505,7 @@ mod ddpg {
                 Pause::Stopped => return Err(PipelineError::Stopped),
                 Pause::Checkpoint | Pause::Finished => {
                     if curve.last().map(|p| p.samples) != Some(trainer.steps()) {
-                        curve.push(measure(&mut trainer, test, seed)?);
+                        curve.push(measure(&mut trainer, &system, test, seed)?);
                     }
                     if pause == Pause::Finished {
                         return Ok(curve);
