@@ -75,9 +75,8 @@ pub fn pusher_problem(cost: PusherCost) -> Result<LocalProblem> {
 
 #[cfg(feature = "mujoco")]
 fn pusher_system() -> Result<Box<dyn tandem_models::DynamicsModel + Send + Sync>> {
-    use tandem_mujoco::p4::{scene_path, PUSHER_FRAME_SKIP, PUSHER_SCENE};
-    let plant = tandem_mujoco::MujocoPlant::from_xml(scene_path(PUSHER_SCENE), PUSHER_FRAME_SKIP)
-        .map_err(|e| PipelineError::Config(e.to_string()))?;
+    let plant =
+        tandem_mujoco::p4::pusher_plant().map_err(|e| PipelineError::Config(e.to_string()))?;
     Ok(Box::new(tandem_models::PlantModel::new(plant)))
 }
 
@@ -209,36 +208,21 @@ pub fn door_problem(cost: DoorCost) -> Result<LocalProblem> {
 mod door {
     use nalgebra::{DMatrix, DVector};
     use tandem_mujoco::p4::{
-        door_initial_state, scene_path, DoorCost, DOOR_ACTION_DIM, DOOR_ANGLE, DOOR_CONDITIONS,
-        DOOR_FRAME_SKIP, DOOR_HORIZON, DOOR_SCENE, DOOR_STATE_DIM,
+        door_initial_state, door_plant, DoorCost, DoorKinematics, DOOR_ACTION_DIM, DOOR_ANGLE,
+        DOOR_CONDITIONS, DOOR_HORIZON, DOOR_STATE_DIM,
     };
-    use tandem_mujoco::{MujocoPlant, Scene};
     use tandem_planners::{Objective, QuadTerminal};
 
     use super::super::gps::{Condition, LocalProblem};
     use super::super::{PipelineError, Result};
 
-    /// Joint positions of the door scene (arm and door).
-    const NQ: usize = 7;
-
-    /// Hook point minus grasp point at joint positions `q`.
-    fn offset(scene: &Scene, ids: &[usize; 2], q: &[f64]) -> [f64; 3] {
-        match scene.site_positions(&q[..NQ], ids) {
-            Ok(p) => [p[0][0] - p[1][0], p[0][1] - p[1][1], p[0][2] - p[1][2]],
-            // Only a non-finite state gets here; the cost is then non-finite too, and the
-            // objective reports it with its step.
-            Err(_) => [f64::NAN; 3],
-        }
-    }
-
     /// Value, gradient and Gauss–Newton Hessian in the state of the state terms of the cost.
     fn expansion(
-        scene: &Scene,
-        ids: &[usize; 2],
+        kin: &DoorKinematics,
         cost: &DoorCost,
         x: &[f64],
     ) -> (f64, DVector<f64>, DMatrix<f64>) {
-        let r = offset(scene, ids, x);
+        let r = kin.offset(x);
         let (v, g, h) = cost.hand_expansion(&r);
         let (g, h) = (
             DVector::from_column_slice(&g),
@@ -247,13 +231,13 @@ mod door {
         // ∂r/∂q by central differences of the kinematics.
         let eps = 1e-6;
         let mut jac = DMatrix::zeros(3, DOOR_STATE_DIM);
-        let mut q = x[..NQ].to_vec();
-        for j in 0..NQ {
+        let mut q = x[..=DOOR_ANGLE].to_vec();
+        for j in 0..q.len() {
             let q0 = q[j];
             q[j] = q0 + eps;
-            let rp = offset(scene, ids, &q);
+            let rp = kin.offset(&q);
             q[j] = q0 - eps;
-            let rm = offset(scene, ids, &q);
+            let rm = kin.offset(&q);
             q[j] = q0;
             for i in 0..3 {
                 jac[(i, j)] = (rp[i] - rm[i]) / (2.0 * eps);
@@ -269,32 +253,28 @@ mod door {
 
     pub(super) fn problem(cost: DoorCost) -> Result<LocalProblem> {
         let bad = |e: tandem_mujoco::MujocoError| PipelineError::Config(e.to_string());
-        let scene = Scene::from_xml(scene_path(DOOR_SCENE)).map_err(bad)?;
-        let ids = [
-            scene.site_id("hand").map_err(bad)?,
-            scene.site_id("handle").map_err(bad)?,
-        ];
+        let plant = door_plant().map_err(bad)?;
+        let kin = DoorKinematics::new(plant.scene().clone()).map_err(bad)?;
         let conditions = (0..DOOR_CONDITIONS.len())
             .map(|c| {
-                let (s1, s2, s3, s4) = (scene.clone(), scene.clone(), scene.clone(), scene.clone());
+                let (k1, k2, k3, k4) = (kin.clone(), kin.clone(), kin.clone(), kin.clone());
                 Condition {
                     x0: door_initial_state(c),
                     objective: Objective::new(DOOR_STATE_DIM, DOOR_ACTION_DIM, move |x, u| {
-                        cost.running(&offset(&s1, &ids, x), x[DOOR_ANGLE], u)
+                        cost.running(&k1.offset(x), x[DOOR_ANGLE], u)
                     })
-                    .with_terminal(move |x| cost.running(&offset(&s2, &ids, x), x[DOOR_ANGLE], &[]))
+                    .with_terminal(move |x| cost.running(&k2.offset(x), x[DOOR_ANGLE], &[]))
                     .with_running_derivatives(move |x, u, _| {
-                        let (c, cx, cxx) = expansion(&s3, &ids, &cost, x);
+                        let (c, cx, cxx) = expansion(&k3, &cost, x);
                         super::with_action_cost(c, cx, cxx, u, cost.action)
                     })
                     .with_terminal_derivatives(move |x| {
-                        let (c, cx, cxx) = expansion(&s4, &ids, &cost, x);
+                        let (c, cx, cxx) = expansion(&k4, &cost, x);
                         QuadTerminal { c, cx, cxx }
                     }),
                 }
             })
             .collect();
-        let plant = MujocoPlant::new(scene, DOOR_FRAME_SKIP).map_err(bad)?;
         Ok(LocalProblem {
             system: Box::new(tandem_models::PlantModel::new(plant)),
             conditions,

@@ -43,6 +43,12 @@
 //! Huber-style penalty: `c(x, u) = w_dist ℓ(‖p(q) − g‖) + w_u ‖u‖²` ([`ReacherCost`]). Starts
 //! follow `Reacher-v5`'s reset ([`reacher_starts`]); [`reacher_observation`] is `Reacher-v5`'s
 //! observation as a function of the state; [`ReacherTask`] makes it an environment's task.
+//!
+//! **As environments.** [`PusherTask`] (one condition; the state and the goal observed),
+//! `DoorTask` (feature `mujoco`: the door's cost needs MuJoCo's kinematics, `DoorKinematics`;
+//! the state and the hook's offset from the grasp point observed) and [`ReacherTask`] are
+//! `tandem_envs::Task`s over the scenes' states, each paying `−c(x', u)` a step; with the
+//! feature, `pusher_plant` and `door_plant` load the scenes as plants for them.
 
 use std::path::PathBuf;
 
@@ -286,6 +292,103 @@ impl PusherCost {
     }
 }
 
+/// The pusher's motor limits (N m; N for the finger): the scene's `ctrlrange`.
+pub const PUSHER_CTRL_LIMITS: [f64; PUSHER_ACTION_DIM] = [10.0, 6.0, 3.0, 10.0];
+/// Length of [`PusherTask`]'s observation: the state and the goal.
+pub const PUSHER_OBS_DIM: usize = PUSHER_STATE_DIM + 2;
+
+/// One pusher condition as an environment's [`tandem_envs::Task`] over the scene's state (with
+/// its frame skip, e.g. `PlantEnv::from_parts(pusher_plant()?, PusherTask::new(..)?)`): episodes
+/// start from the condition's initial state, the agent observes the state and the goal (so that
+/// one policy can serve several conditions, as MDGPS's global policy over the state and the
+/// target), commands are clipped to the motors' limits, and the reward of a step is minus the
+/// cost of the state it reaches and the command, 100 steps, no termination.
+///
+/// A step's reward cannot see the step's index, so the block–goal term counts at full weight at
+/// every step: `−c(x', u, T−1)`, the cost of the episode's last step, whose ramp `(t+1)²/T²` is 1.
+/// The ramp is a shaping of the local controllers' trajectory optimization, which plans whole
+/// episodes; for a policy acting step by step, being near the goal early is no worse.
+#[derive(Debug, Clone)]
+pub struct PusherTask {
+    cost: PusherCost,
+    condition: PusherCondition,
+    observation_space: tandem_core::Space,
+    action_space: tandem_core::Space,
+}
+
+impl PusherTask {
+    /// The task of `condition` with `cost`; an error for invalid weights or a non-finite
+    /// condition.
+    pub fn new(cost: PusherCost, condition: PusherCondition) -> Result<Self, String> {
+        cost.validate()?;
+        if !condition
+            .block
+            .iter()
+            .chain(&condition.goal)
+            .all(|v| v.is_finite())
+        {
+            return Err(format!("pusher condition {condition:?} must be finite"));
+        }
+        let limits = PUSHER_CTRL_LIMITS.to_vec();
+        Ok(Self {
+            cost,
+            condition,
+            observation_space: tandem_core::Space::boxed(
+                vec![f64::NEG_INFINITY; PUSHER_OBS_DIM],
+                vec![f64::INFINITY; PUSHER_OBS_DIM],
+            ),
+            action_space: tandem_core::Space::boxed(limits.iter().map(|l| -l).collect(), limits),
+        })
+    }
+
+    /// The cost.
+    pub fn cost(&self) -> &PusherCost {
+        &self.cost
+    }
+
+    /// The condition.
+    pub fn condition(&self) -> &PusherCondition {
+        &self.condition
+    }
+}
+
+impl tandem_envs::Task for PusherTask {
+    fn id(&self) -> &str {
+        "p4-Pusher"
+    }
+    fn observation_space(&self) -> &tandem_core::Space {
+        &self.observation_space
+    }
+    fn action_space(&self) -> &tandem_core::Space {
+        &self.action_space
+    }
+    fn state_dim(&self) -> usize {
+        PUSHER_STATE_DIM
+    }
+    fn control(&self, action: &tandem_core::Action) -> Vec<f64> {
+        match action {
+            tandem_core::Action::Continuous(a) => tandem_envs::clip_to(&self.action_space, a),
+            tandem_core::Action::Discrete(_) => vec![0.0; PUSHER_ACTION_DIM],
+        }
+    }
+    fn initial_state(&self, _rng: &mut tandem_core::Rng) -> Vec<f64> {
+        self.condition.initial_state()
+    }
+    fn observe(&self, state: &[f64]) -> Vec<f64> {
+        let mut o = state.to_vec();
+        o.extend_from_slice(&self.condition.goal);
+        o
+    }
+    fn reward(&self, _state: &[f64], u: &[f64], next: &[f64]) -> f64 {
+        -self
+            .cost
+            .running(&self.condition, PUSHER_HORIZON, next, u, PUSHER_HORIZON - 1)
+    }
+    fn max_episode_steps(&self) -> Option<usize> {
+        Some(PUSHER_HORIZON)
+    }
+}
+
 /// The door's scene name.
 pub const DOOR_SCENE: &str = "p4_door";
 /// MuJoCo steps per control step (0.01 s each).
@@ -410,6 +513,158 @@ impl DoorCost {
             return Err(format!("target angle {} must be finite", self.target));
         }
         Ok(())
+    }
+}
+
+/// Length of [`DoorTask`]'s observation: the state and the hook's offset from the grasp point.
+pub const DOOR_OBS_DIM: usize = DOOR_STATE_DIM + 3;
+
+#[cfg(feature = "mujoco")]
+pub use door_scene::{door_plant, pusher_plant, DoorKinematics, DoorTask};
+
+#[cfg(feature = "mujoco")]
+mod door_scene {
+    use super::*;
+    use crate::{MujocoError, MujocoPlant, Scene};
+
+    /// The pusher's scene as a plant (state `qpos ++ qvel`, 0.05 s a control step).
+    pub fn pusher_plant() -> Result<MujocoPlant, MujocoError> {
+        MujocoPlant::from_xml(scene_path(PUSHER_SCENE), PUSHER_FRAME_SKIP)
+    }
+
+    /// The door's scene as a plant (state `qpos ++ qvel`, 0.05 s a control step).
+    pub fn door_plant() -> Result<MujocoPlant, MujocoError> {
+        MujocoPlant::from_xml(scene_path(DOOR_SCENE), DOOR_FRAME_SKIP)
+    }
+
+    /// The door scene's kinematics that its cost reads: the hook's point (site `hand`) minus
+    /// the grasp point behind the handle (site `handle`), from MuJoCo's forward kinematics.
+    #[derive(Clone)]
+    pub struct DoorKinematics {
+        scene: Scene,
+        ids: [usize; 2],
+    }
+
+    impl DoorKinematics {
+        /// The kinematics of a loaded door scene; an error if it lacks the two sites.
+        pub fn new(scene: Scene) -> Result<Self, MujocoError> {
+            let ids = [scene.site_id("hand")?, scene.site_id("handle")?];
+            Ok(Self { scene, ids })
+        }
+
+        /// The kinematics of the repository's door scene.
+        pub fn load() -> Result<Self, MujocoError> {
+            Self::new(Scene::from_xml(scene_path(DOOR_SCENE))?)
+        }
+
+        /// The scene.
+        pub fn scene(&self) -> &Scene {
+            &self.scene
+        }
+
+        /// Hook point minus grasp point of a state (or of its joint positions: the first 7
+        /// entries are read). NaN where the state is not finite, so that a cost on it is NaN too
+        /// and its caller reports it.
+        pub fn offset(&self, x: &[f64]) -> [f64; 3] {
+            match self.scene.site_positions(&x[..DOOR_ANGLE + 1], &self.ids) {
+                Ok(p) => [p[0][0] - p[1][0], p[0][1] - p[1][1], p[0][2] - p[1][2]],
+                Err(_) => [f64::NAN; 3],
+            }
+        }
+    }
+
+    /// The door as an environment's [`tandem_envs::Task`] over the scene's state (with its frame
+    /// skip, e.g. `PlantEnv::from_parts(door_plant()?, DoorTask::new(..)?)`): episodes start
+    /// from one of [`DOOR_CONDITIONS`] (a given one, or one drawn uniformly), the agent observes
+    /// the state and the hook's offset from the grasp point ([`DoorKinematics::offset`], what
+    /// the cost reads), commands are clipped to `[−1, 1]`, and the reward of a step is minus the
+    /// cost of the state it reaches and the command, `−c(x', u)`, 100 steps, no termination.
+    #[derive(Clone)]
+    pub struct DoorTask {
+        cost: DoorCost,
+        kinematics: DoorKinematics,
+        start: Option<usize>,
+        observation_space: tandem_core::Space,
+        action_space: tandem_core::Space,
+    }
+
+    impl DoorTask {
+        /// The door with `cost`, starting from condition `start` (`None`: one of the four drawn
+        /// uniformly at every reset); an error for invalid weights or a condition out of range.
+        pub fn new(
+            cost: DoorCost,
+            kinematics: DoorKinematics,
+            start: Option<usize>,
+        ) -> Result<Self, String> {
+            cost.validate()?;
+            if let Some(c) = start.filter(|&c| c >= DOOR_CONDITIONS.len()) {
+                return Err(format!(
+                    "door condition {c} out of range (there are {})",
+                    DOOR_CONDITIONS.len()
+                ));
+            }
+            Ok(Self {
+                cost,
+                kinematics,
+                start,
+                observation_space: tandem_core::Space::boxed(
+                    vec![f64::NEG_INFINITY; DOOR_OBS_DIM],
+                    vec![f64::INFINITY; DOOR_OBS_DIM],
+                ),
+                action_space: tandem_core::Space::symmetric(DOOR_ACTION_DIM, 1.0),
+            })
+        }
+
+        /// The cost.
+        pub fn cost(&self) -> &DoorCost {
+            &self.cost
+        }
+
+        /// The kinematics.
+        pub fn kinematics(&self) -> &DoorKinematics {
+            &self.kinematics
+        }
+    }
+
+    impl tandem_envs::Task for DoorTask {
+        fn id(&self) -> &str {
+            "p4-Door"
+        }
+        fn observation_space(&self) -> &tandem_core::Space {
+            &self.observation_space
+        }
+        fn action_space(&self) -> &tandem_core::Space {
+            &self.action_space
+        }
+        fn state_dim(&self) -> usize {
+            DOOR_STATE_DIM
+        }
+        fn control(&self, action: &tandem_core::Action) -> Vec<f64> {
+            match action {
+                tandem_core::Action::Continuous(a) => tandem_envs::clip_to(&self.action_space, a),
+                tandem_core::Action::Discrete(_) => vec![0.0; DOOR_ACTION_DIM],
+            }
+        }
+        fn initial_state(&self, rng: &mut tandem_core::Rng) -> Vec<f64> {
+            use rand::Rng as _;
+            door_initial_state(
+                self.start
+                    .unwrap_or_else(|| rng.random_range(0..DOOR_CONDITIONS.len())),
+            )
+        }
+        fn observe(&self, state: &[f64]) -> Vec<f64> {
+            let mut o = state.to_vec();
+            o.extend_from_slice(&self.kinematics.offset(state));
+            o
+        }
+        fn reward(&self, _state: &[f64], u: &[f64], next: &[f64]) -> f64 {
+            -self
+                .cost
+                .running(&self.kinematics.offset(next), next[DOOR_ANGLE], u)
+        }
+        fn max_episode_steps(&self) -> Option<usize> {
+            Some(DOOR_HORIZON)
+        }
     }
 }
 
@@ -727,6 +982,40 @@ mod tests {
                 h[(i, k)]
             );
         }
+    }
+
+    /// The pusher's task pays minus the cost of the state reached at full goal weight, whatever
+    /// the state it came from, and observes the state with the goal after it.
+    #[test]
+    fn pusher_task_pays_the_unramped_cost() {
+        use tandem_envs::Task;
+        let c = PusherCost::default();
+        let cond = PUSHER_CONDITIONS[PUSHER_HARD];
+        let task = PusherTask::new(c, cond).unwrap();
+        let next = [
+            0.4, -0.7, 1.1, 0.01, 0.5, -0.3, 0.2, -0.1, 0.3, 0.0, 0.05, 0.0,
+        ];
+        let g = pusher_gripper(&next);
+        let pen = |d: f64| l12(d, c.l1, c.l2, c.alpha);
+        let u = [1.0, -2.0, 0.5, 0.0];
+        let expect = -(c.goal * pen((0.5f64 - 0.9).hypot(-0.3 + 0.45))
+            + c.block * pen((g[0] - 0.5).hypot(g[1] + 0.3))
+            + c.action * 5.25);
+        for from in [[0.0; 12], next] {
+            assert_relative_eq!(task.reward(&from, &u, &next), expect, epsilon = 1e-12);
+        }
+        let o = task.observe(&next);
+        assert_eq!(&o[..PUSHER_STATE_DIM], &next);
+        assert_eq!(&o[PUSHER_STATE_DIM..], &cond.goal);
+        let mut rng = tandem_core::seeding::rng_from_seed(0);
+        assert_eq!(task.initial_state(&mut rng), cond.initial_state());
+        assert_eq!(
+            task.control(&tandem_core::Action::Continuous(vec![
+                20.0, -7.0, 1.0, -0.5
+            ])),
+            vec![10.0, -6.0, 1.0, -0.5]
+        );
+        assert!(PusherTask::new(PusherCost { l2: -1.0, ..c }, cond).is_err());
     }
 
     #[test]

@@ -166,3 +166,130 @@ fn reacher_kinematics_is_gymnasiums() {
         }
     }
 }
+
+/// The pusher as an environment: its command box is the scene's `ctrlrange`, it observes the
+/// state and the goal, and a step at rest from a condition's start pays the cost of the start,
+/// whose distances follow from the condition's coordinates (the gripper at `(1.05, 0)`).
+#[test]
+fn pusher_task_is_an_environment_over_the_scene() {
+    use tandem_envs::{Action, Env, PlantEnv, Task, TimeLimit};
+    use tandem_mujoco::p4::{
+        l12, pusher_plant, PusherCost, PusherTask, PUSHER_HORIZON, PUSHER_OBS_DIM,
+    };
+    let scene = Scene::from_xml(scene_path(PUSHER_SCENE)).unwrap();
+    let cost = PusherCost::default();
+    let cond = PUSHER_CONDITIONS[1];
+    let task = PusherTask::new(cost, cond).unwrap();
+    assert_eq!(task.action_space(), &scene.action_space());
+    // A `PlantEnv` does not truncate by itself; the task's episode length goes to a `TimeLimit`.
+    let steps = task.max_episode_steps().unwrap();
+    let mut env = TimeLimit::new(
+        PlantEnv::from_parts(pusher_plant().unwrap(), task).unwrap(),
+        steps,
+    );
+    let obs = env.reset(Some(0));
+    assert_eq!(obs.len(), PUSHER_OBS_DIM);
+    assert_eq!(&obs[..PUSHER_STATE_DIM], cond.initial_state().as_slice());
+    assert_eq!(&obs[PUSHER_STATE_DIM..], &cond.goal);
+    let step = env
+        .step(&Action::Continuous(vec![0.0; PUSHER_ACTION_DIM]))
+        .unwrap();
+    let pen = |d: f64| l12(d, cost.l1, cost.l2, cost.alpha);
+    let block_goal = (cond.block[0] - cond.goal[0]).hypot(cond.block[1] - cond.goal[1]);
+    let gripper_block = (cond.block[0] - 1.05).hypot(cond.block[1]);
+    let expect = -(cost.goal * pen(block_goal) + cost.block * pen(gripper_block));
+    assert!(
+        (step.reward - expect).abs() < 1e-9,
+        "{} vs {expect}",
+        step.reward
+    );
+    // Commands beyond the motors' limits are clipped to them, and the episode lasts 100 steps.
+    let mut steps = 1;
+    for _ in 0..PUSHER_HORIZON {
+        let s = env
+            .step(&Action::Continuous(vec![100.0, -100.0, 0.0, 0.0]))
+            .unwrap();
+        steps += 1;
+        assert!(s.observation.iter().all(|v| v.is_finite()));
+        if s.truncated || s.terminated {
+            assert!(s.truncated && !s.terminated);
+            break;
+        }
+    }
+    assert_eq!(steps, PUSHER_HORIZON);
+    assert!(PusherTask::new(
+        cost,
+        tandem_mujoco::p4::PusherCondition {
+            block: [f64::NAN, 0.0],
+            goal: [0.0, 0.0]
+        }
+    )
+    .is_err());
+}
+
+/// The door as an environment: the hook's offset from the grasp point at each start is the one
+/// the conditions were placed at (their names), the task observes it after the state, a step at
+/// rest pays the door's cost of it, and resets draw every start.
+#[test]
+fn door_task_is_an_environment_over_the_scene() {
+    use tandem_envs::{Action, Env, PlantEnv, Task};
+    use tandem_mujoco::p4::{
+        door_initial_state, door_plant, l12, DoorCost, DoorKinematics, DoorTask, DOOR_ACTION_DIM,
+        DOOR_CONDITIONS, DOOR_OBS_DIM, DOOR_STATE_DIM,
+    };
+    let kin = DoorKinematics::load().unwrap();
+    let placed = [
+        [-0.1, 0.0, 0.3],
+        [-0.3, 0.0, 0.2],
+        [-0.1, 0.25, 0.2],
+        [-0.1, -0.25, 0.2],
+    ];
+    for (c, want) in placed.iter().enumerate() {
+        let r = kin.offset(&door_initial_state(c));
+        for k in 0..3 {
+            assert!((r[k] - want[k]).abs() < 1e-3, "condition {c}: {r:?}");
+        }
+    }
+    assert!(kin.offset(&[f64::NAN; DOOR_STATE_DIM])[0].is_nan());
+    let cost = DoorCost::default();
+    let task = DoorTask::new(cost, kin.clone(), Some(2)).unwrap();
+    let mut env = PlantEnv::from_parts(door_plant().unwrap(), task).unwrap();
+    let obs = env.reset(Some(5));
+    assert_eq!(obs.len(), DOOR_OBS_DIM);
+    assert_eq!(&obs[..DOOR_STATE_DIM], door_initial_state(2).as_slice());
+    let r = kin.offset(&door_initial_state(2));
+    assert_eq!(&obs[DOOR_STATE_DIM..], &r);
+    let step = env
+        .step(&Action::Continuous(vec![0.0; DOOR_ACTION_DIM]))
+        .unwrap();
+    let d = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+    let expect =
+        -(cost.hand * l12(d, cost.l1, cost.l2, cost.alpha) + cost.angle * cost.target.powi(2));
+    assert!(
+        (step.reward - expect).abs() < 1e-6,
+        "{} vs {expect}",
+        step.reward
+    );
+    // Without a fixed start, resets draw all four.
+    let task = DoorTask::new(cost, kin.clone(), None).unwrap();
+    let mut seen = [false; 4];
+    let mut rng = tandem_core::seeding::rng_from_seed(1);
+    for _ in 0..40 {
+        let x = task.initial_state(&mut rng);
+        let c = (0..DOOR_CONDITIONS.len())
+            .find(|&c| door_initial_state(c) == x)
+            .unwrap();
+        seen[c] = true;
+    }
+    assert_eq!(seen, [true; 4]);
+    assert!(DoorTask::new(cost, kin.clone(), Some(4)).is_err());
+    assert!(DoorTask::new(
+        DoorCost {
+            alpha: -1.0,
+            ..cost
+        },
+        kin,
+        None
+    )
+    .is_err());
+}
