@@ -222,7 +222,7 @@ mod door {
         cost: &DoorCost,
         x: &[f64],
     ) -> (f64, DVector<f64>, DMatrix<f64>) {
-        let r = kin.offset(x);
+        let r = kin.offset_or_nan(x);
         let (v, g, h) = cost.hand_expansion(&r);
         let (g, h) = (
             DVector::from_column_slice(&g),
@@ -235,9 +235,9 @@ mod door {
         for j in 0..q.len() {
             let q0 = q[j];
             q[j] = q0 + eps;
-            let rp = kin.offset(&q);
+            let rp = kin.offset_or_nan(&q);
             q[j] = q0 - eps;
-            let rm = kin.offset(&q);
+            let rm = kin.offset_or_nan(&q);
             q[j] = q0;
             for i in 0..3 {
                 jac[(i, j)] = (rp[i] - rm[i]) / (2.0 * eps);
@@ -261,9 +261,9 @@ mod door {
                 Condition {
                     x0: door_initial_state(c),
                     objective: Objective::new(DOOR_STATE_DIM, DOOR_ACTION_DIM, move |x, u| {
-                        cost.running(&k1.offset(x), x[DOOR_ANGLE], u)
+                        cost.running(&k1.offset_or_nan(x), x[DOOR_ANGLE], u)
                     })
-                    .with_terminal(move |x| cost.running(&k2.offset(x), x[DOOR_ANGLE], &[]))
+                    .with_terminal(move |x| cost.running(&k2.offset_or_nan(x), x[DOOR_ANGLE], &[]))
                     .with_running_derivatives(move |x, u, _| {
                         let (c, cx, cxx) = expansion(&k3, &cost, x);
                         super::with_action_cost(c, cx, cxx, u, cost.action)

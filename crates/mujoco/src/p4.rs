@@ -563,13 +563,27 @@ mod door_scene {
         }
 
         /// Hook point minus grasp point of a state (or of its joint positions: the first 7
-        /// entries are read). NaN where the state is not finite, so that a cost on it is NaN too
-        /// and its caller reports it.
-        pub fn offset(&self, x: &[f64]) -> [f64; 3] {
-            match self.scene.site_positions(&x[..DOOR_ANGLE + 1], &self.ids) {
-                Ok(p) => [p[0][0] - p[1][0], p[0][1] - p[1][1], p[0][2] - p[1][2]],
-                Err(_) => [f64::NAN; 3],
+        /// entries are read). Errors: fewer than 7 entries, or a non-finite one among them.
+        pub fn offset(&self, x: &[f64]) -> Result<[f64; 3], MujocoError> {
+            let nq = DOOR_ANGLE + 1;
+            if x.len() < nq {
+                return Err(MujocoError::Model {
+                    path: self.scene.path().to_path_buf(),
+                    message: format!(
+                        "the door's offset needs {nq} joint positions, got {}",
+                        x.len()
+                    ),
+                });
             }
+            let p = self.scene.site_positions(&x[..nq], &self.ids)?;
+            Ok([p[0][0] - p[1][0], p[0][1] - p[1][1], p[0][2] - p[1][2]])
+        }
+
+        /// [`DoorKinematics::offset`] for a cost: NaN where the state is not finite, so that the
+        /// cost is NaN too and its caller (an environment's state check, an objective's) reports
+        /// it with its step. Callers pass whole states.
+        pub fn offset_or_nan(&self, x: &[f64]) -> [f64; 3] {
+            self.offset(x).unwrap_or([f64::NAN; 3])
         }
     }
 
@@ -654,13 +668,13 @@ mod door_scene {
         }
         fn observe(&self, state: &[f64]) -> Vec<f64> {
             let mut o = state.to_vec();
-            o.extend_from_slice(&self.kinematics.offset(state));
+            o.extend_from_slice(&self.kinematics.offset_or_nan(state));
             o
         }
         fn reward(&self, _state: &[f64], u: &[f64], next: &[f64]) -> f64 {
             -self
                 .cost
-                .running(&self.kinematics.offset(next), next[DOOR_ANGLE], u)
+                .running(&self.kinematics.offset_or_nan(next), next[DOOR_ANGLE], u)
         }
         fn max_episode_steps(&self) -> Option<usize> {
             Some(DOOR_HORIZON)

@@ -245,19 +245,22 @@ fn door_task_is_an_environment_over_the_scene() {
         [-0.1, -0.25, 0.2],
     ];
     for (c, want) in placed.iter().enumerate() {
-        let r = kin.offset(&door_initial_state(c));
+        let r = kin.offset(&door_initial_state(c)).unwrap();
         for k in 0..3 {
             assert!((r[k] - want[k]).abs() < 1e-3, "condition {c}: {r:?}");
         }
     }
-    assert!(kin.offset(&[f64::NAN; DOOR_STATE_DIM])[0].is_nan());
+    assert!(kin.offset(&[f64::NAN; DOOR_STATE_DIM]).is_err());
+    assert!(kin.offset_or_nan(&[f64::NAN; DOOR_STATE_DIM])[0].is_nan());
+    let short = kin.offset(&[0.0; 3]).unwrap_err().to_string();
+    assert!(short.contains("7 joint positions, got 3"), "{short}");
     let cost = DoorCost::default();
     let task = DoorTask::new(cost, kin.clone(), Some(2)).unwrap();
     let mut env = PlantEnv::from_parts(door_plant().unwrap(), task).unwrap();
     let obs = env.reset(Some(5));
     assert_eq!(obs.len(), DOOR_OBS_DIM);
     assert_eq!(&obs[..DOOR_STATE_DIM], door_initial_state(2).as_slice());
-    let r = kin.offset(&door_initial_state(2));
+    let r = kin.offset(&door_initial_state(2)).unwrap();
     assert_eq!(&obs[DOOR_STATE_DIM..], &r);
     let step = env
         .step(&Action::Continuous(vec![0.0; DOOR_ACTION_DIM]))
