@@ -308,6 +308,19 @@ pub const PUSHER_OBS_DIM: usize = PUSHER_STATE_DIM + 2;
 /// every step: `−c(x', u, T−1)`, the cost of the episode's last step, whose ramp `(t+1)²/T²` is 1.
 /// The ramp is a shaping of the local controllers' trajectory optimization, which plans whole
 /// episodes; for a policy acting step by step, being near the goal early is no worse.
+///
+/// ```
+/// use tandem_envs::Task;
+/// use tandem_mujoco::p4::{PusherCost, PusherTask, PUSHER_CONDITIONS, PUSHER_HARD};
+///
+/// let task = PusherTask::new(PusherCost::default(), PUSHER_CONDITIONS[PUSHER_HARD]).unwrap();
+/// let x0 = task.initial_state(&mut tandem_core::seeding::rng_from_seed(0));
+/// assert_eq!(task.observe(&x0)[12..], PUSHER_CONDITIONS[PUSHER_HARD].goal); // after the state
+/// // Resting at the start pays for the block 0.81 m from the goal, 1.2 m from the gripper.
+/// assert!(task.reward(&x0, &[0.0; 4], &x0) < -10.0);
+/// // With the feature `mujoco`, an environment: `TimeLimit::new(PlantEnv::from_parts(
+/// // pusher_plant()?, task)?, PUSHER_HORIZON)`.
+/// ```
 #[derive(Debug, Clone)]
 pub struct PusherTask {
     cost: PusherCost,
