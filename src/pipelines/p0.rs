@@ -993,7 +993,7 @@ pub fn ddpg_agent<T: Task>(
 ) -> std::result::Result<Adapted<Ddpg>, AgentError> {
     let seeds = SeedStream::new(seed);
     let fd = feature_dim(&cfg.features);
-    let obs = tandem_core::Space::boxed(vec![f64::NEG_INFINITY; fd], vec![f64::INFINITY; fd]);
+    let obs = tandem_core::Space::unbounded(fd);
     let agent = Ddpg::new(
         cfg.ddpg.clone(),
         &obs,

@@ -72,6 +72,11 @@ impl Space {
         Self::boxed(vec![-b; n], vec![b; n])
     }
 
+    /// A flat box of `n` components without bounds: an observation space where none is known.
+    pub fn unbounded(n: usize) -> Self {
+        Self::boxed(vec![f64::NEG_INFINITY; n], vec![f64::INFINITY; n])
+    }
+
     /// A discrete space of `n` choices.
     pub fn discrete(n: usize) -> Self {
         Space::Discrete { n }

@@ -64,11 +64,7 @@ impl GymTask {
         Ok(Self {
             kind,
             init_qpos,
-            observation_space: Space::Box {
-                low: vec![f64::NEG_INFINITY; spec.obs_dim],
-                high: vec![f64::INFINITY; spec.obs_dim],
-                shape: vec![spec.obs_dim],
-            },
+            observation_space: Space::unbounded(spec.obs_dim),
             action_space: Space::Box {
                 low: vec![-b; spec.nu],
                 high: vec![b; spec.nu],

@@ -346,10 +346,7 @@ impl PusherTask {
         Ok(Self {
             cost,
             condition,
-            observation_space: tandem_core::Space::boxed(
-                vec![f64::NEG_INFINITY; PUSHER_OBS_DIM],
-                vec![f64::INFINITY; PUSHER_OBS_DIM],
-            ),
+            observation_space: tandem_core::Space::unbounded(PUSHER_OBS_DIM),
             action_space: tandem_core::Space::boxed(limits.iter().map(|l| -l).collect(), limits),
         })
     }
@@ -634,10 +631,7 @@ mod door_scene {
                 cost,
                 kinematics,
                 start,
-                observation_space: tandem_core::Space::boxed(
-                    vec![f64::NEG_INFINITY; DOOR_OBS_DIM],
-                    vec![f64::INFINITY; DOOR_OBS_DIM],
-                ),
+                observation_space: tandem_core::Space::unbounded(DOOR_OBS_DIM),
                 action_space: tandem_core::Space::symmetric(DOOR_ACTION_DIM, 1.0),
             })
         }
@@ -847,10 +841,7 @@ impl ReacherTask {
         cost.validate()?;
         Ok(Self {
             cost,
-            observation_space: tandem_core::Space::boxed(
-                vec![f64::NEG_INFINITY; REACHER_OBS_DIM],
-                vec![f64::INFINITY; REACHER_OBS_DIM],
-            ),
+            observation_space: tandem_core::Space::unbounded(REACHER_OBS_DIM),
             action_space: tandem_core::Space::symmetric(REACHER_ACTION_DIM, 1.0),
         })
     }

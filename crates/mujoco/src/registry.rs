@@ -88,10 +88,7 @@ pub fn registered() -> Vec<EnvSpec> {
                 id: s.id,
                 description: s.description,
                 max_episode_steps: s.max_episode_steps,
-                observation_space: Space::boxed(
-                    vec![f64::NEG_INFINITY; s.obs_dim],
-                    vec![f64::INFINITY; s.obs_dim],
-                ),
+                observation_space: Space::unbounded(s.obs_dim),
                 action_space: Space::symmetric(s.nu, s.action_bound),
             }
         })

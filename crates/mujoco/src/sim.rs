@@ -302,7 +302,7 @@ impl MujocoEnv {
         }
         let mut env = Self::build(scene, spec.id.to_string(), spec.frame_skip, body_ids);
         env.task = Some(kind);
-        env.observation_space = unbounded(spec.obs_dim);
+        env.observation_space = Space::unbounded(spec.obs_dim);
         env.action_space = action_space;
         Ok(env)
     }
@@ -341,7 +341,7 @@ impl MujocoEnv {
             body_ids,
             init_qpos: scene.qpos0().to_vec(),
             init_qvel: vec![0.0; nv],
-            observation_space: unbounded(nq + nv),
+            observation_space: Space::unbounded(nq + nv),
             action_space: scene.action_space(),
             phase: Phase::NotReset,
             rng: rng_from_seed(0),
@@ -416,10 +416,6 @@ impl MujocoEnv {
         self.last = None;
         self.observe()
     }
-}
-
-fn unbounded(n: usize) -> Space {
-    Space::boxed(vec![f64::NEG_INFINITY; n], vec![f64::INFINITY; n])
 }
 
 impl Env for MujocoEnv {

@@ -182,10 +182,10 @@ fn pusher_task_is_an_environment_over_the_scene() {
     let task = PusherTask::new(cost, cond).unwrap();
     assert_eq!(task.action_space(), &scene.action_space());
     // A `PlantEnv` does not truncate by itself; the task's episode length goes to a `TimeLimit`.
-    let steps = task.max_episode_steps().unwrap();
+    let horizon = task.max_episode_steps().unwrap();
     let mut env = TimeLimit::new(
         PlantEnv::from_parts(pusher_plant().unwrap(), task).unwrap(),
-        steps,
+        horizon,
     );
     let obs = env.reset(Some(0));
     assert_eq!(obs.len(), PUSHER_OBS_DIM);
