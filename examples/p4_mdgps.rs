@@ -86,13 +86,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .iter()
             .map(|p| {
                 format!(
-                    "{}:{:.4}/{:.4}/{:.1e}",
-                    p.samples, p.test_measure, p.local_measure, p.policy_loss
+                    "{}:{:.4}/{:.4}/{:.1e}/{:.2}",
+                    p.samples, p.test_measure, p.local_measure, p.policy_loss, p.step_mult
                 )
             })
             .collect();
         println!(
-            "{name:>8}: samples:test/local/loss {} ({} failed updates; {:.1} s)",
+            "{name:>8}: samples:test/local/loss/step {} ({} failed updates; {:.1} s)",
             curve.join(" "),
             run.failed_updates,
             t0.elapsed().as_secs_f64()

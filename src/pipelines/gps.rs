@@ -234,11 +234,8 @@ impl Local {
         )?)
     }
 
-    /// Updates the controller from its `samples` with `method`. With an `anchor` (MDGPS: the
-    /// global policy linearized around the samples) LQR-FLM's KL bound, alone or as PILQR's
-    /// first stage, is taken against it at the configured `ε`; without one, against the
-    /// controller itself, LQR-FLM with GPS's step rule. A numerical failure of the fit or of the
-    /// optimizer keeps the controller and returns `false`.
+    /// Updates the controller from its `samples` with `method` (LQR-FLM with GPS's step rule). A
+    /// numerical failure of the fit or of the optimizer keeps the controller and returns `false`.
     pub(crate) fn improve(
         &mut self,
         method: LocalMethod,
@@ -246,15 +243,64 @@ impl Local {
         objective: &Objective,
         lqr: &LqrFlm,
         cfg: &LocalConfig,
-        anchor: Option<&TvlgController>,
     ) -> Result<bool> {
-        match self.next(method, samples, objective, lqr, cfg, anchor) {
-            Ok(next) => {
-                self.controller = next;
-                Ok(true)
+        let next = numerical(self.next(method, samples, objective, lqr, cfg))?;
+        Ok(self.replace(next))
+    }
+
+    /// The dynamics fitted to `samples` (GMM prior over this condition's recent samples) and the
+    /// objective's quadratic expansion around them. A numerical failure is `None`.
+    pub(crate) fn model(
+        &mut self,
+        samples: &TrajectorySamples,
+        objective: &Objective,
+    ) -> Result<Option<LocalModel>> {
+        numerical((|| {
+            let dynamics = self
+                .fit
+                .fit(samples.states.view(), samples.actions.view())?;
+            Ok((dynamics, quadratize_cost(objective, samples)?))
+        })())
+    }
+
+    /// MDGPS's update of the controller from its `samples` and their `model`: LQR-FLM under
+    /// `E[KL(p ‖ anchor)] ≤ kl_step` (or the configured `ε` when `None`), or PILQR whose LQR-FLM
+    /// stage takes its bounds against `anchor`. Not for PI², which has no anchor. A numerical
+    /// failure keeps the controller and returns `false`.
+    pub(crate) fn improve_anchored(
+        &mut self,
+        method: LocalMethod,
+        samples: &TrajectorySamples,
+        (dynamics, cost): &LocalModel,
+        lqr: &LqrFlm,
+        anchor: &TvlgController,
+        kl_step: Option<f64>,
+    ) -> Result<bool> {
+        let next = numerical(match method {
+            LocalMethod::Pilqr => self
+                .pilqr
+                .update_anchored(&self.controller, anchor, samples, dynamics, cost)
+                .map(|s| s.controller)
+                .map_err(PipelineError::from),
+            LocalMethod::LqrFlm => lqr
+                .update(anchor, dynamics, cost, kl_step)
+                .map(|s| s.controller)
+                .map_err(PipelineError::from),
+            LocalMethod::Pi2 => Err(PipelineError::Config(
+                "PI² takes no anchor: its update reweights its own samples".into(),
+            )),
+        })?;
+        Ok(self.replace(next))
+    }
+
+    /// Takes `next` if there is one; whether it was taken.
+    fn replace(&mut self, next: Option<TvlgController>) -> bool {
+        match next {
+            Some(c) => {
+                self.controller = c;
+                true
             }
-            Err(PipelineError::Planner(_) | PipelineError::Model(_)) => Ok(false),
-            Err(e) => Err(e),
+            None => false,
         }
     }
 
@@ -265,7 +311,6 @@ impl Local {
         objective: &Objective,
         lqr: &LqrFlm,
         cfg: &LocalConfig,
-        anchor: Option<&TvlgController>,
     ) -> Result<TvlgController> {
         if method == LocalMethod::Pi2 {
             let s = pi2_update(
@@ -282,14 +327,10 @@ impl Local {
             .fit(samples.states.view(), samples.actions.view())?;
         let cost = quadratize_cost(objective, samples)?;
         if method == LocalMethod::Pilqr {
-            let anchor = anchor.unwrap_or(&self.controller);
             return Ok(self
                 .pilqr
-                .update_anchored(&self.controller, anchor, samples, &dynamics, &cost)?
+                .update_with_cost(&self.controller, samples, &dynamics, &cost)?
                 .controller);
-        }
-        if let Some(anchor) = anchor {
-            return Ok(lqr.update(anchor, &dynamics, &cost, None)?.controller);
         }
         if let Some((pc, pd, pq)) = &self.lqr.prev {
             self.lqr.mult = classic_step_mult(
@@ -310,6 +351,19 @@ impl Local {
         )?;
         self.lqr.prev = Some((self.controller.clone(), dynamics, cost));
         Ok(next.controller)
+    }
+}
+
+/// The dynamics fitted to a batch of samples and the cost's quadratic expansion around them.
+pub(crate) type LocalModel = (TvlgDynamics, Vec<QuadraticCost>);
+
+/// A numerical failure of a fit or an optimizer (`Planner` and `Model` errors) as `None`; other
+/// errors pass.
+fn numerical<T>(r: Result<T>) -> Result<Option<T>> {
+    match r {
+        Ok(v) => Ok(Some(v)),
+        Err(PipelineError::Planner(_) | PipelineError::Model(_)) => Ok(None),
+        Err(e) => Err(e),
     }
 }
 
@@ -345,7 +399,7 @@ pub fn train_local(
             if it + 1 == cfg.iterations {
                 continue;
             }
-            if !local.improve(method, &samples, &cond.objective, &lqr, cfg, None)? {
+            if !local.improve(method, &samples, &cond.objective, &lqr, cfg)? {
                 failed[c] += 1;
             }
         }

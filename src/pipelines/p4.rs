@@ -141,9 +141,9 @@ pub fn reacher_policy_input() -> super::gps::PolicyInput {
 
 /// MDGPS's settings for the reacher: 15 iterations of 3 trajectories per condition, initial
 /// action variance 0.02 (standard deviation 0.14: the commands that matter are a few tenths),
-/// KL bound `ε = 0.1` per step (with 0.5 or 1 the local controllers, bounded against a global
-/// policy that still fits them loosely, lost more than they gained), a policy of two hidden
-/// layers of 64.
+/// base KL bound `ε = 0.1` per step (at a fixed 0.5 or 1 the local controllers, bounded against a
+/// global policy that still fits them loosely, lost more than they gained), scaled for LQR-FLM by
+/// MDGPS's step rule, a policy of two hidden layers of 64 fitted uniformly.
 pub fn reacher_config() -> super::mdgps::MdgpsConfig {
     let mut local = super::gps::LocalConfig {
         iterations: 15,
@@ -155,6 +155,7 @@ pub fn reacher_config() -> super::mdgps::MdgpsConfig {
     super::mdgps::MdgpsConfig {
         local,
         policy: Default::default(),
+        step: Default::default(),
     }
 }
 

@@ -41,7 +41,9 @@ pub use cem::{Cem, CemConfig};
 pub use dmd::{DmdMpc, DmdMpcConfig, Proposal, ProposalFn, Utility};
 pub use error::{PlanError, Result};
 pub use ilqr::{backward_pass, BackwardPass, Ilqr, IlqrConfig, IlqrSolution};
-pub use lqr_flm::{classic_step_mult, LqrFlm, LqrFlmConfig, LqrFlmStep};
+pub use lqr_flm::{
+    adjust_step_mult, classic_step_mult, laplace_cost, LqrFlm, LqrFlmConfig, LqrFlmStep,
+};
 pub use mpc::{Bounds, Interpolation, Knots, Noise, Plan, Planner};
 pub use mppi::{Mppi, MppiConfig, Temperature};
 pub use objective::{

@@ -282,20 +282,51 @@ pub fn classic_step_mult(
     cost: &[QuadraticCost],
 ) -> Result<f64> {
     positive("step multiplier", mult)?;
-    let l = |p: &TvlgController, f: &TvlgDynamics, c: &[QuadraticCost]| -> Result<f64> {
-        check_len(
-            "cost terms (T running + terminal)",
-            p.horizon() + 1,
-            c.len(),
-        )?;
-        Ok(expected_cost(&forward_moments(p, f)?, c))
-    };
-    let before = l(prev_controller, prev_dynamics, prev_cost)?;
-    let predicted = before - l(controller, prev_dynamics, prev_cost)?;
-    let actual = before - l(controller, dynamics, cost)?;
+    let before = laplace_cost(prev_controller, prev_dynamics, prev_cost)?;
+    let predicted = before - laplace_cost(controller, prev_dynamics, prev_cost)?;
+    let actual = before - laplace_cost(controller, dynamics, cost)?;
+    adjust_step_mult(mult, predicted, actual, (0.01, 10.0))
+}
+
+/// The expected cost `L(p, f, c)` of controller `p` under fitted dynamics `f` and the quadratic
+/// cost `c` (`T` running terms then the terminal one): the "Laplace" estimate GPS's step rules
+/// compare.
+pub fn laplace_cost(p: &TvlgController, f: &TvlgDynamics, c: &[QuadraticCost]) -> Result<f64> {
+    check_len(
+        "cost terms (T running + terminal)",
+        p.horizon() + 1,
+        c.len(),
+    )?;
+    let l = expected_cost(&forward_moments(p, f)?, c);
+    if l.is_finite() {
+        Ok(l)
+    } else {
+        Err(PlanError::NonFinite(
+            "expected cost of a TVLG controller".into(),
+        ))
+    }
+}
+
+/// GPS's step rule (`_set_new_mult`): modelling the improvement as quadratic in the KL step, the
+/// step that maximizes it scales the multiplier by `predicted / (2 max(predicted − actual,
+/// 10⁻⁴))`, clamped to `[0.1, 5]`; the new multiplier is clamped to `bounds` (min, max).
+/// [`classic_step_mult`] uses it with `(0.01, 10)`; MDGPS with its own improvements and bounds.
+pub fn adjust_step_mult(
+    mult: f64,
+    predicted: f64,
+    actual: f64,
+    (min, max): (f64, f64),
+) -> Result<f64> {
+    positive("step multiplier", mult)?;
+    positive("smallest step multiplier", min)?;
+    if max.is_nan() || max < min {
+        return Err(PlanError::Config(format!(
+            "step multiplier bounds [{min}, {max}] are empty"
+        )));
+    }
     if !(predicted.is_finite() && actual.is_finite()) {
-        return Err(PlanError::NonFinite("LQR-FLM step adjustment costs".into()));
+        return Err(PlanError::NonFinite("step adjustment improvements".into()));
     }
     let factor = (predicted / (2.0 * (predicted - actual).max(1e-4))).clamp(0.1, 5.0);
-    Ok((mult * factor).clamp(0.01, 10.0))
+    Ok((mult * factor).clamp(min, max))
 }

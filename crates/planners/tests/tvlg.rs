@@ -11,9 +11,9 @@ use ndarray::Array2;
 use tandem_core::seeding::rng_from_seed;
 use tandem_models::{DynamicsModel, ModelInput, TvlgConfig, TvlgFit};
 use tandem_planners::{
-    classic_step_mult, pi2_update, pi2_update_with_temperatures, pi2_weights, quadratize_cost,
-    sample_trajectories, LqrFlm, LqrFlmConfig, Objective, Pi2Config, Pilqr, PilqrConfig,
-    QuadraticCost, SampleConfig, TvlgController,
+    adjust_step_mult, classic_step_mult, laplace_cost, pi2_update, pi2_update_with_temperatures,
+    pi2_weights, quadratize_cost, sample_trajectories, LqrFlm, LqrFlmConfig, Objective, Pi2Config,
+    Pilqr, PilqrConfig, QuadraticCost, SampleConfig, TvlgController,
 };
 
 const T: usize = 20;
@@ -484,6 +484,45 @@ fn classic_step_rule_on_agreeing_and_null_predictions() {
     let shrink = classic_step_mult(1.0, &ctrl, &dynamics, &cost, &ctrl, &dynamics, &cost).unwrap();
     assert!((shrink - 0.1).abs() < 1e-12);
     assert!(classic_step_mult(0.0, &ctrl, &dynamics, &cost, &next, &dynamics, &cost).is_err());
+}
+
+/// GPS's step rule on hand-worked improvements: a model whose prediction came true (actual =
+/// predicted) asks for the largest growth, 5; half the predicted improvement is the optimum of the
+/// quadratic model, so the step stays; none of it halves it; a loss shrinks it by at most 0.1; the
+/// multiplier stays in the caller's bounds; bad bounds, multipliers or non-finite improvements are
+/// errors. `laplace_cost` is the expected cost the classic rule compares.
+#[test]
+fn step_rule_on_hand_worked_improvements() {
+    let b = (0.01, 10.0);
+    assert_eq!(adjust_step_mult(1.0, 2.0, 2.0, b).unwrap(), 5.0);
+    assert!((adjust_step_mult(1.0, 2.0, 1.0, b).unwrap() - 1.0).abs() < 1e-12);
+    assert!((adjust_step_mult(1.0, 2.0, 0.0, b).unwrap() - 0.5).abs() < 1e-12);
+    // predicted 1, actual −1: 1 / (2 · 2) = 0.25.
+    assert!((adjust_step_mult(2.0, 1.0, -1.0, b).unwrap() - 0.5).abs() < 1e-12);
+    assert!((adjust_step_mult(1.0, 1.0, -100.0, b).unwrap() - 0.1).abs() < 1e-12);
+    assert_eq!(adjust_step_mult(2.0, 2.0, 2.0, (0.5, 3.0)).unwrap(), 3.0);
+    assert_eq!(adjust_step_mult(0.6, 1.0, -100.0, (0.5, 3.0)).unwrap(), 0.5);
+    assert!(adjust_step_mult(1.0, 1.0, 1.0, (2.0, 1.0)).is_err());
+    assert!(adjust_step_mult(1.0, 1.0, 1.0, (0.0, 1.0)).is_err());
+    assert!(adjust_step_mult(-1.0, 1.0, 1.0, b).is_err());
+    assert!(adjust_step_mult(1.0, f64::NAN, 1.0, b).is_err());
+
+    let (obj, ctrl, samples, dynamics) = first_batch(0.01, 4);
+    let cost = quadratize_cost(&obj, &samples).unwrap();
+    let next = LqrFlm::new(LqrFlmConfig::default())
+        .unwrap()
+        .update(&ctrl, &dynamics, &cost, None)
+        .unwrap()
+        .controller;
+    let (before, after) = (
+        laplace_cost(&ctrl, &dynamics, &cost).unwrap(),
+        laplace_cost(&next, &dynamics, &cost).unwrap(),
+    );
+    assert!(
+        after < before,
+        "LQR-FLM lowers the expected cost: {before} -> {after}"
+    );
+    assert!(laplace_cost(&ctrl, &dynamics, &cost[1..]).is_err());
 }
 
 /// PILQR on a cost supplied per time step: the quadratized objective given from outside is the
