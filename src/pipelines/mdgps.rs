@@ -10,8 +10,8 @@
 //!    (`K̄_t = ∂μ_θ/∂x` at the samples' mean state, `k̄_t = μ_θ(x̄_t) − K̄_t x̄_t`, `Σ̄_t = diag(σ²)`:
 //!    [`GlobalPolicy::linearize`]);
 //! 3. update `p_c` with the local method: LQR-FLM minimizes the expected cost subject to
-//!    `E[KL(p_c ‖ π̄_c)] ≤ ε m` (p4's constraint against the old global policy; `m` from GPS's
-//!    MDGPS step rule, [`MdgpsStep`]); PILQR does the same in its LQR-FLM stage (with its own
+//!    `E[KL(p_c ‖ π̄_c)] ≤ ε m` (p4's constraint against the old global policy; `m = 1`, or from
+//!    GPS's MDGPS step rule, [`MdgpsStep`]); PILQR does the same in its LQR-FLM stage (with its own
 //!    per-step multipliers) and then PI² on the residual costs-to-go of its samples; PI²
 //!    reweights the samples as alone. On the first iteration, before the global policy has been
 //!    trained, the bound is taken against `p_c` itself (plain trajectory optimization);
@@ -101,10 +101,10 @@ pub enum Weighting {
 /// The multiplier then moves as [`tandem_planners::adjust_step_mult`]. PILQR keeps its own
 /// per-step rule (on the residuals); PI² has no bound.
 ///
-/// On the reacher (seed 0, `ε` 0.1, uniform regression) the rule kept `m` between 0.5 and 10 and
-/// MDGPS with LQR-FLM reached 0.075 m on the test targets after 21,600 samples instead of 32,400
-/// at a fixed `ε` (final 0.061 against 0.063 m). With the precision-weighted regression it drove
-/// `m` to its floor and the regression diverged: that is why [`Weighting`] defaults to uniform.
+/// Off by default. On the reacher (`ε` 0.1, uniform regression, `tandem reproduce p4-reacher` with
+/// `adjust = true`, 3 seeds) MDGPS with LQR-FLM ended at 0.061, 0.131 and 0.036 m against 0.063,
+/// 0.065 and 0.040 m at a fixed `ε`: on seed 1 the rule drove `m` to its floor, the local
+/// controllers lost ground and the regression diverged.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MdgpsStep {
@@ -117,10 +117,10 @@ pub struct MdgpsStep {
 }
 
 impl Default for MdgpsStep {
-    /// Adapting, in GPS's default bounds `[0.01, 10]`.
+    /// Not adapting (see above); when on, GPS's default bounds `[0.01, 10]`.
     fn default() -> Self {
         Self {
-            adjust: true,
+            adjust: false,
             min_mult: 0.01,
             max_mult: 10.0,
         }
