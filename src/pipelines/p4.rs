@@ -141,10 +141,10 @@ pub fn reacher_policy_input() -> super::gps::PolicyInput {
 
 /// MDGPS's settings for the reacher: 15 iterations of 3 trajectories per condition, initial
 /// action variance 0.02 (standard deviation 0.14: the commands that matter are a few tenths),
-/// KL bound `ε = 0.1` per step (at 0.5 or 1 the local controllers, bounded against a
-/// global policy that still fits them loosely, lost more than they gained; GPS's step rule,
-/// [`super::mdgps::MdgpsStep`], helped on one seed and hurt on another), a policy of two hidden
-/// layers of 64 fitted uniformly.
+/// KL bound `ε = 0.1` per step (at 0.5 or 1 the local controllers, bounded against a global
+/// policy that still fits them loosely, lost more than they gained; GPS's step rule,
+/// [`super::mdgps::MdgpsStep`], helped a little on two seeds and hurt badly on the third), a
+/// policy of two hidden layers of 64 fitted uniformly.
 pub fn reacher_config() -> super::mdgps::MdgpsConfig {
     let mut local = super::gps::LocalConfig {
         iterations: 15,
