@@ -255,12 +255,19 @@ impl Local {
         samples: &TrajectorySamples,
         objective: &Objective,
     ) -> Result<Option<LocalModel>> {
-        numerical((|| {
-            let dynamics = self
-                .fit
-                .fit(samples.states.view(), samples.actions.view())?;
-            Ok((dynamics, quadratize_cost(objective, samples)?))
-        })())
+        numerical(self.fit_model(samples, objective))
+    }
+
+    /// [`Local::model`] with failures as errors.
+    fn fit_model(
+        &mut self,
+        samples: &TrajectorySamples,
+        objective: &Objective,
+    ) -> Result<LocalModel> {
+        let dynamics = self
+            .fit
+            .fit(samples.states.view(), samples.actions.view())?;
+        Ok((dynamics, quadratize_cost(objective, samples)?))
     }
 
     /// MDGPS's update of the controller from its `samples` and their `model`: LQR-FLM under
@@ -322,10 +329,7 @@ impl Local {
             )?;
             return Ok(s.controller);
         }
-        let dynamics = self
-            .fit
-            .fit(samples.states.view(), samples.actions.view())?;
-        let cost = quadratize_cost(objective, samples)?;
+        let (dynamics, cost) = self.fit_model(samples, objective)?;
         if method == LocalMethod::Pilqr {
             return Ok(self
                 .pilqr

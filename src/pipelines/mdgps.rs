@@ -388,13 +388,11 @@ fn weighted_mse(
     let scale = 1.0 / pred.len() as f32;
     let mut sum = 0.0f64;
     for (i, &row) in rows.iter().enumerate() {
-        let r: Vec<f32> = (0..m)
-            .map(|a| pred[i * m + a] - target[i * m + a])
-            .collect();
+        let r = |a: usize| pred[i * m + a] - target[i * m + a];
         let w = &weights[row * m * m..(row + 1) * m * m];
         for a in 0..m {
-            let wr: f32 = (0..m).map(|b| w[a * m + b] * r[b]).sum();
-            sum += f64::from(r[a] * wr);
+            let wr: f32 = (0..m).map(|b| w[a * m + b] * r(b)).sum();
+            sum += f64::from(r(a) * wr);
             grad[i * m + a] = 2.0 * scale * wr;
         }
     }
@@ -541,7 +539,8 @@ pub fn train_mdgps(
                 .collect();
         }
         // The regression's data: every sampled state with the new controller's mean action (and
-        // its precision).
+        // its precision, for the weighted regression).
+        let weighted = cfg.policy.weighting == Weighting::Precision;
         let (mut states, mut targets, mut precisions) = (Vec::new(), Vec::new(), Vec::new());
         for (l, samples) in locals.iter().zip(&batches) {
             let ctrl = &l.controller;
@@ -553,8 +552,10 @@ pub fn train_mdgps(
                     );
                     states.extend(x.iter());
                     targets.extend(ctrl.mean(t, &x).iter());
-                    // nalgebra is column-major; a precision is symmetric.
-                    precisions.extend(ctrl.inv_cov(t).iter());
+                    if weighted {
+                        // nalgebra is column-major; a precision is symmetric.
+                        precisions.extend(ctrl.inv_cov(t).iter());
+                    }
                 }
             }
         }
