@@ -51,6 +51,9 @@ pub enum PipelineError {
     /// A configuration value out of range.
     #[error("configuration: {0}")]
     Config(String),
+    /// A network failed outside a checkpoint (bad shapes, a non-finite loss or gradient).
+    #[error("network: {0}")]
+    Network(NnError),
     /// A checkpoint could not be written or read, or belongs to another run.
     #[error("checkpoint: {0}")]
     Checkpoint(String),
@@ -70,9 +73,15 @@ pub fn box_bounds(space: &tandem_core::Space, needs: &str) -> Result<(Vec<f64>, 
     }
 }
 
+/// A checkpoint's own failures (unreadable, a tensor missing) stay checkpoint errors; every other
+/// network failure is [`PipelineError::Network`].
 impl From<NnError> for PipelineError {
     fn from(e: NnError) -> Self {
-        PipelineError::Checkpoint(e.to_string())
+        match e {
+            NnError::Checkpoint(what) => PipelineError::Checkpoint(what),
+            NnError::MissingTensor(_) => PipelineError::Checkpoint(e.to_string()),
+            other => PipelineError::Network(other),
+        }
     }
 }
 
@@ -174,5 +183,32 @@ impl Checkpoints for Ephemeral {
     }
     fn save(&mut self, _key: &str, _ckpt: &Checkpoint) -> Result<()> {
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn network_failures_are_not_reported_as_checkpoint_failures() {
+        let mut store = InMemory::default();
+        store
+            .files
+            .insert("run".into(), b"not safetensors".to_vec());
+        let e = store.load("run").unwrap_err();
+        assert!(matches!(e, PipelineError::Checkpoint(_)), "{e}");
+        let missing = PipelineError::from(NnError::MissingTensor("actor.w0".into()));
+        assert!(matches!(missing, PipelineError::Checkpoint(_)), "{missing}");
+
+        let e = PipelineError::from(NnError::NonFinite {
+            what: "critic loss".into(),
+            index: 0,
+        });
+        assert!(matches!(e, PipelineError::Network(_)), "{e}");
+        assert_eq!(
+            e.to_string(),
+            "network: non-finite value in critic loss (first at flat index 0)"
+        );
     }
 }

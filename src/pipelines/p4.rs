@@ -493,9 +493,8 @@ mod ddpg {
                         return Ok(curve);
                     }
                     let mut ckpt = trainer.save(&env)?;
-                    let bad = |e: tandem_nn::NnError| PipelineError::Checkpoint(e.to_string());
-                    ckpt.put_json("run", &(KEY, seed)).map_err(bad)?;
-                    ckpt.put_json("curve", &curve).map_err(bad)?;
+                    ckpt.put_json("run", &(KEY, seed))?;
+                    ckpt.put_json("curve", &curve)?;
                     store.save(KEY, &ckpt)?;
                 }
             }
