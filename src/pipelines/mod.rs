@@ -51,7 +51,7 @@ pub enum PipelineError {
     /// A configuration value out of range.
     #[error("configuration: {0}")]
     Config(String),
-    /// A network failed outside a checkpoint (bad shapes, a non-finite loss or gradient).
+    /// A network failed while computing (a non-finite loss or gradient, a bad setting).
     #[error("network: {0}")]
     Network(NnError),
     /// A checkpoint could not be written or read, or belongs to another run.
@@ -73,14 +73,20 @@ pub fn box_bounds(space: &tandem_core::Space, needs: &str) -> Result<(Vec<f64>, 
     }
 }
 
-/// A checkpoint's own failures (unreadable, a tensor missing) stay checkpoint errors; every other
-/// network failure is [`PipelineError::Network`].
+/// What a checkpoint read can fail with (unreadable, a tensor missing, a tensor of the wrong
+/// shape or type) is a checkpoint error; what only computing can fail with (non-finite numbers, a
+/// bad setting, candle) is [`PipelineError::Network`].
 impl From<NnError> for PipelineError {
     fn from(e: NnError) -> Self {
         match e {
             NnError::Checkpoint(what) => PipelineError::Checkpoint(what),
-            NnError::MissingTensor(_) => PipelineError::Checkpoint(e.to_string()),
-            other => PipelineError::Network(other),
+            NnError::MissingTensor(_) | NnError::ShapeMismatch { .. } => {
+                PipelineError::Checkpoint(e.to_string())
+            }
+            NnError::NonFinite { .. }
+            | NnError::InvalidConfig(_)
+            | NnError::NoTape(_)
+            | NnError::Candle(_) => PipelineError::Network(e),
         }
     }
 }
@@ -200,6 +206,12 @@ mod tests {
         assert!(matches!(e, PipelineError::Checkpoint(_)), "{e}");
         let missing = PipelineError::from(NnError::MissingTensor("actor.w0".into()));
         assert!(matches!(missing, PipelineError::Checkpoint(_)), "{missing}");
+        let shape = PipelineError::from(NnError::ShapeMismatch {
+            what: "actor.w0".into(),
+            expected: "[256, 17]".into(),
+            got: "[256, 11]".into(),
+        });
+        assert!(matches!(shape, PipelineError::Checkpoint(_)), "{shape}");
 
         let e = PipelineError::from(NnError::NonFinite {
             what: "critic loss".into(),

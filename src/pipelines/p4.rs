@@ -458,13 +458,10 @@ mod ddpg {
         let mut trainer = Trainer::new(AlgoConfig::Ddpg(cfg.agent.clone()), settings, &env, seed)?;
         let mut curve: Vec<TestedPoint> = match store.load(KEY)? {
             Some(ckpt) => {
-                let (name, saved_seed): (String, u64) = ckpt
-                    .get_json("run")
-                    .map_err(|e| PipelineError::Checkpoint(e.to_string()))?;
+                let (name, saved_seed): (String, u64) = ckpt.get_json("run")?;
                 ensure_same_run((&name, saved_seed), (KEY, seed))?;
                 trainer.load(&ckpt, &mut env)?;
-                ckpt.get_json("curve")
-                    .map_err(|e| PipelineError::Checkpoint(e.to_string()))?
+                ckpt.get_json("curve")?
             }
             None => vec![measure(&mut trainer, &system, test, seed)?],
         };
