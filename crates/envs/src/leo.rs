@@ -11,7 +11,7 @@
 //! | observation | p0's 18 dimensions: the state without the shoulder's angle and velocity, i.e. `[x, z, θ_torso, 6 leg angles, ẋ, ż, θ̇_torso, 6 leg velocities]` (m, rad, m/s, rad/s) |
 //! | action | `Box(6)`: the six leg motors' voltages in [`tandem_dynamics::biped::MOTOR_JOINTS`] order, clipped to ±10.7 V |
 //! | reward | [`LeoWalkTask::reward`]: `300 Δx − 1.5 − 2 W` per step, `W` the step's electrical work (J), and `−75` on a fall |
-//! | start | standing straight with flat feet, at rest (deterministic) |
+//! | start | standing straight with flat feet, at rest (deterministic); [`LeoWalkTask::with_start`] with [`LeoStart::Stepping`] starts mid-step instead |
 //! | episode | 667 steps (20 s at 30 ms); terminates on a fall: a knee, the hip, the head or the hand touches the ground |
 //!
 //! The electrical work of a step is p0's measure `W = T_s Σ_j U_j (U_j − K G φ̇_j) / R` over the
@@ -68,6 +68,35 @@ impl LeoModel {
             LeoModel::Idealized => Overrides::default(),
             LeoModel::True => leo_true_overrides(),
         }
+    }
+}
+
+/// Where a Leo episode starts. Both at rest, the stance foot flat on the ground.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LeoStart {
+    /// Standing straight on both feet.
+    #[default]
+    Standing,
+    /// Mid-step, as p0's authors start their walking task: the left leg straight, the right
+    /// hip swung 0.82 rad forward and the right knee bent 1.27 rad, the right foot in the air.
+    /// With the motors off it topples forwards.
+    Stepping,
+}
+
+impl LeoStart {
+    /// The plant state of this start for the biped `plant`.
+    pub fn state(self, plant: &RigidBodyPlant) -> Vec<f64> {
+        let model = plant.model();
+        let mut x = standing_state(model).as_slice().to_vec();
+        if self == LeoStart::Stepping {
+            // A positive angle swings the part below the joint backwards.
+            for (joint, angle) in [("right_hip", -0.82), ("right_knee", 1.27)] {
+                if let Some(i) = model.joint_index(joint) {
+                    x[i] = angle;
+                }
+            }
+        }
+        x
     }
 }
 
@@ -154,6 +183,12 @@ impl LeoWalkTask {
             action_space: Space::symmetric(6, voltage_max),
             plant: plant.clone(),
         })
+    }
+
+    /// The same task starting from `start`.
+    pub fn with_start(mut self, start: LeoStart) -> Self {
+        self.start = start.state(&self.plant);
+        self
     }
 
     /// The motors' electrical work (J) over the step `state --u--> next`:
@@ -395,6 +430,49 @@ mod tests {
         );
         let x = env.state();
         assert!(x[1] < tandem_dynamics::biped::HIP_HEIGHT - 0.05);
+    }
+
+    #[test]
+    fn the_stepping_start_stands_on_the_left_foot_and_left_alone_falls_forwards() {
+        let (plant, task) = leo_parts(LeoModel::Idealized, "t").unwrap();
+        let standing = task.initial_state(&mut tandem_core::seeding::rng_from_seed(0));
+        assert_eq!(standing, LeoStart::Standing.state(&plant));
+        let task = task.with_start(LeoStart::Stepping);
+        let x = task.initial_state(&mut tandem_core::seeding::rng_from_seed(0));
+        let height = |x: &[f64], name: &str| {
+            let i = plant
+                .contacts()
+                .iter()
+                .position(|c| c.name == name)
+                .unwrap();
+            plant.contact_heights(x)[i]
+        };
+        // The left foot is where standing puts it, flat; the right one is in the air; nothing
+        // else differs from standing.
+        for c in ["left_heel", "left_toe"] {
+            approx::assert_abs_diff_eq!(height(&x, c), height(&standing, c), epsilon = 1e-12);
+        }
+        for c in ["right_heel", "right_toe"] {
+            assert!(height(&x, c) > 0.02, "{c} at {}", height(&x, c));
+        }
+        let differ: Vec<usize> = (0..x.len()).filter(|&i| x[i] != standing[i]).collect();
+        assert_eq!(differ.len(), 2);
+        assert!(!task.fallen(&x));
+        // Motors off, the biped topples forwards and the fall ends the episode.
+        let mut env = PlantEnv::from_parts(plant.clone(), task.clone()).unwrap();
+        env.reset(Some(0));
+        let mut fell = false;
+        for _ in 0..100 {
+            if env
+                .step(&Action::Continuous(vec![0.0; 6]))
+                .unwrap()
+                .terminated
+            {
+                fell = true;
+                break;
+            }
+        }
+        assert!(fell && env.state()[0] > 0.1, "x = {}", env.state()[0]);
     }
 
     #[test]

@@ -38,8 +38,8 @@ pub use leg2r::{
     LEG2R_STEPS,
 };
 pub use leo::{
-    leo_parts, Gait, LeoEnv, LeoModel, LeoWalkTask, LEO_REWARD_FALL, LEO_REWARD_PER_JOULE,
-    LEO_REWARD_PER_METRE, LEO_REWARD_PER_STEP, LEO_STEPS,
+    leo_parts, Gait, LeoEnv, LeoModel, LeoStart, LeoWalkTask, LEO_REWARD_FALL,
+    LEO_REWARD_PER_JOULE, LEO_REWARD_PER_METRE, LEO_REWARD_PER_STEP, LEO_STEPS,
 };
 pub use pendulum::{angle_normalize, pendulum_reward, PendulumEnv, PendulumTask};
 pub use pixel_maze::{PixelMazeEnv, PIXEL_MAZE_GRID, PIXEL_MAZE_OBSTACLES, PIXEL_MAZE_PIXELS};
