@@ -33,7 +33,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     let biped = |model: LeoModel, id: &str| -> Result<_, Box<dyn std::error::Error>> {
         let (plant, task) = leo_parts(model, id)?;
-        let task = task.with_start(start);
+        let task = task.with_start(start)?;
         Ok((ModelEnv::new(PlantModel::new(plant), task.clone())?, task))
     };
     let (mut env, task) = biped(LeoModel::Idealized, "Leo-v0")?;

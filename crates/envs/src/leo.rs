@@ -84,19 +84,24 @@ pub enum LeoStart {
 }
 
 impl LeoStart {
-    /// The plant state of this start for the biped `plant`.
-    pub fn state(self, plant: &RigidBodyPlant) -> Vec<f64> {
+    /// The plant state of this start for the biped `plant` (a [`leo_plant`]); an error if
+    /// `plant` lacks a joint the start sets.
+    pub fn state(self, plant: &RigidBodyPlant) -> Result<Vec<f64>, EnvError> {
         let model = plant.model();
         let mut x = standing_state(model).as_slice().to_vec();
         if self == LeoStart::Stepping {
             // A positive angle swings the part below the joint backwards.
             for (joint, angle) in [("right_hip", -0.82), ("right_knee", 1.27)] {
-                if let Some(i) = model.joint_index(joint) {
-                    x[i] = angle;
-                }
+                let i = model
+                    .joint_index(joint)
+                    .ok_or_else(|| EnvError::Unsupported {
+                        env: format!("{self:?} start"),
+                        reason: format!("the plant has no joint {joint}"),
+                    })?;
+                x[i] = angle;
             }
         }
-        x
+        Ok(x)
     }
 }
 
@@ -186,9 +191,9 @@ impl LeoWalkTask {
     }
 
     /// The same task starting from `start`.
-    pub fn with_start(mut self, start: LeoStart) -> Self {
-        self.start = start.state(&self.plant);
-        self
+    pub fn with_start(mut self, start: LeoStart) -> Result<Self, EnvError> {
+        self.start = start.state(&self.plant)?;
+        Ok(self)
     }
 
     /// The motors' electrical work (J) over the step `state --u--> next`:
@@ -436,8 +441,8 @@ mod tests {
     fn the_stepping_start_stands_on_the_left_foot_and_left_alone_falls_forwards() {
         let (plant, task) = leo_parts(LeoModel::Idealized, "t").unwrap();
         let standing = task.initial_state(&mut tandem_core::seeding::rng_from_seed(0));
-        assert_eq!(standing, LeoStart::Standing.state(&plant));
-        let task = task.with_start(LeoStart::Stepping);
+        assert_eq!(standing, LeoStart::Standing.state(&plant).unwrap());
+        let task = task.with_start(LeoStart::Stepping).unwrap();
         let x = task.initial_state(&mut tandem_core::seeding::rng_from_seed(0));
         let height = |x: &[f64], name: &str| {
             let i = plant
