@@ -4,36 +4,56 @@
 //! policy's return, walked distance `L` (m), electrical work (J) and whether it fell, on the
 //! idealized and on the true biped. Does it learn to walk?
 //!
-//! `cargo run --release --example p0_leo_ddpg [standing|stepping] [seed] [steps]` (defaults
-//! `standing`, 0, 300000): `stepping` starts every episode mid-step, as p0's authors do
-//! ([`LeoStart::Stepping`]). About 30 minutes on one core.
+//! `cargo run --release --example p0_leo_ddpg [standing|stepping|authors] [seed] [steps]`
+//! (defaults `standing`, 0, 300000): `stepping` starts every episode mid-step, as p0's authors
+//! do ([`LeoStart::Stepping`]); `authors` adds the rest of what their code does that we can
+//! set: 14 observed dimensions (torso pitch and the six leg angles, with their velocities: no
+//! torso position or velocity), voltages bounded at 8.6 V, only drawn electrical energy
+//! counted ([`LeoWork::Positive`]), an L2 penalty of 10⁻³ on the critic, and no update before
+//! 20 000 stored transitions. About 30 minutes on one core.
 
 use tandem::agents::{EpisodeRunner, StepOptions};
 use tandem::core::SeedStream;
-use tandem::envs::{leo_parts, LeoModel, LeoStart};
+use tandem::envs::{leo_parts, LeoModel, LeoStart, LeoWork};
 use tandem::models::{ModelEnv, PlantModel};
+use tandem::pipelines::adapter::Feature;
 use tandem::pipelines::p0::{
     agent_spaces, ddpg_agent, leo_measures, measured_episode, p0_loop, Method, P0Config,
 };
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let start = match args.get(1).map(String::as_str) {
-        None | Some("standing") => LeoStart::Standing,
-        Some("stepping") => LeoStart::Stepping,
+    let (start, authors) = match args.get(1).map(String::as_str) {
+        None | Some("standing") => (LeoStart::Standing, false),
+        Some("stepping") => (LeoStart::Stepping, false),
+        Some("authors") => (LeoStart::Stepping, true),
         Some(other) => {
-            return Err(format!("start must be standing or stepping, got {other}").into())
+            let e = format!("the mode is standing, stepping or authors, not {other}");
+            return Err(e.into());
         }
     };
     let number = |i: usize, d: u64| -> Result<u64, Box<dyn std::error::Error>> {
         Ok(args.get(i).map(|s| s.parse()).transpose()?.unwrap_or(d))
     };
     let (seed, steps) = (number(2, 0)?, number(3, 300_000)?);
-    let cfg = P0Config::leo();
+    let mut cfg = P0Config::leo();
+    if authors {
+        // Observation indices: x 0, z 1, pitch 2, leg angles 3-8, ẋ 9, ż 10, pitch rate 11,
+        // leg velocities 12-17; angular velocities in units of 10 rad/s, as P0Config::leo.
+        cfg.features = (2..=8)
+            .map(|index| Feature::Linear { index, scale: 1.0 })
+            .chain((11..=17).map(|index| Feature::Linear { index, scale: 0.1 }))
+            .collect();
+        cfg.ddpg.critic_weight_decay = 1e-3;
+        cfg.ddpg.learning_starts = 20_000;
+    }
 
     let biped = |model: LeoModel, id: &str| -> Result<_, Box<dyn std::error::Error>> {
         let (plant, task) = leo_parts(model, id)?;
-        let task = task.with_start(start)?;
+        let mut task = task.with_start(start)?;
+        if authors {
+            task = task.with_work(LeoWork::Positive).with_voltage_limit(8.6)?;
+        }
         Ok((ModelEnv::new(PlantModel::new(plant), task.clone())?, task))
     };
     let (mut env, task) = biped(LeoModel::Idealized, "Leo-v0")?;

@@ -333,6 +333,7 @@ impl Default for ReacherDdpg {
                 critic_hidden: vec![400, 300],
                 actor_lr: 1e-3,
                 critic_lr: 1e-3,
+                critic_weight_decay: 0.0,
                 tau: 0.005,
                 gamma: 0.99,
                 noise: tandem_agents::NoiseConfig::Gaussian { sigma: 0.1 },

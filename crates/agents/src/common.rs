@@ -124,8 +124,13 @@ pub(crate) struct Net {
 
 impl Net {
     pub(crate) fn new(config: MlpConfig, lr: f64, rng: &mut Rng) -> Result<Self> {
+        Self::with_adam(config, AdamConfig::with_lr(lr as f32), rng)
+    }
+
+    /// [`Net::new`] with a full Adam configuration (e.g. weight decay).
+    pub(crate) fn with_adam(config: MlpConfig, adam: AdamConfig, rng: &mut Rng) -> Result<Self> {
         let mlp = Mlp::new(config, rng)?;
-        let opt = Adam::new(AdamConfig::with_lr(lr as f32), mlp.num_params())?;
+        let opt = Adam::new(adam, mlp.num_params())?;
         let ws = mlp.workspace();
         let grads = mlp.zero_grads();
         Ok(Self {

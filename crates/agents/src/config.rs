@@ -120,6 +120,9 @@ pub struct DdpgConfig {
     pub actor_lr: f64,
     /// Critic learning rate (Adam).
     pub critic_lr: f64,
+    /// L2 penalty on the critic's parameters, added to its gradient (Adam's coupled weight
+    /// decay; Lillicrap et al. §7 use 10⁻², p0's authors' code 10⁻³). 0 turns it off.
+    pub critic_weight_decay: f64,
     /// Target-network update rate τ (polyak).
     pub tau: f64,
     /// Discount γ.
@@ -149,6 +152,7 @@ impl Default for DdpgConfig {
             critic_hidden: vec![400, 300],
             actor_lr: 1e-4,
             critic_lr: 1e-3,
+            critic_weight_decay: 0.0,
             tau: 0.001,
             gamma: 0.99,
             noise: NoiseConfig::default(),
@@ -168,6 +172,12 @@ impl DdpgConfig {
         check_hidden("critic_hidden", &self.critic_hidden)?;
         check_lr("actor_lr", self.actor_lr)?;
         check_lr("critic_lr", self.critic_lr)?;
+        ensure(
+            self.critic_weight_decay >= 0.0 && self.critic_weight_decay.is_finite(),
+            "critic_weight_decay",
+            self.critic_weight_decay,
+            "must be finite and >= 0",
+        )?;
         check_tau(self.tau)?;
         check_gamma(self.gamma)?;
         self.noise.validate()?;

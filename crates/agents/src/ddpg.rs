@@ -19,7 +19,7 @@ use ndarray::{Array1, Array2, ArrayView2};
 use rand::Rng as _;
 use rand_distr::{Distribution, StandardNormal};
 use tandem_core::{Action, Rng, SeedStream, Space};
-use tandem_nn::{Activation, Checkpoint, Init, MlpConfig};
+use tandem_nn::{Activation, AdamConfig, Checkpoint, Init, MlpConfig};
 
 use crate::agent::{
     check_action_rows, check_obs, obs_rows, Agent, Batch, BatchPolicy, Critic, Metrics, Mode,
@@ -88,7 +88,11 @@ impl Ddpg {
         sizes.push(1);
         let critic_cfg = MlpConfig::new(&sizes).output_init(Init::Uniform { bound: 3e-3 });
         let actor = Net::new(actor_cfg, config.actor_lr, &mut init)?;
-        let critic = Net::new(critic_cfg, config.critic_lr, &mut init)?;
+        let critic_adam = AdamConfig {
+            weight_decay: config.critic_weight_decay as f32,
+            ..AdamConfig::with_lr(config.critic_lr as f32)
+        };
+        let critic = Net::with_adam(critic_cfg, critic_adam, &mut init)?;
         Ok(Self {
             actor_t: Target::of(&actor),
             critic_t: Target::of(&critic),
@@ -111,6 +115,11 @@ impl Ddpg {
     /// The actor's flat parameters.
     pub fn actor_params(&self) -> &[f32] {
         self.actor.mlp.params()
+    }
+
+    /// The critic's flat parameters.
+    pub fn critic_params(&self) -> &[f32] {
+        self.critic.mlp.params()
     }
 
     /// Replaces the exploration noise (p0 changes σ between its phases); the process restarts

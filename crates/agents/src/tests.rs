@@ -72,6 +72,40 @@ fn ddpg_learns_the_optimal_action_of_a_one_step_task() {
     assert!(after < 0.15, "mean |a - a*| = {after} (before {before})");
 }
 
+/// The critic's L2 penalty shrinks its weights (against the same agent without it, on the
+/// same minibatches) and, at the small value p0's authors use, still learns the task.
+#[test]
+fn ddpg_critic_weight_decay_shrinks_the_critic_and_still_learns() {
+    let (os, acts) = spaces();
+    let cfg = |critic_weight_decay| DdpgConfig {
+        actor_hidden: vec![64, 64],
+        critic_hidden: vec![64, 64],
+        actor_lr: 1e-3,
+        critic_lr: 3e-3,
+        critic_weight_decay,
+        tau: 0.05,
+        batch_size: 64,
+        ..DdpgConfig::default()
+    };
+    let buf = continuous_bandit_buffer(4000, 1);
+    let norm = |p: &[f32]| p.iter().map(|&x| f64::from(x).powi(2)).sum::<f64>().sqrt();
+    let mut norms = Vec::new();
+    for wd in [0.0, 1e-3] {
+        let mut agent = Ddpg::new(cfg(wd), &os, &acts, 0).unwrap();
+        let mut rng = rng_from_seed(2);
+        for _ in 0..1500 {
+            agent.update(&buf.sample(64, &mut rng).unwrap()).unwrap();
+        }
+        norms.push(norm(agent.critic_params()));
+        let err = mean_abs_error(&mut agent);
+        assert!(err < 0.15, "weight decay {wd}: mean |a - a*| = {err}");
+    }
+    assert!(norms[1] < 0.99 * norms[0], "critic norms {norms:?}");
+    let bad = cfg(-1e-3);
+    let e = Ddpg::new(bad, &os, &acts, 0).unwrap_err();
+    assert!(e.to_string().contains("critic_weight_decay"), "{e}");
+}
+
 #[test]
 fn sac_learns_the_optimal_action_of_a_one_step_task() {
     let (os, acts) = spaces();

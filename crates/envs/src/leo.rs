@@ -105,6 +105,18 @@ impl LeoStart {
     }
 }
 
+/// How a step's electrical work counts each motor's energy.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LeoWork {
+    /// p0's measure: `U (U − K G φ̇) / R` per motor, negative when a back-driven motor returns
+    /// energy.
+    #[default]
+    Signed,
+    /// Only the energy each motor draws, `max(0, U (U − K G φ̇) / R)`, as p0's authors' code
+    /// counts it: braking earns nothing back.
+    Positive,
+}
+
 /// p0's walked distance and motor work of one episode.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gait {
@@ -130,6 +142,7 @@ pub struct LeoWalkTask {
     /// Contact points that end the episode when they touch the ground.
     fall_contacts: Vec<usize>,
     start: Vec<f64>,
+    work: LeoWork,
     observation_space: Space,
     action_space: Space,
 }
@@ -184,6 +197,7 @@ impl LeoWalkTask {
             motors,
             fall_contacts,
             start: standing_state(model).as_slice().to_vec(),
+            work: LeoWork::Signed,
             observation_space: Space::boxed(vec![-inf; 18], vec![inf; 18]),
             action_space: Space::symmetric(6, voltage_max),
             plant: plant.clone(),
@@ -196,8 +210,29 @@ impl LeoWalkTask {
         Ok(self)
     }
 
+    /// The same task counting electrical work as `work` (the default is p0's signed measure).
+    pub fn with_work(mut self, work: LeoWork) -> Self {
+        self.work = work;
+        self
+    }
+
+    /// The same task with the voltages clipped to `±volts` instead of the motors' limit (p0's
+    /// authors' code bounds them at 8.6 V); an error unless `0 < volts <=` the motors' limit.
+    pub fn with_voltage_limit(mut self, volts: f64) -> Result<Self, EnvError> {
+        let max = self.motors[0].1.voltage_max;
+        if !(volts > 0.0 && volts <= max) {
+            return Err(EnvError::Unsupported {
+                env: self.id,
+                reason: format!("voltage limit {volts} V outside (0, {max}] V"),
+            });
+        }
+        self.action_space = Space::symmetric(6, volts);
+        Ok(self)
+    }
+
     /// The motors' electrical work (J) over the step `state --u--> next`:
-    /// `T_s Σ_j U_j (U_j − K G φ̇_j) / R`, `φ̇_j` the mean of the start and end velocities.
+    /// `T_s Σ_j U_j (U_j − K G φ̇_j) / R`, `φ̇_j` the mean of the start and end velocities
+    /// (each term floored at zero under [`LeoWork::Positive`]).
     pub fn electrical_work(&self, state: &[f64], u: &[f64], next: &[f64]) -> f64 {
         self.motors
             .iter()
@@ -206,7 +241,11 @@ impl LeoWalkTask {
                 let kg = m.torque_constant * m.gear;
                 let uj = uj.clamp(-m.voltage_max, m.voltage_max);
                 let w = 0.5 * (state[NV + j] + next[NV + j]);
-                uj * (uj - kg * w) / m.resistance
+                let e = uj * (uj - kg * w) / m.resistance;
+                match self.work {
+                    LeoWork::Signed => e,
+                    LeoWork::Positive => e.max(0.0),
+                }
             })
             .sum::<f64>()
             * self.dt
@@ -382,6 +421,16 @@ mod tests {
         fast[NV + 3] = 10.0; // left hip, the first motor
         let u = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
         assert!(task.electrical_work(&fast, &u, &fast) < 0.0);
+        // p0's authors count only the energy drawn: the back-driven motor adds nothing, the
+        // stalled one its joule heat.
+        let positive = task.clone().with_work(LeoWork::Positive);
+        assert_eq!(positive.electrical_work(&fast, &u, &fast), 0.0);
+        let u2 = [1.0, 0.0, 0.0, 0.0, 0.0, 5.0];
+        approx::assert_relative_eq!(
+            positive.electrical_work(&fast, &u2, &fast),
+            25.0 / m.resistance * 0.03,
+            max_relative = 1e-12
+        );
         // The episode sum equals the joule heat plus the mechanical power into the motors.
         let kg = m.torque_constant * m.gear;
         let (uu, wv) = (3.0, 2.0);
@@ -392,6 +441,19 @@ mod tests {
         let mech = m.torque(uu, wv) * wv;
         approx::assert_relative_eq!(w, (heat + mech) * 0.03, max_relative = 1e-12);
         assert!((uu * (uu - kg * wv) / m.resistance * 0.03 - w).abs() < 1e-15);
+    }
+
+    #[test]
+    fn a_voltage_limit_bounds_the_action_space_and_clips_the_controls() {
+        let (_, task) = leo_parts(LeoModel::Idealized, "t").unwrap();
+        let limited = task.clone().with_voltage_limit(8.6).unwrap();
+        assert_eq!(limited.action_space(), &Space::symmetric(6, 8.6));
+        let u = limited.control(&Action::Continuous(vec![10.0, -10.0, 1.0, 0.0, 0.0, 0.0]));
+        assert_eq!(u, vec![8.6, -8.6, 1.0, 0.0, 0.0, 0.0]);
+        for bad in [0.0, -1.0, 11.0, f64::NAN] {
+            let e = task.clone().with_voltage_limit(bad).unwrap_err();
+            assert!(e.to_string().contains("voltage limit"), "{e}");
+        }
     }
 
     #[test]

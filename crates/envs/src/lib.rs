@@ -38,7 +38,7 @@ pub use leg2r::{
     LEG2R_STEPS,
 };
 pub use leo::{
-    leo_parts, Gait, LeoEnv, LeoModel, LeoStart, LeoWalkTask, LEO_REWARD_FALL,
+    leo_parts, Gait, LeoEnv, LeoModel, LeoStart, LeoWalkTask, LeoWork, LEO_REWARD_FALL,
     LEO_REWARD_PER_JOULE, LEO_REWARD_PER_METRE, LEO_REWARD_PER_STEP, LEO_STEPS,
 };
 pub use pendulum::{angle_normalize, pendulum_reward, PendulumEnv, PendulumTask};
