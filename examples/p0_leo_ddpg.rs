@@ -4,31 +4,32 @@
 //! policy's return, walked distance `L` (m), electrical work (J) and whether it fell, on the
 //! idealized and on the true biped. Does it learn to walk?
 //!
-//! `cargo run --release --example p0_leo_ddpg [standing|stepping|authors] [seed] [steps]`
-//! (defaults `standing`, 0, 300000): `stepping` starts every episode mid-step, as p0's authors
-//! do ([`LeoStart::Stepping`]); `authors` adds the rest of what their code does that we can
-//! set: 14 observed dimensions (torso pitch and the six leg angles, with their velocities: no
-//! torso position or velocity), voltages bounded at 8.6 V, only drawn electrical energy
-//! counted ([`LeoWork::Positive`]), an L2 penalty of 10⁻³ on the critic, and no update before
-//! 20 000 stored transitions. About 30 minutes on one core.
+//! `cargo run --release --example p0_leo_ddpg [authors|stepping|standing] [seed] [steps]`
+//! (defaults `authors`, 0, 300000). `authors` is p0-leo's set-up ([`leo_task`],
+//! [`P0Config::leo`]): what p0's authors' code does where the paper is silent (mid-step start,
+//! 14 observed dimensions, 8.6 V, only drawn energy counted, an L2 penalty of 10⁻³ on the critic,
+//! no update before 20 000 stored transitions). `stepping` and `standing` are the earlier
+//! settings, which did not learn to walk (docs/p0.md): 17 observed dimensions (all but `x`), the
+//! motors' full voltage, signed work, no critic penalty, updates after 100 transitions; starting
+//! mid-step or standing. About 30 minutes on one core.
 
 use tandem::agents::{EpisodeRunner, StepOptions};
 use tandem::core::SeedStream;
-use tandem::envs::{leo_parts, LeoModel, LeoStart, LeoWork};
+use tandem::envs::{leo_parts, LeoModel, LeoStart};
 use tandem::models::{ModelEnv, PlantModel};
 use tandem::pipelines::adapter::Feature;
 use tandem::pipelines::p0::{
-    agent_spaces, ddpg_agent, leo_measures, measured_episode, p0_loop, Method, P0Config,
+    agent_spaces, ddpg_agent, leo_measures, leo_task, measured_episode, p0_loop, Method, P0Config,
 };
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let (start, authors) = match args.get(1).map(String::as_str) {
-        None | Some("standing") => (LeoStart::Standing, false),
-        Some("stepping") => (LeoStart::Stepping, false),
-        Some("authors") => (LeoStart::Stepping, true),
+    let earlier = match args.get(1).map(String::as_str) {
+        None | Some("authors") => None,
+        Some("stepping") => Some(LeoStart::Stepping),
+        Some("standing") => Some(LeoStart::Standing),
         Some(other) => {
-            let e = format!("the mode is standing, stepping or authors, not {other}");
+            let e = format!("the mode is authors, stepping or standing, not {other}");
             return Err(e.into());
         }
     };
@@ -37,23 +38,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let (seed, steps) = (number(2, 0)?, number(3, 300_000)?);
     let mut cfg = P0Config::leo();
-    if authors {
+    if earlier.is_some() {
         // Observation indices: x 0, z 1, pitch 2, leg angles 3-8, ẋ 9, ż 10, pitch rate 11,
-        // leg velocities 12-17; angular velocities in units of 10 rad/s, as P0Config::leo.
-        cfg.features = (2..=8)
-            .map(|index| Feature::Linear { index, scale: 1.0 })
-            .chain((11..=17).map(|index| Feature::Linear { index, scale: 0.1 }))
-            .collect();
-        cfg.ddpg.critic_weight_decay = 1e-3;
-        cfg.ddpg.learning_starts = 20_000;
+        // leg velocities 12-17. All but x: z in decimetres, angular velocities in 10 rad/s.
+        cfg.features = std::iter::once(Feature::Linear {
+            index: 1,
+            scale: 10.0,
+        })
+        .chain((2..=10).map(|index| Feature::Linear { index, scale: 1.0 }))
+        .chain((11..=17).map(|index| Feature::Linear { index, scale: 0.1 }))
+        .collect();
+        cfg.ddpg.critic_weight_decay = 0.0;
+        cfg.ddpg.learning_starts = 100;
     }
 
     let biped = |model: LeoModel, id: &str| -> Result<_, Box<dyn std::error::Error>> {
-        let (plant, task) = leo_parts(model, id)?;
-        let mut task = task.with_start(start)?;
-        if authors {
-            task = task.with_work(LeoWork::Positive).with_voltage_limit(8.6)?;
-        }
+        let (plant, task) = match earlier {
+            None => leo_task(model)?,
+            Some(start) => {
+                let (plant, task) = leo_parts(model, id)?;
+                (plant, task.with_start(start)?)
+            }
+        };
         Ok((ModelEnv::new(PlantModel::new(plant), task.clone())?, task))
     };
     let (mut env, task) = biped(LeoModel::Idealized, "Leo-v0")?;

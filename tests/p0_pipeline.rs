@@ -4,13 +4,14 @@
 use std::cell::Cell;
 use std::collections::BTreeMap;
 use tandem::agents::NoiseConfig;
+use tandem::core::{Action, Space};
 use tandem::dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
-use tandem::envs::{make, SampleCounter};
+use tandem::envs::{make, SampleCounter, Task};
 
 use tandem::nn::Checkpoint;
 use tandem::pipelines::p0::{
     agent_spaces, collect, ddpg_agent, leo_problem, p0_loop, pendulum_problem, run_seed, Method,
-    P0Config, RunRecord,
+    P0Config, RunRecord, LEO_VOLTAGE_LIMIT,
 };
 use tandem::pipelines::{Checkpoints, Ephemeral, PipelineError, Result};
 
@@ -437,7 +438,34 @@ fn tiny_leo() -> P0Config {
     c.eval_interval = 300;
     c.model_steps = 200;
     c.fit.epochs = 1;
+    // A warm-up shorter than pre-training (Leo's 20 000 would leave these runs without updates).
+    c.ddpg.learning_starts = 150;
     c
+}
+
+#[test]
+fn p0_leo_runs_the_authors_task_on_both_bipeds() {
+    let problem = leo_problem().unwrap();
+    let mut true_env = (problem.true_env)().unwrap();
+    let bounded = Space::symmetric(6, LEO_VOLTAGE_LIMIT);
+    assert_eq!(problem.task.action_space(), &bounded);
+    assert_eq!(true_env.action_space(), &bounded);
+    // Both start mid-step, the right foot in the air: with the motors off the true biped
+    // topples (a fall ends the episode) well before the 667-step limit.
+    let start = problem
+        .task
+        .initial_state(&mut tandem::core::seeding::rng_from_seed(0));
+    assert_eq!(true_env.reset(Some(1)), problem.task.observe(&start));
+    let mut steps = 0;
+    loop {
+        let s = true_env.step(&Action::Continuous(vec![0.0; 6])).unwrap();
+        steps += 1;
+        assert!(s.reward.is_finite());
+        if s.terminated || s.truncated {
+            assert!(s.terminated && steps < 100, "fell after {steps} steps");
+            break;
+        }
+    }
 }
 
 #[test]
@@ -475,6 +503,12 @@ fn leo_runs_measure_their_first_and_last_policy_on_the_same_episode_as_the_curve
         // two batches of 300.
         assert_eq!(r.true_samples, 600);
     }
+    // A fresh agent waits for its warm-up (updates from the 151st transition on), the
+    // pre-trained one fine-tunes from its first minibatch of 64 (Leo's fine-tuning warm-up).
+    assert_eq!(cfg.fine_tune_learning_starts, Some(0));
+    let updates = |m: Method| records.iter().find(|r| r.method == m).unwrap().updates;
+    assert_eq!(updates(Method::Cold), 600 - 150 + 1);
+    assert_eq!(updates(Method::Warm), 600 - 64 + 1);
     // Warm start and the difference method start from the same pre-trained policy.
     let start = |m: Method| {
         records

@@ -100,6 +100,8 @@ pub fn leo_quick_config() -> P0Config {
     c.eval_interval = 700;
     c.model_steps = 300;
     c.fit.epochs = 2;
+    // Leo's warm-up of 20 000 transitions would leave pre-training and cold start without updates.
+    c.ddpg.learning_starts = 300;
     c
 }
 

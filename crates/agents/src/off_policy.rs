@@ -389,6 +389,13 @@ impl<A: OffPolicyAgent> OffPolicyLoop<A> {
         &self.s.schedule
     }
 
+    /// Updates start once the primary buffer holds more than `n` transitions from now on (the
+    /// schedule's warm-up suits a fresh agent; a trained one moved to a new system may need
+    /// none). A saved loop restores only into a loop with the same setting.
+    pub fn set_learning_starts(&mut self, n: usize) {
+        self.s.schedule.learning_starts = n;
+    }
+
     /// The primary buffer.
     pub fn primary(&self) -> &ReplayBuffer {
         &self.primary
@@ -707,6 +714,13 @@ mod tests {
         lp.clear(Store::Primary).unwrap();
         assert_eq!((lp.primary().len(), lp.counts().primary_pushed), (0, 0));
         assert!(lp.update(1).is_err(), "no data to sample from");
+        // A shorter warm-up from now on: learning steps 35..=46 store transitions 1..=12, and
+        // the even ones holding more than 8 (44 and 46) update; with the old 10, only 46.
+        lp.set_learning_starts(8);
+        assert_eq!(lp.schedule().learning_starts, 8);
+        lp.train(&mut env, &mut runner, 12, StepOptions::real(), &mut |_| {})
+            .unwrap();
+        assert_eq!(lp.counts().updates, 36 + 2 * 3);
     }
 
     #[test]
