@@ -19,7 +19,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed = arg(1).unwrap_or(0);
     let mut cfg = P3Config::pendulum();
     cfg.base.real_steps = arg(2).unwrap_or(5000);
-    let b = cfg.base.clone();
+    let b = cfg.m_demorl_loop();
     let problem = pendulum_problem();
     let (task, seeds) = (&problem.task, SeedStream::new(seed));
     let (mut env, mut eval_env) = ((problem.env)()?, (problem.env)()?);

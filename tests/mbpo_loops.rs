@@ -179,6 +179,37 @@ fn every_method_counts_real_steps_refits_and_imagined_transitions_exactly() {
 }
 
 #[test]
+fn m_demorl_with_all_real_minibatches_learns_exactly_as_sac() {
+    // With every minibatch row from D_ENV the planned transitions never reach SAC, which then
+    // sees the same data in the same order as SAC alone: the same policy at every evaluation.
+    let mut cfg = small();
+    cfg.base.real_steps = 400;
+    cfg.mpc_real_ratio = Some(1.0);
+    assert_eq!(cfg.m_demorl_loop().real_ratio, 1.0);
+    let sac = strip(run(Method::Sac, &cfg, 2, &mut Vec::new()));
+    let m = strip(run(Method::MDemorl, &cfg, 2, &mut Vec::new()));
+    assert!(m.imagined > 0, "it still plans");
+    assert_eq!(m.curve, sac.curve);
+    // MBPO's share: mostly planned rows, another policy.
+    cfg.mpc_real_ratio = None;
+    let mixed = strip(run(Method::MDemorl, &cfg, 2, &mut Vec::new()));
+    assert_eq!(mixed.curve[0], sac.curve[0]);
+    assert_ne!(mixed.curve, sac.curve);
+    // Out of range is a settings error.
+    cfg.mpc_real_ratio = Some(1.5);
+    let problem = pendulum_problem();
+    let e = p3::run(
+        Method::MDemorl,
+        &problem,
+        &cfg,
+        2,
+        &mut Ephemeral,
+        &mut |_| {},
+    );
+    assert!(matches!(e, Err(PipelineError::Config(m)) if m.contains("mpc_real_ratio")));
+}
+
+#[test]
 fn the_same_seed_gives_the_same_run_and_another_seed_another() {
     let mut cfg = small();
     cfg.base.real_steps = 300;

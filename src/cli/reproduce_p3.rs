@@ -768,20 +768,23 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
     let closing = vec![
         format!(
             "{}; the model an ensemble of {} ({} elites) of {:?}, refit every {} real steps; \
-             MBPO {} rollouts per real step; M-DeMoRL {} sampled sequences, H {} → {} over \
-             epochs {}–{}, up to {} MPC transitions an epoch.{}",
+             MBPO {} rollouts per real step, {} % real data in SAC's minibatches; M-DeMoRL {} \
+             sampled sequences, H {} → {} over epochs {}–{}, up to {} MPC transitions an \
+             epoch, {} % real data in SAC's minibatches.{}",
             loop_sentence(b),
             b.ensemble.members,
             b.ensemble.elites,
             b.ensemble.hidden,
             b.model_train_freq,
             b.rollouts_per_step,
+            b.real_ratio * 100.0,
             s.p3.mpc.samples,
             s.p3.horizon.start,
             s.p3.horizon.end,
             s.p3.horizon.from_epoch,
             s.p3.horizon.to_epoch,
             s.p3.transitions_per_epoch.max(),
+            s.p3.m_demorl_loop().real_ratio * 100.0,
             s.leg.as_ref().map_or(String::new(), |l| format!(
                 " Reward (15) with errors in units of {} m and {} m/s on the true leg.",
                 l.position_scale, l.velocity_scale

@@ -105,6 +105,11 @@ pub struct P3Config {
     /// Plans made at once, as one population of `plans_per_batch × mpc.samples` rows through
     /// the model, the policy and the critic (ours: 64; only the random numbers depend on it).
     pub plans_per_batch: usize,
+    /// The share of real transitions in M-DeMoRL's SAC minibatches, the rest drawn from `D_MPC`
+    /// (Algorithm 1 says only that SAC learns from `D_ENV ∪ D_MPC`). `None`: `base.real_ratio`,
+    /// MBPO's share (5 % real).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mpc_real_ratio: Option<f64>,
 }
 
 impl Default for P3Config {
@@ -122,6 +127,7 @@ impl Default for P3Config {
             transitions_per_epoch: LinearSchedule::constant(10_000),
             keep_iterations: 1,
             plans_per_batch: 64,
+            mpc_real_ratio: None,
         }
     }
 }
@@ -182,6 +188,13 @@ impl P3Config {
         self.horizon.validate("horizon")?;
         self.transitions_per_epoch
             .validate("transitions_per_epoch")?;
+        if let Some(r) = self.mpc_real_ratio {
+            if !(0.0..=1.0).contains(&r) {
+                return Err(PipelineError::Config(format!(
+                    "mpc_real_ratio must lie in [0, 1], got {r}"
+                )));
+            }
+        }
         if self.keep_iterations == 0 || self.plans_per_batch == 0 {
             return Err(PipelineError::Config(
                 "keep_iterations and plans_per_batch must be >= 1".into(),
@@ -201,6 +214,14 @@ impl P3Config {
         Ok(())
     }
 
+    /// The loop M-DeMoRL runs: `base` with [`Self::mpc_real_ratio`] as its real share.
+    pub fn m_demorl_loop(&self) -> MbpoConfig {
+        MbpoConfig {
+            real_ratio: self.mpc_real_ratio.unwrap_or(self.base.real_ratio),
+            ..self.base.clone()
+        }
+    }
+
     /// Plans per refit at `epoch`.
     pub fn plans_per_refit(&self, epoch: u64) -> usize {
         let b = &self.base;
@@ -211,7 +232,8 @@ impl P3Config {
 }
 
 /// Runs `method` for `seed` on `problem` (resuming from the checkpoint `store` holds under the
-/// method's name, if any). SAC and MBPO run [`super::mbpo`]'s loop with `cfg.base`.
+/// method's name, if any). SAC and MBPO run [`super::mbpo`]'s loop with `cfg.base`, M-DeMoRL
+/// with [`P3Config::m_demorl_loop`].
 pub fn run<T, F>(
     method: Method,
     problem: &Problem<T, F>,
@@ -233,7 +255,8 @@ where
         }
         Method::MDemorl => {
             let mut plans = MpcPlans { cfg: cfg.clone() };
-            run_with(problem, &cfg.base, seed, Some(&mut plans), store, on_event)
+            let base = cfg.m_demorl_loop();
+            run_with(problem, &base, seed, Some(&mut plans), store, on_event)
         }
     }
 }
