@@ -227,7 +227,7 @@ pub fn markdown(task: P0Task, t: &Table, cfg: &P0Config, wall: f64) -> String {
         P0Task::Leo => (
             format!("p0 Table IV on the Leo-like biped ({n_seeds} seeds)"),
             "Return of the deterministic policy on the true biped (undiscounted, one 20 s \
-             episode of 667 steps from standing). True samples are training samples on the \
+             episode of 667 steps from mid-step). True samples are training samples on the \
              true biped, counted exactly; evaluation episodes are not counted. Mean ± standard \
              error over seeds.",
         ),
