@@ -15,7 +15,7 @@
 
 use tandem::agents::{EpisodeRunner, StepOptions};
 use tandem::core::SeedStream;
-use tandem::envs::{leo_parts, LeoModel, LeoStart};
+use tandem::envs::{leo_parts, LeoEnv, LeoModel, LeoStart};
 use tandem::models::{ModelEnv, PlantModel};
 use tandem::pipelines::adapter::Feature;
 use tandem::pipelines::p0::{
@@ -52,19 +52,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         cfg.ddpg.learning_starts = 100;
     }
 
-    let biped = |model: LeoModel, id: &str| -> Result<_, Box<dyn std::error::Error>> {
+    let biped = |model: LeoModel| -> Result<_, Box<dyn std::error::Error>> {
         let (plant, task) = match earlier {
             None => leo_task(model)?,
             Some(start) => {
-                let (plant, task) = leo_parts(model, id)?;
+                let (plant, task) = leo_parts(model, LeoEnv::id_of(model))?;
                 (plant, task.with_start(start)?)
             }
         };
         Ok((ModelEnv::new(PlantModel::new(plant), task.clone())?, task))
     };
-    let (mut env, task) = biped(LeoModel::Idealized, "Leo-v0")?;
-    let (mut idealized, _) = biped(LeoModel::Idealized, "Leo-v0")?;
-    let (mut true_biped, true_task) = biped(LeoModel::True, "Leo-true-v0")?;
+    let (mut env, task) = biped(LeoModel::Idealized)?;
+    let (mut idealized, _) = biped(LeoModel::Idealized)?;
+    let (mut true_biped, true_task) = biped(LeoModel::True)?;
 
     let seeds = SeedStream::new(seed);
     let (obs, act) = agent_spaces(&task);

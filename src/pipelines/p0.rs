@@ -657,8 +657,12 @@ where
     let key = method.name();
     let seeds = SeedStream::new(seed);
     let mut eval_env = (problem.true_env)()?;
-    if let (Some(n), false) = (cfg.fine_tune_learning_starts, method == Method::Cold) {
-        start.set_learning_starts(loop_learning_starts(n, &cfg.ddpg));
+    // Warm start and the difference method fine-tune the pre-trained agent.
+    match cfg.fine_tune_learning_starts {
+        Some(n) if method != Method::Cold => {
+            start.set_learning_starts(loop_learning_starts(n, &cfg.ddpg));
+        }
+        _ => {}
     }
     let batch = cfg.batch_of(method);
     if method.is_difference() && batch.is_none() {
@@ -973,11 +977,7 @@ pub const LEO_VOLTAGE_LIMIT: f64 = 8.6;
 /// ([`LeoStart::Stepping`]), only the electrical energy the motors draw counts as work
 /// ([`LeoWork::Positive`]), and voltages are bounded at [`LEO_VOLTAGE_LIMIT`].
 pub fn leo_task(model: LeoModel) -> std::result::Result<(RigidBodyPlant, LeoWalkTask), EnvError> {
-    let id = match model {
-        LeoModel::Idealized => LeoEnv::ID,
-        LeoModel::True => LeoEnv::ID_TRUE,
-    };
-    let (plant, task) = leo_parts(model, id)?;
+    let (plant, task) = leo_parts(model, LeoEnv::id_of(model))?;
     let task = task
         .with_start(LeoStart::Stepping)?
         .with_work(LeoWork::Positive)

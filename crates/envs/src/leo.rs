@@ -337,12 +337,17 @@ impl LeoEnv {
     /// Id of the true biped's environment.
     pub const ID_TRUE: &'static str = "Leo-true-v0";
 
-    /// The walking task over `model`'s biped.
-    pub fn new(model: LeoModel) -> Self {
-        let id = match model {
+    /// The registered id of `model`'s biped ([`Self::ID`] or [`Self::ID_TRUE`]).
+    pub fn id_of(model: LeoModel) -> &'static str {
+        match model {
             LeoModel::Idealized => Self::ID,
             LeoModel::True => Self::ID_TRUE,
-        };
+        }
+    }
+
+    /// The walking task over `model`'s biped.
+    pub fn new(model: LeoModel) -> Self {
+        let id = Self::id_of(model);
         let (plant, task) = leo_parts(model, id).expect("the registered Leo builds");
         PlantEnv::from_parts(plant, task).expect("the Leo task fits its plant")
     }
