@@ -383,10 +383,6 @@ fn reproduce_rejects_non_finite_config_values_before_any_work() {
             "[fit]\nholdout_fraction = 1.5",
             "fit.holdout_fraction is 1.5",
         ),
-        (
-            "target_within_reference = 1.5",
-            "target_within_reference must be in [0, 1)",
-        ),
     ] {
         let cfg = temp_file(&format!("p0-{}", key.len()), line);
         let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("p0-nan-out");

@@ -150,30 +150,8 @@ const RATIO_NOTE: &str =
 /// Table II: per method, the return at the budget and the true samples to the target; the
 /// reference μ^true (the cold start's converged return); how many times more true samples each
 /// baseline needed than the difference method.
-///
-/// An error when the target is stated relative to the reference and no cold start ran.
-pub fn table(records: &[RunRecord], cfg: &P0Config) -> Result<Table> {
+pub fn table(records: &[RunRecord], cfg: &P0Config) -> Table {
     let mut t = Table::default();
-    // The reference μ^true first: the target may be stated relative to it.
-    let cold: Vec<&RunRecord> = records
-        .iter()
-        .filter(|r| r.method == Method::Cold)
-        .collect();
-    let reference = (!cold.is_empty()).then(|| {
-        let per_seed: Vec<f64> = cold
-            .iter()
-            .map(|r| r.final_return(cfg.reference_evals))
-            .collect();
-        let (mean, stderr) = mean_stderr(&per_seed);
-        (mean, stderr, per_seed)
-    });
-    let target_value = cfg.target(reference.as_ref().map(|r| r.0)).ok_or_else(|| {
-        CliError::Other(
-            "the target is relative to the cold start's return (target_within_reference) and \
-             no cold start ran"
-                .into(),
-        )
-    })?;
     // Per method: mean true samples to the target with a seed that never reached it counted at
     // the samples it used, and whether any seed fell short.
     let mut used: Vec<(Method, f64, bool)> = Vec::new();
@@ -188,15 +166,24 @@ pub fn table(records: &[RunRecord], cfg: &P0Config) -> Result<Table> {
                 seed: r.seed,
                 samples: r.true_samples,
                 return_at_budget: r.return_at(cfg.real_budget).unwrap_or(f64::NAN),
-                samples_to_target: r.samples_to(target_value),
+                samples_to_target: r.samples_to(cfg.target_return),
             })
             .collect();
         let (figures, mean_samples, short) =
-            MethodFigures::from_runs(cfg.real_budget, target_value, &seeds);
+            MethodFigures::from_runs(cfg.real_budget, cfg.target_return, &seeds);
         used.push((m, mean_samples, short));
         t.methods.insert(m.name().into(), figures);
     }
-    if let Some((mean, stderr, per_seed)) = reference {
+    let cold: Vec<&RunRecord> = records
+        .iter()
+        .filter(|r| r.method == Method::Cold)
+        .collect();
+    if !cold.is_empty() {
+        let per_seed: Vec<f64> = cold
+            .iter()
+            .map(|r| r.final_return(cfg.reference_evals))
+            .collect();
+        let (mean, stderr) = mean_stderr(&per_seed);
         let gap = t
             .methods
             .get(Method::Difference.name())
@@ -222,7 +209,7 @@ pub fn table(records: &[RunRecord], cfg: &P0Config) -> Result<Table> {
             ));
         }
     }
-    Ok(t)
+    t
 }
 
 /// Table II (pendulum) or Table IV (Leo) as Markdown: the shared rendering with p0's words;
@@ -272,15 +259,6 @@ pub fn markdown(task: P0Task, t: &Table, cfg: &P0Config, wall: f64) -> String {
             r.stderr,
             gap.map_or("n/a".to_string(), |g| format!("{:.1} %", 100.0 * g)),
         ));
-        if let (Some(f), Some(m)) = (cfg.target_within_reference, t.methods.values().next()) {
-            closing.push(format!(
-                "The target return {:.1} is μ^true's less {:.0} % of its magnitude: p0's target \
-                 on Leo, 2300, is the return its difference method reached, \"within 10 %\" of \
-                 its μ^true's, on a biped whose returns are on another scale than ours.",
-                m.samples_to_target.target,
-                100.0 * f
-            ));
-        }
     }
     // The sentence under the table names each baseline's first comparison (with p0's batch);
     // those with the small batch get their own.
@@ -311,7 +289,7 @@ pub fn markdown(task: P0Task, t: &Table, cfg: &P0Config, wall: f64) -> String {
          difference method is evaluated after each model update ({} true samples each, {} in \
          all){small_sentence}. Wall time {wall:.0} s.",
         cfg.eval_interval,
-        cfg.baseline_stop_early && cfg.target_within_reference.is_none(),
+        cfg.baseline_stop_early,
         cfg.baseline_max_samples,
         cfg.real_batch,
         cfg.real_budget,
@@ -656,7 +634,7 @@ impl Study for P0Study {
         records: &[RunRecord],
         wall: f64,
     ) -> Result<String> {
-        let table = table(records, cfg)?;
+        let table = table(records, cfg);
         let mut md = markdown(self.0, &table, cfg, wall);
         match self.0 {
             P0Task::Pendulum => {
@@ -738,7 +716,7 @@ mod tests {
                 &[(0, -4e3), (400, -900.0), (800, -660.0)],
             ),
         ];
-        let t = table(&recs, &cfg).unwrap();
+        let t = table(&recs, &cfg);
         let close = |v: f64, x: f64| (v - x).abs() < 1e-12;
         let cmp = |b: &str| t.comparisons.iter().find(|c| c.baseline == b).unwrap();
         // Cold: (1200 + 1600) / 2 over 400, a lower bound (seed 1 never reached it).
@@ -775,49 +753,6 @@ mod tests {
     }
 
     #[test]
-    fn a_target_within_the_reference_is_taken_from_the_cold_starts_final_returns() {
-        let cfg = P0Config {
-            real_budget: 800,
-            reference_evals: 2,
-            target_within_reference: Some(0.1),
-            ..P0Config::default()
-        };
-        // Cold: final returns (900 + 1100) / 2 and (700 + 900) / 2, reference 900, target 810.
-        let recs = [
-            record(Method::Cold, 0, &[(0, 0.0), (800, 900.0), (1600, 1100.0)]),
-            record(Method::Cold, 1, &[(0, 0.0), (800, 700.0), (1600, 900.0)]),
-            record(Method::Warm, 0, &[(0, 100.0), (400, 800.0), (800, 820.0)]),
-            record(Method::Difference, 0, &[(0, 100.0), (400, 815.0)]),
-        ];
-        let t = table(&recs, &cfg).unwrap();
-        let to = |m: &str| &t.methods[m].samples_to_target;
-        assert!((to("warm").target - 810.0).abs() < 1e-12);
-        assert_eq!(to("warm").per_seed, [Some(800)]);
-        assert_eq!(to("difference").per_seed, [Some(400)]);
-        assert_eq!(to("cold").per_seed, [Some(800), Some(1600)]);
-        let md = markdown(P0Task::Leo, &t, &cfg, 1.0);
-        assert!(
-            md.contains("The target return 810.0 is μ^true's less 10 %"),
-            "{md}"
-        );
-        // A negative reference: "within 10 %" is still below it.
-        let neg: Vec<RunRecord> = [-1000.0, -800.0]
-            .iter()
-            .enumerate()
-            .map(|(s, &r)| record(Method::Cold, s as u64, &[(0, -5e3), (800, r)]))
-            .collect();
-        let cfg1 = P0Config {
-            reference_evals: 1,
-            ..cfg.clone()
-        };
-        let t = table(&neg, &cfg1).unwrap();
-        assert!((t.methods["cold"].samples_to_target.target + 990.0).abs() < 1e-9);
-        // Without a cold start the target is unknown: an error, not a table of "never".
-        let e = table(&recs[2..], &cfg).unwrap_err().to_string();
-        assert!(e.contains("no cold start ran"), "{e}");
-    }
-
-    #[test]
     fn a_run_short_of_the_budget_is_an_error_naming_the_seed_not_a_null() {
         let cfg = P0Config {
             real_budget: 800,
@@ -828,11 +763,7 @@ mod tests {
             record(Method::Cold, 0, &[(0, -9e3), (800, -2e3)]),
             record(Method::Cold, 1, &[(1200, -900.0)]),
         ];
-        let e = table(&recs, &cfg)
-            .unwrap()
-            .to_json()
-            .unwrap_err()
-            .to_string();
+        let e = table(&recs, &cfg).to_json().unwrap_err().to_string();
         assert!(
             e.contains("cold.return_at_budget.per_seed[1] is NaN"),
             "{e}"

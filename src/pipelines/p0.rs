@@ -125,8 +125,7 @@ pub struct P0Config {
     /// that the difference method's return at the budget is compared against (p0 Sec. V-A).
     pub baseline_max_samples: u64,
     /// Stop a warm run once it has reached [`Self::target_return`] and used
-    /// [`Self::real_budget`] samples (both Table II figures are known by then); never with
-    /// [`Self::target_within_reference`].
+    /// [`Self::real_budget`] samples (both Table II figures are known by then).
     pub baseline_stop_early: bool,
     /// The reference return `μ^true` is the mean of the cold start's last this many
     /// evaluations (its converged performance, less sensitive to one evaluation's luck).
@@ -147,12 +146,6 @@ pub struct P0Config {
     pub eval_episodes: usize,
     /// Table II's fixed return (p0: −1000).
     pub target_return: f64,
-    /// Where set, the fixed return of the report is not [`Self::target_return`] but the
-    /// reference `μ^true`'s return less this fraction of its magnitude: p0's Leo target of 2300
-    /// is the return its difference method reached, "within 10 %" of `μ^true`'s, so 0.1 restates
-    /// it on a biped whose returns are on another scale. The reference is known only once the
-    /// cold starts have run, so warm runs then never stop early.
-    pub target_within_reference: Option<f64>,
     /// The difference network (p0 Sec. IV-C: 3×400 ReLU, dropout 0.3, AdaGrad).
     pub residual: ResidualModelConfig,
     /// Each fit of the difference model (on all true samples so far).
@@ -188,7 +181,6 @@ impl Default for P0Config {
             eval_interval: 400,
             eval_episodes: 1,
             target_return: -1000.0,
-            target_within_reference: None,
             residual: ResidualModelConfig::default(),
             fit: FitConfig {
                 epochs: 10,
@@ -235,7 +227,6 @@ impl P0Config {
             // most of the 33 750-sample budget before warm start's first update.
             fine_tune_learning_starts: Some(0),
             target_return: 2300.0,
-            target_within_reference: Some(0.1),
             ..Self::default()
         }
     }
@@ -279,24 +270,8 @@ impl P0Config {
         if self.fit.epochs == 0 || self.fit.batch_size == 0 {
             return bad("fit.epochs and fit.batch_size must be >= 1");
         }
-        if let Some(f) = self.target_within_reference {
-            if !(0.0..1.0).contains(&f) {
-                return bad("target_within_reference must be in [0, 1)");
-            }
-        }
         self.ddpg.validate()?;
         Ok(())
-    }
-
-    /// The fixed return of the report given the reference `μ^true`'s return (`None` before any
-    /// cold start has run): [`Self::target_return`], or the reference less
-    /// [`Self::target_within_reference`] of its magnitude where that is set (`None` while the
-    /// reference is unknown).
-    pub fn target(&self, reference: Option<f64>) -> Option<f64> {
-        match self.target_within_reference {
-            None => Some(self.target_return),
-            Some(f) => reference.map(|r| r - f * r.abs()),
-        }
     }
 }
 
@@ -787,7 +762,7 @@ where
                     true_samples: count.get(),
                     eval_return: r,
                 });
-                p.reached |= cfg.target(None).is_some_and(|t| r >= t);
+                p.reached |= r >= cfg.target_return;
                 let stop_early = cfg.baseline_stop_early && method == Method::Warm;
                 if stop_early && p.reached && count.get() >= cfg.real_budget {
                     break;
