@@ -543,7 +543,7 @@ fn reproduce_p0_leo_quick_writes_tables_iii_and_iv_fig_8_and_the_gaits() {
     let table: serde_json::Value = serde_json::from_str(&read("table.json")).unwrap();
     for m in ["cold", "warm", "difference"] {
         assert_eq!(table[m]["return_at_budget"]["budget"], 1400, "{m}");
-        assert_eq!(table[m]["samples_to_target"]["target"], 2300.0);
+        assert_eq!(table[m]["samples_to_target"]["target"], 560.0);
     }
     assert!(table.get("difference_small_batch").is_none());
     let t3: serde_json::Value = serde_json::from_str(&read("table3.json")).unwrap();
