@@ -15,7 +15,7 @@
 
 use tandem::agents::{EpisodeRunner, StepOptions};
 use tandem::core::SeedStream;
-use tandem::envs::{leo_parts, LeoEnv, LeoModel, LeoStart};
+use tandem::envs::{leo_parts, LeoModel, LeoStart};
 use tandem::models::{ModelEnv, PlantModel};
 use tandem::pipelines::adapter::Feature;
 use tandem::pipelines::p0::{
@@ -56,7 +56,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (plant, task) = match earlier {
             None => leo_task(model)?,
             Some(start) => {
-                let (plant, task) = leo_parts(model, LeoEnv::id_of(model))?;
+                let (plant, task) = leo_parts(model)?;
                 (plant, task.with_start(start)?)
             }
         };

@@ -34,7 +34,7 @@ use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 use tandem_dynamics::rigid_plant::RigidBodyPlant;
 use tandem_dynamics::Plant;
 use tandem_envs::{
-    leo_parts, DcMotorPendulumEnv, DcMotorPendulumTask, Env, EnvError, LeoEnv, LeoModel, LeoStart,
+    leo_parts, DcMotorPendulumEnv, DcMotorPendulumTask, Env, EnvError, LeoModel, LeoStart,
     LeoWalkTask, LeoWork, PlantEnv, SampleCounter, Task, TimeLimit, LEO_STEPS,
 };
 use tandem_models::{
@@ -982,7 +982,7 @@ pub const LEO_VOLTAGE_LIMIT: f64 = 8.6;
 /// ([`LeoStart::Stepping`]), only the electrical energy the motors draw counts as work
 /// ([`LeoWork::Positive`]), and voltages are bounded at [`LEO_VOLTAGE_LIMIT`].
 pub fn leo_task(model: LeoModel) -> std::result::Result<(RigidBodyPlant, LeoWalkTask), EnvError> {
-    let (plant, task) = leo_parts(model, LeoEnv::id_of(model))?;
+    let (plant, task) = leo_parts(model)?;
     let task = task
         .with_start(LeoStart::Stepping)?
         .with_work(LeoWork::Positive)

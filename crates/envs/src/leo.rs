@@ -347,14 +347,15 @@ impl LeoEnv {
 
     /// The walking task over `model`'s biped.
     pub fn new(model: LeoModel) -> Self {
-        let id = Self::id_of(model);
-        let (plant, task) = leo_parts(model, id).expect("the registered Leo builds");
+        let (plant, task) = leo_parts(model).expect("the registered Leo builds");
         PlantEnv::from_parts(plant, task).expect("the Leo task fits its plant")
     }
 }
 
-/// The biped of `model` and the walking task over it, reported as `id`.
-pub fn leo_parts(model: LeoModel, id: &str) -> Result<(RigidBodyPlant, LeoWalkTask), EnvError> {
+/// The biped of `model` and the walking task over it, reported under its registered id
+/// ([`LeoEnv::id_of`]).
+pub fn leo_parts(model: LeoModel) -> Result<(RigidBodyPlant, LeoWalkTask), EnvError> {
+    let id = LeoEnv::id_of(model);
     let plant = leo_plant(RigidPlantConfig::default(), &model.overrides()).map_err(|e| {
         EnvError::Unsupported {
             env: id.to_string(),
@@ -378,7 +379,7 @@ mod tests {
         policy: Option<BipedTestPolicy>,
         steps: usize,
     ) -> (LeoWalkTask, RigidBodyPlant, Vec<Vec<f64>>, Vec<Vec<f64>>) {
-        let (plant, task) = leo_parts(model, "t").unwrap();
+        let (plant, task) = leo_parts(model).unwrap();
         let mut x = task.initial_state(&mut tandem_core::seeding::rng_from_seed(0));
         let mut states = vec![x.clone()];
         let mut controls = Vec::new();
@@ -403,7 +404,7 @@ mod tests {
 
     #[test]
     fn observation_drops_the_shoulder_and_keeps_p0s_18_dimensions() {
-        let (_, task) = leo_parts(LeoModel::Idealized, "t").unwrap();
+        let (_, task) = leo_parts(LeoModel::Idealized).unwrap();
         let s: Vec<f64> = (0..20).map(|i| i as f64).collect();
         let o = task.observe(&s);
         assert_eq!(o.len(), 18);
@@ -414,7 +415,7 @@ mod tests {
 
     #[test]
     fn electrical_work_is_joule_heat_at_stall_and_signed_when_back_driven() {
-        let (_, task) = leo_parts(LeoModel::Idealized, "t").unwrap();
+        let (_, task) = leo_parts(LeoModel::Idealized).unwrap();
         let m = DcMotor::default();
         let s = vec![0.0; 20];
         // At rest: U² / R per motor for 30 ms.
@@ -450,7 +451,7 @@ mod tests {
 
     #[test]
     fn a_voltage_limit_bounds_the_action_space_and_clips_the_controls() {
-        let (_, task) = leo_parts(LeoModel::Idealized, "t").unwrap();
+        let (_, task) = leo_parts(LeoModel::Idealized).unwrap();
         let limited = task.clone().with_voltage_limit(8.6).unwrap();
         assert_eq!(limited.action_space(), &Space::symmetric(6, 8.6));
         let u = limited.control(&Action::Continuous(vec![10.0, -10.0, 1.0, 0.0, 0.0, 0.0]));
@@ -506,7 +507,7 @@ mod tests {
 
     #[test]
     fn the_stepping_start_stands_on_the_left_foot_and_left_alone_falls_forwards() {
-        let (plant, task) = leo_parts(LeoModel::Idealized, "t").unwrap();
+        let (plant, task) = leo_parts(LeoModel::Idealized).unwrap();
         let standing = task.initial_state(&mut tandem_core::seeding::rng_from_seed(0));
         assert_eq!(standing, LeoStart::Standing.state(&plant).unwrap());
         let task = task.with_start(LeoStart::Stepping).unwrap();
@@ -549,8 +550,8 @@ mod tests {
 
     #[test]
     fn the_true_biped_differs_from_the_idealized_one_as_table_i() {
-        let (pi, _) = leo_parts(LeoModel::Idealized, "i").unwrap();
-        let (pt, _) = leo_parts(LeoModel::True, "t").unwrap();
+        let (pi, _) = leo_parts(LeoModel::Idealized).unwrap();
+        let (pt, _) = leo_parts(LeoModel::True).unwrap();
         let x = standing_state(pi.model());
         // Same posture, different weight: the heavier torso adds (1.25 − 0.942) g to the
         // potential energy's slope in z.
