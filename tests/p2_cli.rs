@@ -150,3 +150,31 @@ fn quick_maze_reproduction_writes_the_f1_table_and_the_frames() {
     );
     assert!(read("fig8.svg").contains("with_model"));
 }
+
+#[test]
+fn env_is_a_maze_option_and_unknown_mazes_are_errors() {
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_tandem"))
+            .args(args)
+            .output()
+            .expect("the tandem binary runs")
+    };
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("p2-env-errors");
+    let o = out.to_str().unwrap();
+    for (args, says) in [
+        (
+            vec!["reproduce", "p2-cartpole", "--env", "PixelMaze-v1"],
+            "p2-maze only",
+        ),
+        (
+            vec!["reproduce", "p2-maze", "--env", "PixelMaze-v7"],
+            "not a pixel maze",
+        ),
+    ] {
+        let r = run(&[&args[..], &["--quick", "--quiet", "--out", o]].concat());
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains(says) && !err.contains("panicked"), "{err}");
+        assert!(!out.exists(), "{args:?} wrote {o}");
+    }
+}

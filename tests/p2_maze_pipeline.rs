@@ -149,4 +149,33 @@ fn out_of_range_settings_are_errors() {
     let mut c = small();
     c.solved_return = f64::NAN;
     assert!(run(Method::ModelFree, &c, 0, &mut Ephemeral, &mut |_| {}).is_err());
+    let mut c = small();
+    c.env = "CartPole-v1".into();
+    let e = run(Method::ModelFree, &c, 0, &mut Ephemeral, &mut |_| {}).unwrap_err();
+    assert!(e.to_string().contains("not a pixel maze"), "{e}");
+}
+
+#[test]
+fn the_authors_layout_runs_its_100_step_episodes_without_ending_at_collisions() {
+    let cfg = MazeConfig {
+        env: "PixelMaze-v1".into(),
+        ..small()
+    };
+    assert_eq!(
+        MazeConfig::for_env("PixelMaze-v1").map(|c| (c.env, c.solved_return)),
+        Some(("PixelMaze-v1".to_string(), 35.0))
+    );
+    assert!(MazeConfig::for_env("PixelMaze-v2").is_none());
+    let (events, r) = whole(Method::WithModel, &cfg, 1);
+    assert_eq!(schedule(&events), "RRR".to_string() + &"RII".repeat(5));
+    // Collisions do not end an episode and reaching the goal does not either: every real
+    // episode runs to the 100-step limit, and every return is a sum of -5, 0 and +1 steps.
+    assert_eq!(r.real_samples, 8 * 100);
+    assert!(r
+        .real_returns
+        .iter()
+        .all(|g| g.fract() == 0.0 && *g <= 70.0));
+    // The default maze's episodes are at most 50 steps.
+    let (_, v0) = whole(Method::ModelFree, &small(), 1);
+    assert!(v0.real_samples <= 8 * 50);
 }

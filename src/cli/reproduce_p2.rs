@@ -3,7 +3,8 @@
 //! (`with_model`), over seeds:
 //!
 //! - CartPole-v1 (Sec. 4.1, Fig. 6): REINFORCE, the MLP model of `(s', r, done)`;
-//! - the pixel maze `PixelMaze-v0` (Sec. 4.2, Fig. 7 and 8): DQN from 16×16 RGB frames, the pixel
+//! - the pixel maze `PixelMaze-v0`, or with `--env PixelMaze-v1` the authors' released layout
+//!   (Sec. 4.2, Fig. 7 and 8): DQN from 16×16 RGB frames, the pixel
 //!   model; plus the pixel model's own experiment, its F1 per channel on held-out transitions
 //!   after 10, 100 and 300 training episodes, and its predicted frames (Fig. 7).
 //!
@@ -19,7 +20,8 @@
 //!   `quality.json` (the F1 experiment per seed).
 //!
 //! "Solved" is the mean return of the last 100 real episodes reaching 475 on CartPole
-//! (gymnasium's threshold) and 20 on the maze (ours); p2 defines neither. SIGINT or SIGTERM
+//! (gymnasium's threshold) and 20 on `PixelMaze-v0`, 35 on `PixelMaze-v1` (ours, about half the
+//! best return); p2 defines neither. SIGINT or SIGTERM
 //! stops the jobs between episodes and exits with 130 or 143; this command keeps no checkpoints
 //! on disk (no `--resume`): a stopped reproduction is started again. `--first-seed` lets
 //! processes split the seeds.
@@ -38,6 +40,7 @@ use tandem::pipelines::p2_maze::{self, MazeConfig, Quality, QualityConfig};
 use tandem::pipelines::{Checkpoints, Result as PipelineResult};
 use tandem::report::{ensure_finite, to_json_pretty, Curve, Figure, SamplesToTarget};
 use tandem::run::{csv, Existing, Layout, RunDir};
+use tandem_envs::PixelMazeEnv;
 use tandem_nn::Checkpoint;
 
 use super::{CliError, Result};
@@ -71,6 +74,11 @@ pub struct P2Args {
     /// given keep their defaults, unknown keys are errors). Not with `--quick`.
     #[arg(long, conflicts_with = "quick")]
     pub config: Option<PathBuf>,
+    /// p2-maze only: the maze, `PixelMaze-v0` (ours, from the paper alone) or `PixelMaze-v1`
+    /// (the authors' released layout), with its default settings [default: PixelMaze-v0].
+    /// With `--config`, the file's `env` says it.
+    #[arg(long, conflicts_with = "config")]
+    pub env: Option<String>,
 }
 
 /// Which of p2's experiments.
@@ -88,13 +96,6 @@ impl Experiment {
         match self {
             Experiment::CartPole => "p2-cartpole",
             Experiment::Maze => "p2-maze",
-        }
-    }
-
-    fn env(self) -> &'static str {
-        match self {
-            Experiment::CartPole => "CartPole-v1",
-            Experiment::Maze => "PixelMaze-v0",
         }
     }
 
@@ -146,21 +147,49 @@ pub enum Settings {
 }
 
 impl Settings {
-    fn defaults(exp: Experiment, quick: bool) -> Self {
-        match (exp, quick) {
-            (Experiment::CartPole, false) => Settings::CartPole(P2Config::default()),
-            (Experiment::CartPole, true) => Settings::CartPole(quick_config()),
-            (Experiment::Maze, false) => Settings::Maze {
-                runs: Box::default(),
-                quality: QualityConfig::default(),
-            },
-            (Experiment::Maze, true) => {
-                let (runs, quality) = quick_maze_config();
+    /// The defaults of `exp` (on the maze `env` for p2-maze), or why there are none.
+    fn defaults(
+        exp: Experiment,
+        quick: bool,
+        env: Option<&str>,
+    ) -> std::result::Result<Self, String> {
+        Ok(match (exp, env) {
+            (Experiment::CartPole, Some(_)) => {
+                return Err("--env applies to p2-maze only (p2-cartpole runs CartPole-v1)".into())
+            }
+            (Experiment::CartPole, None) if quick => Settings::CartPole(quick_config()),
+            (Experiment::CartPole, None) => Settings::CartPole(P2Config::default()),
+            (Experiment::Maze, env) => {
+                let env = env.unwrap_or(PixelMazeEnv::ID);
+                let Some(mut runs) = MazeConfig::for_env(env) else {
+                    return Err(format!(
+                        "--env {env}: not a pixel maze (use {} or {})",
+                        PixelMazeEnv::ID,
+                        PixelMazeEnv::ID_V1
+                    ));
+                };
+                let mut quality = QualityConfig::default();
+                if quick {
+                    let (q_runs, q_quality) = quick_maze_config();
+                    runs = MazeConfig {
+                        env: runs.env,
+                        ..q_runs
+                    };
+                    quality = q_quality;
+                }
                 Settings::Maze {
                     runs: Box::new(runs),
                     quality,
                 }
             }
+        })
+    }
+
+    /// The environment's id.
+    fn env(&self) -> &str {
+        match self {
+            Settings::CartPole(_) => "CartPole-v1",
+            Settings::Maze { runs, .. } => &runs.env,
         }
     }
 
@@ -199,6 +228,11 @@ impl Settings {
             Settings::CartPole(_) => format!(
                 "mean return of the last {window} real episodes >= {target} (p2 gives no \
                  definition; gymnasium's CartPole-v1 reward threshold)"
+            ),
+            Settings::Maze { runs, .. } if runs.env == PixelMazeEnv::ID_V1 => format!(
+                "mean training return of the last {window} real episodes >= {target} (p2 gives \
+                 no definition; ours: about half the best return, 70 from the fixed start, \
+                 fixed before any run)"
             ),
             Settings::Maze { .. } => format!(
                 "mean training return of the last {window} real episodes >= {target} (p2 gives \
@@ -498,7 +532,7 @@ const PAPER_F1: [(u64, [f64; 3]); 3] = [
 ];
 
 /// The table as Markdown, with the settings that matter and the wall time.
-pub fn markdown(t: &P2Table, exp: Experiment, settings: &str, wall: f64) -> String {
+pub fn markdown(t: &P2Table, exp: Experiment, env: &str, settings: &str, wall: f64) -> String {
     let (paper_mf, paper_wm) = exp.paper();
     let agent = exp.agent();
     let alone = format!("{agent} alone");
@@ -513,8 +547,7 @@ pub fn markdown(t: &P2Table, exp: Experiment, settings: &str, wall: f64) -> Stri
          are counted exactly; imagined episodes cost none. Mean ± standard error over the \
          seeds that solved it.\n\n| Method | Real episodes to solve | Paper | Imagined \
          episodes (mean) |\n|---|---|---|---|\n",
-        exp.env(),
-        t.solved
+        env, t.solved
     );
     for (label, r, paper) in rows {
         s.push_str(&format!(
@@ -573,7 +606,7 @@ pub fn markdown(t: &P2Table, exp: Experiment, settings: &str, wall: f64) -> Stri
 
 /// Fig. 6 (CartPole) or 8 (maze): the mean over seeds of the training return (mean of the last
 /// `window` real episodes) against real episodes, every 10 episodes.
-pub fn curves(records: &[RunRecord], exp: Experiment, window: usize) -> Figure {
+pub fn curves(records: &[RunRecord], exp: Experiment, env: &str, window: usize) -> Figure {
     let w = window;
     let curves = Method::ALL
         .iter()
@@ -599,7 +632,7 @@ pub fn curves(records: &[RunRecord], exp: Experiment, window: usize) -> Figure {
             "p2 Fig. {}: {} on {}, alone and with the learned model",
             exp.figure().1,
             exp.agent(),
-            exp.env()
+            env
         ),
         x_label: "real episodes".into(),
         y_label: format!("training return (mean of the last {w} real episodes)"),
@@ -757,7 +790,8 @@ pub fn p2(exp: Experiment, args: &P2Args) -> Result<()> {
             let text = std::fs::read_to_string(path).map_err(io_err(path.clone()))?;
             Settings::from_toml(exp, &text).map_err(|e| CliError::input(&what, e))?
         }
-        None => Settings::defaults(exp, args.quick),
+        None => Settings::defaults(exp, args.quick, args.env.as_deref())
+            .map_err(|e| CliError::input("--env", e))?,
     };
     settings.validate().map_err(CliError::other)?;
     ensure_finite(&settings).map_err(CliError::other)?;
@@ -885,12 +919,15 @@ pub fn p2(exp: Experiment, args: &P2Args) -> Result<()> {
     let mut t = table(&records, target, settings.solved_text());
     t.f1 = f1_table(&qualities);
     ensure_finite(&t).map_err(CliError::other)?;
-    let md = markdown(&t, exp, &settings.describe(), wall);
+    let md = markdown(&t, exp, settings.env(), &settings.describe(), wall);
     let json = to_json_pretty(&t).map_err(|e| CliError::Other(format!("table.json: {e}")))?;
     let mut files = vec![
         ("table.json", json),
         ("table.md", md.clone()),
-        (exp.figure().0, curves(&records, exp, window).svg()),
+        (
+            exp.figure().0,
+            curves(&records, exp, settings.env(), window).svg(),
+        ),
     ];
     if let (Settings::Maze { runs, .. }, Some(q)) = (&settings, qualities.first()) {
         files.push(("fig7.svg", fig7(q, runs.model.threshold)));
@@ -955,7 +992,7 @@ mod tests {
         let q = &t.with_model_over_model_free;
         assert!((q.ratio.unwrap() - 400.0 / 1300.0).abs() < 1e-12);
         assert_eq!(q.bound.as_deref(), Some("upper"));
-        let md = markdown(&t, Experiment::CartPole, "s", 1.0);
+        let md = markdown(&t, Experiment::CartPole, "CartPole-v1", "s", 1.0);
         assert!(md.contains("at most 0.31"), "{md}");
         assert!(md.contains("- REINFORCE alone: 600, never"), "{md}");
         // The JSON has the keys the issue names, with null for the seed that never solved it.

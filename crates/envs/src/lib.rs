@@ -7,7 +7,7 @@
 //! | [`Env`], [`Step`], [`EnvError`] | the trait, with gymnasium's `terminated`/`truncated` |
 //! | [`Task`], [`PlantEnv`] | start, observation, control, reward, termination and episode length over a plant's state; an environment over any [`tandem_dynamics::Plant`] plus a task (the classic environments below are instances) |
 //! | [`CartPoleEnv`] (`CartPole-v1`), [`PendulumEnv`] (`Pendulum-v1`) | exact to gymnasium 1.x |
-//! | [`PixelMazeEnv`] (`PixelMaze-v0`) | p2's crowd-navigation maze as 16×16 RGB images, 5 discrete actions |
+//! | [`PixelMazeEnv`] (`PixelMaze-v0`, `PixelMaze-v1`) | p2's crowd-navigation maze as 16×16 RGB images, 5 discrete actions; v1 is the authors' released layout |
 //! | [`DcMotorPendulumEnv`] (`DcMotorPendulum-idealized-v0`, `DcMotorPendulum-real-v0`) | p0's swing-up pair; reward [`dc_motor_pendulum_reward`] |
 //! | [`Leg2REnv`] (`Leg2R-v0`, `Leg2R-real-v0`) | p3's 2R leg on a test rig (URDF, 500 Hz, 3 N m joints) tracking a semi-elliptical foot trajectory; reward (15) [`leg2r_reward`]; idealized/true pair |
 //! | [`make`], [`make_unwrapped`], [`registered`] | the registry |
@@ -42,7 +42,10 @@ pub use leo::{
     LEO_REWARD_PER_JOULE, LEO_REWARD_PER_METRE, LEO_REWARD_PER_STEP, LEO_STEPS,
 };
 pub use pendulum::{angle_normalize, pendulum_reward, PendulumEnv, PendulumTask};
-pub use pixel_maze::{PixelMazeEnv, PIXEL_MAZE_GRID, PIXEL_MAZE_OBSTACLES, PIXEL_MAZE_PIXELS};
+pub use pixel_maze::{
+    ObstaclePlacement, PixelMazeEnv, PixelMazeLayout, PIXEL_MAZE_GRID, PIXEL_MAZE_OBSTACLES,
+    PIXEL_MAZE_PIXELS,
+};
 pub use registry::{make, make_unwrapped, registered, EnvSpec};
 pub use tandem_core::{Action, Space};
 pub use task::{clip_to, control_dim, PlantEnv, Task, TaskEpisodes};

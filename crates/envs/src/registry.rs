@@ -50,6 +50,11 @@ const REGISTRY: &[(&str, &str, usize)] = &[
         50,
     ),
     (
+        PixelMazeEnv::ID_V1,
+        "p2's maze as the authors released it: 16x16 one-pixel cells, 5 obstacles, fixed start",
+        100,
+    ),
+    (
         Leg2REnv::ID,
         "p3's 2R leg (0.15 m links, 3 N m, 500 Hz) tracking a semi-elliptical foot trajectory",
         LEG2R_STEPS,
@@ -81,6 +86,7 @@ pub fn make_unwrapped(id: &str) -> Result<Box<dyn Env>, EnvError> {
         }
         DcMotorPendulumEnv::ID_REAL => Box::new(DcMotorPendulumEnv::new(PendulumModel::Real)),
         PixelMazeEnv::ID => Box::new(PixelMazeEnv::new()),
+        PixelMazeEnv::ID_V1 => Box::new(PixelMazeEnv::v1()),
         Leg2REnv::ID => Box::new(Leg2REnv::new(Leg2RModel::Idealized)),
         Leg2REnv::ID_REAL => Box::new(Leg2REnv::new(Leg2RModel::Real)),
         LeoEnv::ID => Box::new(LeoEnv::new(LeoModel::Idealized)),
@@ -139,7 +145,10 @@ mod tests {
             assert_eq!(env.action_space(), &spec.action_space);
         }
         let limits: Vec<usize> = registered().iter().map(|s| s.max_episode_steps).collect();
-        assert_eq!(limits, vec![500, 200, 400, 400, 50, 1000, 1000, 667, 667]);
+        assert_eq!(
+            limits,
+            vec![500, 200, 400, 400, 50, 100, 1000, 1000, 667, 667]
+        );
     }
 
     #[test]
