@@ -161,10 +161,13 @@ fn the_authors_layout_runs_its_100_step_episodes_without_ending_at_collisions() 
         env: "PixelMaze-v1".into(),
         ..small()
     };
+    let v1 = MazeConfig::for_env("PixelMaze-v1").unwrap();
+    assert_eq!((v1.env.as_str(), v1.solved_return), ("PixelMaze-v1", 35.0));
     assert_eq!(
-        MazeConfig::for_env("PixelMaze-v1").map(|c| (c.env, c.solved_return)),
-        Some(("PixelMaze-v1".to_string(), 35.0))
+        (v1.dqn.learning_rate, v1.dqn.learning_rate_final),
+        (1e-4, Some(1e-4))
     );
+    assert_eq!(v1.model, MazeConfig::default().model);
     assert!(MazeConfig::for_env("PixelMaze-v2").is_none());
     let (events, r) = whole(Method::WithModel, &cfg, 1);
     assert_eq!(schedule(&events), "RRR".to_string() + &"RII".repeat(5));
