@@ -168,7 +168,8 @@ fn the_authors_layout_runs_its_100_step_episodes_without_ending_at_collisions() 
         (1e-4, Some(1e-4))
     );
     assert_eq!(v1.model, MazeConfig::default().model);
-    assert!(MazeConfig::for_env("PixelMaze-v2").is_none());
+    let e = MazeConfig::for_env("PixelMaze-v2").unwrap_err();
+    assert!(e.to_string().contains("not a pixel maze"), "{e}");
     let (events, r) = whole(Method::WithModel, &cfg, 1);
     assert_eq!(schedule(&events), "RRR".to_string() + &"RII".repeat(5));
     // Collisions do not end an episode and reaching the goal does not either: every real

@@ -161,13 +161,7 @@ impl Settings {
             (Experiment::CartPole, None) => Settings::CartPole(P2Config::default()),
             (Experiment::Maze, env) => {
                 let env = env.unwrap_or(PixelMazeEnv::ID);
-                let Some(mut runs) = MazeConfig::for_env(env) else {
-                    return Err(format!(
-                        "--env {env}: not a pixel maze (use {} or {})",
-                        PixelMazeEnv::ID,
-                        PixelMazeEnv::ID_V1
-                    ));
-                };
+                let mut runs = MazeConfig::for_env(env).map_err(|e| e.to_string())?;
                 let mut quality = QualityConfig::default();
                 if quick {
                     let (q_runs, q_quality) = quick_maze_config();

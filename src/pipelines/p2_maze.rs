@@ -1,7 +1,7 @@
 //! Paper p2's maze experiment (Sec. 3.2 and 4.2): DQN on p2's crowd-navigation maze from pixels
-//! (`PixelMaze-v0` or the authors' layout `PixelMaze-v1`, 16×16 RGB), alone and with episodes imagined by the pixel model
-//! ([`PixelModel`]: four frames and the action in, the next frame, the reward and the termination
-//! out).
+//! (`PixelMaze-v0` or the authors' layout `PixelMaze-v1`, 16×16 RGB), alone and with episodes
+//! imagined by the pixel model ([`PixelModel`]: four frames and the action in, the next frame, the
+//! reward and the termination out).
 //!
 //! The loop is Fig. 3's, as [`super::p2::run`] runs it for REINFORCE, here for an off-policy
 //! agent through the shared [`OffPolicyLoop`]:
@@ -118,11 +118,11 @@ impl MazeConfig {
     /// real episodes (p2's DQN alone needed 700), and a slower, steadier DQN for its longer
     /// episodes: Adam 1e-4, target copied every 2000 steps, a 100 000-transition buffer, ε
     /// decayed over 20 000 steps (with v0's settings DQN alone reached the goal and then
-    /// collapsed on both seeds tried; with these it solved both, docs/p2.md). `None` for any
-    /// other id.
-    pub fn for_env(env: &str) -> Option<Self> {
+    /// collapsed on both seeds tried; with these it solved both, docs/p2.md). Any other id is
+    /// an error naming the two mazes.
+    pub fn for_env(env: &str) -> Result<Self> {
         match env {
-            PixelMazeEnv::ID => Some(Self::default()),
+            PixelMazeEnv::ID => Ok(Self::default()),
             PixelMazeEnv::ID_V1 => {
                 let mut dqn = maze_dqn();
                 dqn.learning_rate = 1e-4;
@@ -130,7 +130,7 @@ impl MazeConfig {
                 dqn.target_update_interval = 2000;
                 dqn.buffer_size = 100_000;
                 dqn.exploration_steps = 20_000;
-                Some(Self {
+                Ok(Self {
                     env: env.to_string(),
                     dqn,
                     solved_return: 35.0,
@@ -138,7 +138,7 @@ impl MazeConfig {
                     ..Self::default()
                 })
             }
-            _ => None,
+            _ => Err(not_a_maze(env)),
         }
     }
 
@@ -155,12 +155,7 @@ impl MazeConfig {
             return bad("fit.steps and fit.batch_size must be >= 1");
         }
         let Some(maze) = PixelMazeEnv::from_id(&self.env) else {
-            return Err(PipelineError::Config(format!(
-                "env `{}` is not a pixel maze: use {} or {}",
-                self.env,
-                PixelMazeEnv::ID,
-                PixelMazeEnv::ID_V1
-            )));
+            return Err(not_a_maze(&self.env));
         };
         let shape = match maze.observation_space() {
             tandem_core::Space::Box { shape, .. } => shape.clone(),
@@ -173,6 +168,15 @@ impl MazeConfig {
         self.dqn.validate()?;
         Ok(())
     }
+}
+
+/// The error for an `env` that is not one of the pixel mazes.
+fn not_a_maze(env: &str) -> PipelineError {
+    PipelineError::Config(format!(
+        "env `{env}` is not a pixel maze: use {} or {}",
+        PixelMazeEnv::ID,
+        PixelMazeEnv::ID_V1
+    ))
 }
 
 /// The maze as the runs use it: [`MazeConfig::env`] with its registered episode limit.
