@@ -83,12 +83,15 @@ fn quick_reproduction_writes_the_table_the_figure_and_the_runs() {
 }
 
 /// `tandem reproduce p2-maze --quick`: DQN alone and with the pixel model on seed 3
-/// (`--first-seed`), and the pixel model's F1 experiment with its picture.
+/// (`--first-seed`), and the pixel model's F1 experiment (on seed 3 by a `[quality]` table in
+/// `--config`) with its picture.
 #[test]
 fn quick_maze_reproduction_writes_the_f1_table_and_the_frames() {
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("p2-maze-quick");
     let _ = std::fs::remove_dir_all(&out);
     let o = out.to_str().unwrap();
+    let cfg = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("p2-maze-quick.toml");
+    std::fs::write(&cfg, "[quality]\nseeds = [3]\n").unwrap();
     let args = [
         "reproduce",
         "p2-maze",
@@ -98,6 +101,8 @@ fn quick_maze_reproduction_writes_the_f1_table_and_the_frames() {
         "1",
         "--first-seed",
         "3",
+        "--config",
+        cfg.to_str().unwrap(),
         "--out",
         o,
     ];
@@ -136,8 +141,10 @@ fn quick_maze_reproduction_writes_the_f1_table_and_the_frames() {
         }
     }
     let quality: Value = serde_json::from_str(&read("quality.json")).unwrap();
-    assert_eq!(quality.as_array().unwrap().len(), 1); // the F1 experiment on the first seed
+    assert_eq!(quality.as_array().unwrap().len(), 1); // the F1 experiment on seed 3
     assert_eq!(quality[0]["seed"], 3);
+    let f1_curve = read("runs/model_f1__seed3/curve.csv");
+    assert_eq!(f1_curve.lines().count(), 3, "{f1_curve}"); // header, after 2, after 5
     let md = read("table.md");
     assert!(
         md.contains("DQN with the model") && md.contains("| 5 |"),
@@ -161,7 +168,21 @@ fn env_is_a_maze_option_and_unknown_mazes_are_errors() {
     };
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("p2-env-errors");
     let o = out.to_str().unwrap();
+    let v0 = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("p2-env-v0.toml");
+    std::fs::write(&v0, "env = \"PixelMaze-v0\"\n").unwrap();
+    let v0 = v0.to_str().unwrap();
     for (args, says) in [
+        (
+            vec![
+                "reproduce",
+                "p2-maze",
+                "--env",
+                "PixelMaze-v1",
+                "--config",
+                v0,
+            ],
+            "says env = \"PixelMaze-v0\"",
+        ),
         (
             vec!["reproduce", "p2-cartpole", "--env", "PixelMaze-v1"],
             "p2-maze only",
@@ -177,4 +198,108 @@ fn env_is_a_maze_option_and_unknown_mazes_are_errors() {
         assert!(err.contains(says) && !err.contains("panicked"), "{err}");
         assert!(!out.exists(), "{args:?} wrote {o}");
     }
+}
+
+/// `tandem reproduce p2-maze` killed (SIGKILL) once a run has a checkpoint and resumed ends with
+/// the table, figure, curves and records of an uninterrupted run (wall times aside) and no state
+/// left; a second seed run as its own process and `tandem reproduce merge` give the table of
+/// one process running both seeds.
+#[cfg(unix)]
+#[test]
+fn a_killed_maze_reproduction_resumes_and_separate_seeds_merge_to_the_same_table() {
+    use std::path::Path;
+    use std::process::Stdio;
+    use std::time::{Duration, Instant};
+
+    let root = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("p2-maze-resume");
+    let _ = std::fs::remove_dir_all(&root);
+    std::fs::create_dir_all(&root).unwrap();
+    let cfg = root.join("often.toml");
+    std::fs::write(&cfg, "checkpoint_every = 4\n").unwrap();
+    let cfg = cfg.to_str().unwrap();
+    let tandem = |args: &[&str]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_tandem"));
+        c.args(args).stdout(Stdio::null()).stderr(Stdio::piped());
+        c
+    };
+    let fresh = |out: &Path, seeds: &str, first: &str| {
+        let o = out.to_str().unwrap().to_string();
+        let args = [
+            "reproduce",
+            "p2-maze",
+            "--quick",
+            "--quiet",
+            "--config",
+            cfg,
+            "--seeds",
+            seeds,
+            "--first-seed",
+            first,
+            "--out",
+            &o,
+        ];
+        tandem(&args)
+    };
+    let ok = |mut c: Command| {
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+
+    let whole = root.join("whole");
+    ok(fresh(&whole, "2", "0"));
+
+    let cut = root.join("cut");
+    let mut child = fresh(&cut, "1", "0").spawn().unwrap();
+    let ckpt = cut.join("state/seed0/model_free/model_free.safetensors");
+    let start = Instant::now();
+    while !ckpt.exists() {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "finished before a checkpoint"
+        );
+        assert!(start.elapsed() < Duration::from_secs(120));
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    ok(tandem(&[
+        "reproduce",
+        "p2-maze",
+        "--quiet",
+        "--resume",
+        cut.to_str().unwrap(),
+    ]));
+    assert!(!cut.join("state").exists() && !cut.join(".tandem.lock").exists());
+    let record = |d: &Path, run: &str| {
+        let text = std::fs::read_to_string(d.join("runs").join(run).join("record.json")).unwrap();
+        let mut r: Value = serde_json::from_str(&text).unwrap();
+        r["wall_seconds"] = Value::Null;
+        r
+    };
+    for run in ["model_f1__seed0", "model_free__seed0", "with_model__seed0"] {
+        assert_eq!(record(&whole, run), record(&cut, run), "{run}");
+        let curve = |d: &Path| std::fs::read_to_string(d.join("runs").join(run).join("curve.csv"));
+        assert_eq!(curve(&whole).unwrap(), curve(&cut).unwrap(), "{run}");
+    }
+
+    let other = root.join("seed1");
+    ok(fresh(&other, "1", "1"));
+    assert!(
+        !other.join("runs/model_f1__seed1").exists(),
+        "F1 runs on seed 0 only"
+    );
+    let merged = root.join("merged");
+    ok(tandem(&[
+        "reproduce",
+        "merge",
+        cut.to_str().unwrap(),
+        other.to_str().unwrap(),
+        "--out",
+        merged.to_str().unwrap(),
+    ]));
+    for f in ["table.json", "fig8.svg", "fig7.svg"] {
+        let same = std::fs::read(whole.join(f)).unwrap() == std::fs::read(merged.join(f)).unwrap();
+        assert!(same, "{f} differs");
+    }
+    std::fs::remove_dir_all(&root).ok();
 }

@@ -112,8 +112,9 @@ fn the_f1_experiment_scores_copies_on_later_episodes_past_solved() {
     let q = QualityConfig {
         checkpoints: vec![2, 4],
         heldout_episodes: 2,
+        seeds: vec![1],
     };
-    let out = model_quality(&cfg, &q, 1, &Ephemeral).unwrap();
+    let out = model_quality(&cfg, &q, 1, &Ephemeral, &mut |_| {}).unwrap();
     assert_eq!(out.real_returns.len(), 6); // the last checkpoint and its 2 held-out episodes
     let eps: Vec<u64> = out.points.iter().map(|p| p.episodes).collect();
     assert_eq!(eps, [2, 4]);
@@ -130,11 +131,14 @@ fn the_f1_experiment_scores_copies_on_later_episodes_past_solved() {
     }
     // The model after 4 episodes trained on more transitions than after 2.
     assert!(out.points[1].transitions > out.points[0].transitions);
-    let bad = QualityConfig {
-        checkpoints: vec![0],
-        heldout_episodes: 2,
-    };
-    assert!(model_quality(&cfg, &bad, 1, &Ephemeral).is_err());
+    for (checkpoints, heldout_episodes) in [(vec![0], 2), (vec![], 2), (vec![3], 0)] {
+        let bad = QualityConfig {
+            checkpoints,
+            heldout_episodes,
+            seeds: vec![1],
+        };
+        assert!(model_quality(&cfg, &bad, 1, &Ephemeral, &mut |_| {}).is_err());
+    }
 }
 
 #[test]

@@ -125,9 +125,11 @@ pub trait Study: Sync {
         false
     }
 
-    /// One seed's runs (their names, the keys of records and checkpoints), grouped into jobs:
-    /// the runs of a job go one after another in one thread, jobs in parallel.
-    fn jobs(&self, settings: &Self::Settings) -> Vec<Vec<String>>;
+    /// The runs of `seed` (their names, the keys of records and checkpoints), grouped into
+    /// jobs: the runs of a job go one after another in one thread, jobs in parallel. Most
+    /// studies run the same on every seed; one may add runs on chosen seeds (p2-maze's F1
+    /// experiment).
+    fn jobs(&self, settings: &Self::Settings, seed: u64) -> Vec<Vec<String>>;
 
     /// The length of `run`'s progress bar (e.g. its real steps).
     fn length(&self, settings: &Self::Settings, run: &str) -> u64;
@@ -424,10 +426,9 @@ fn read_records<S: Study>(
     dir: &Path,
     seeds: std::ops::Range<u64>,
 ) -> Result<Vec<S::Record>> {
-    let runs: Vec<String> = study.jobs(settings).into_iter().flatten().collect();
     let mut records = Vec::new();
     for seed in seeds {
-        for run in &runs {
+        for run in study.jobs(settings, seed).iter().flatten() {
             let r = read_record(dir, run, seed)?.ok_or_else(|| {
                 CliError::Other(format!(
                     "{}: seed {seed}: the {run} run left no record",
@@ -488,7 +489,12 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
             .progress_chars("=> ");
     let settings = &rc.config;
     let jobs: Vec<(u64, Vec<String>)> = (rc.first_seed..rc.first_seed + rc.seeds)
-        .flat_map(|seed| study.jobs(settings).into_iter().map(move |j| (seed, j)))
+        .flat_map(|seed| {
+            study
+                .jobs(settings, seed)
+                .into_iter()
+                .map(move |j| (seed, j))
+        })
         .collect();
     let next = AtomicUsize::new(0);
     let errors: Mutex<Vec<(u64, String)>> = Mutex::new(Vec::new());
@@ -672,10 +678,9 @@ pub fn merge<S: Study>(
     };
     let name = format!("{}-merged", study.name());
     let dir = RunDir::create(out, &name, layout(study, true), existing).map_err(CliError::other)?;
-    let runs: Vec<String> = study.jobs(settings).into_iter().flatten().collect();
     let mut records = Vec::new();
     for (seed, rs) in by_seed {
-        for (run, r) in runs.iter().zip(rs) {
+        for (run, r) in study.jobs(settings, seed).iter().flatten().zip(rs) {
             write_record(study, dir.path(), run, seed, &r)?;
             records.push(r);
         }
@@ -715,9 +720,18 @@ pub fn override_settings<C: Serialize + DeserializeOwned>(
     text: &str,
     what: &str,
 ) -> Result<C> {
-    let mut v = toml::Value::try_from(base).map_err(CliError::other)?;
     let over: toml::Table =
         toml::from_str(text).map_err(|e| CliError::input(what, e.to_string()))?;
+    override_with_table(base, over, what)
+}
+
+/// [`override_settings`] with the overrides already parsed.
+pub fn override_with_table<C: Serialize + DeserializeOwned>(
+    base: &C,
+    over: toml::Table,
+    what: &str,
+) -> Result<C> {
+    let mut v = toml::Value::try_from(base).map_err(CliError::other)?;
     merge_toml(&mut v, toml::Value::Table(over));
     let c: C = v
         .try_into()

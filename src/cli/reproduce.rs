@@ -8,6 +8,7 @@ use clap::{Args, Subcommand};
 use super::harness;
 use super::reproduce_p0::{P0Args, P0Study, P0Task};
 use super::reproduce_p1::P1Study;
+use super::reproduce_p2::{Experiment, P2Study};
 use super::reproduce_p3::P3Study;
 use super::reproduce_p4::{Door, P4Study, Pusher};
 use super::reproduce_p4_reacher::ReacherStudy;
@@ -47,7 +48,7 @@ pub enum ReproduceCommand {
     /// p4 (PILQR) Fig. 4 on gymnasium's reacher (MuJoCo, needs `--features mujoco`): neural
     /// policies by MDGPS with LQR-FLM, PI² or PILQR and by DDPG, final distance on 300 test targets.
     P4Reacher(super::reproduce_p4_reacher::ReacherArgs),
-    /// Combine p0-pendulum, p0-leo, p1, p3-leg, p3-mujoco, p4-pusher, p4-door or p4-reacher reproductions of disjoint seeds (e.g. one
+    /// Combine p0-pendulum, p0-leo, p1, p2-cartpole, p2-maze, p3-leg, p3-mujoco, p4-pusher, p4-door or p4-reacher reproductions of disjoint seeds (e.g. one
     /// process per seed, `--first-seed`) into one table and figure; their settings must be equal.
     Merge(MergeArgs),
 }
@@ -73,10 +74,10 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
         ReproduceCommand::P0Leo(args) => harness::run(&P0Study(P0Task::Leo), &args.study),
         ReproduceCommand::P1(args) => harness::run(&P1Study::new(args.env), &args.study),
         ReproduceCommand::P2Cartpole(args) => {
-            super::reproduce_p2::p2(super::reproduce_p2::Experiment::CartPole, &args)
+            harness::run(&P2Study::new(Experiment::CartPole, args.env), &args.study)
         }
         ReproduceCommand::P2Maze(args) => {
-            super::reproduce_p2::p2(super::reproduce_p2::Experiment::Maze, &args)
+            harness::run(&P2Study::new(Experiment::Maze, args.env), &args.study)
         }
         ReproduceCommand::P3Leg(args) => {
             harness::run(&P3Study::leg(args.ablate_elites, args.oracle), &args.study)
@@ -107,6 +108,18 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
                 ),
                 "p1" => harness::merge(
                     &P1Study::new(None),
+                    &args.dirs,
+                    args.out.as_deref(),
+                    args.overwrite,
+                ),
+                "p2-cartpole" => harness::merge(
+                    &P2Study::new(Experiment::CartPole, None),
+                    &args.dirs,
+                    args.out.as_deref(),
+                    args.overwrite,
+                ),
+                "p2-maze" => harness::merge(
+                    &P2Study::new(Experiment::Maze, None),
                     &args.dirs,
                     args.out.as_deref(),
                     args.overwrite,

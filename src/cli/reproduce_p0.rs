@@ -576,7 +576,7 @@ impl Study for P0Study {
         parse_config(base, &text, &format!("--config {}", path.display()))
     }
 
-    fn jobs(&self, cfg: &P0Config) -> Vec<Vec<String>> {
+    fn jobs(&self, cfg: &P0Config, _seed: u64) -> Vec<Vec<String>> {
         let pretrained = cfg
             .methods()
             .into_iter()

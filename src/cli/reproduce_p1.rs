@@ -148,7 +148,7 @@ impl Study for P1Study {
         self.env.is_some()
     }
 
-    fn jobs(&self, _s: &P1Settings) -> Vec<Vec<String>> {
+    fn jobs(&self, _s: &P1Settings, _seed: u64) -> Vec<Vec<String>> {
         Method::ALL
             .iter()
             .map(|m| vec![m.name().to_string()])

@@ -8,10 +8,13 @@
 //!   model; plus the pixel model's own experiment, its F1 per channel on held-out transitions
 //!   after 10, 100 and 300 training episodes, and its predicted frames (Fig. 7).
 //!
-//! Each writes in the output directory:
+//! Both run through the shared [`super::harness`] (checkpoints, `--resume`, one process per seed,
+//! `tandem reproduce merge`), each method and seed a job, and write in the output directory,
+//! besides the harness' `config.json` and `state/`:
 //!
-//! - `config.json`: the settings used, seeds, status and wall time;
 //! - `runs/<method>__seed<k>/record.json` and `curve.csv`: each run's return per real episode;
+//!   on the maze also `runs/model_f1__seed<k>/` for the seeds of the F1 experiment
+//!   ([`QualityConfig::seeds`], seed 0 by default);
 //! - `table.md`, `table.json`: real episodes to solve per method (`episodes_to_solve`: mean and
 //!   standard error over the seeds that solved it, `per_seed` with `null` where a seed never
 //!   did), the ratio of the means, with-model over model-free, and for the maze `f1`;
@@ -21,63 +24,34 @@
 //!
 //! "Solved" is the mean return of the last 100 real episodes reaching 475 on CartPole
 //! (gymnasium's threshold) and 20 on `PixelMaze-v0`, 35 on `PixelMaze-v1` (ours, about half the
-//! best return); p2 defines neither. SIGINT or SIGTERM
-//! stops the jobs between episodes and exits with 130 or 143; this command keeps no checkpoints
-//! on disk (no `--resume`): a stopped reproduction is started again. `--first-seed` lets
-//! processes split the seeds.
+//! best return); p2 defines neither. A run checkpoints every `checkpoint_every` real episodes
+//! (50 by default); the F1 experiment keeps no checkpoints (its copies of the model are not in
+//! them) and starts again when resumed.
 
-use std::path::PathBuf;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
-use std::time::Instant;
+use std::path::Path;
 
 use clap::Args;
-use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
-use tandem::interrupt::{Stop, EXIT_SIGINT};
 use tandem::pipelines::p2::{cartpole, Event, Method, P2Config, RunRecord};
 use tandem::pipelines::p2_maze::{self, MazeConfig, Quality, QualityConfig};
 use tandem::pipelines::{Checkpoints, Result as PipelineResult};
 use tandem::report::{ensure_finite, to_json_pretty, Curve, Figure, SamplesToTarget};
-use tandem::run::{csv, Existing, Layout, RunDir};
+use tandem::run::RunDir;
 use tandem_envs::PixelMazeEnv;
-use tandem_nn::Checkpoint;
 
+use super::harness::{self, JobError, Study, StudyArgs};
 use super::{CliError, Result};
 
 /// Arguments of `tandem reproduce p2-cartpole` and `p2-maze`.
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct P2Args {
-    /// Number of seeds (S, S+1, ..., S+N-1) [default: 10, as p2 averages over 10 runs].
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
-    pub seeds: Option<u64>,
-    /// The first seed S (processes can split the seeds).
-    #[arg(long, default_value_t = 0)]
-    pub first_seed: u64,
-    /// Small smoke configuration (a small model, 20 real episodes; numbers are meaningless).
-    #[arg(long)]
-    pub quick: bool,
-    /// Output directory (default `runs/<experiment>__<time>/`).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Parallel jobs, one thread each (one job per method and seed).
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..=64))]
-    pub jobs: u64,
-    /// No progress bars.
-    #[arg(long)]
-    pub quiet: bool,
-    /// Replace the reproduction in an existing `--out` directory; without it, an existing
-    /// reproduction there is an error.
-    #[arg(long)]
-    pub overwrite: bool,
-    /// TOML file of settings (`P2Config` for CartPole, `MazeConfig` for the maze; fields not
-    /// given keep their defaults, unknown keys are errors). Not with `--quick`.
-    #[arg(long, conflicts_with = "quick")]
-    pub config: Option<PathBuf>,
+    /// Seeds (default 10, as p2 averages over 10 runs), output, jobs, resume: as every study.
+    #[command(flatten)]
+    pub study: StudyArgs,
     /// p2-maze only: the maze, `PixelMaze-v0` (ours, from the paper alone) or `PixelMaze-v1`
-    /// (the authors' released layout), with its default settings [default: PixelMaze-v0].
-    /// With `--config`, the file's `env` says it.
-    #[arg(long, conflicts_with = "config")]
+    /// (the authors' released layout), with its default settings [default: a `--config`
+    /// file's `env`, else PixelMaze-v0; on `--resume`, the recorded one].
+    #[arg(long)]
     pub env: Option<String>,
 }
 
@@ -121,22 +95,13 @@ impl Experiment {
             Experiment::Maze => ("fig8.svg", 8),
         }
     }
-
-    /// The files and folders the command writes (what `--overwrite` removes).
-    pub fn layout(self) -> Layout {
-        match self {
-            Experiment::CartPole => LAYOUT,
-            Experiment::Maze => MAZE_LAYOUT,
-        }
-    }
 }
 
-/// The settings of either experiment (serialized as the inner config).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// The settings of either experiment: `config.json`'s `config` is CartPole's [`P2Config`]
+/// itself, the maze's `{runs, quality}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum Settings {
-    /// CartPole's.
-    CartPole(P2Config),
     /// The maze's, with the pixel model's F1 experiment.
     Maze {
         /// The runs.
@@ -144,24 +109,75 @@ pub enum Settings {
         /// The F1 experiment.
         quality: QualityConfig,
     },
+    /// CartPole's.
+    CartPole(P2Config),
 }
 
 impl Settings {
-    /// The defaults of `exp` (on the maze `env` for p2-maze), or why there are none.
-    fn defaults(
-        exp: Experiment,
-        quick: bool,
-        env: Option<&str>,
-    ) -> std::result::Result<Self, String> {
-        Ok(match (exp, env) {
-            (Experiment::CartPole, Some(_)) => {
-                return Err("--env applies to p2-maze only (p2-cartpole runs CartPole-v1)".into())
+    /// The settings of `exp`: its defaults (`--quick`'s sizes with `quick`), on the maze those
+    /// of `env` (`--env`, else the `--config` file's `env`, else `PixelMaze-v0`), then the
+    /// file's overrides. A maze file holds [`MazeConfig`]'s keys at its top and the F1
+    /// experiment's ([`QualityConfig`]) in a `[quality]` table; keys not given keep their
+    /// defaults, unknown ones are errors.
+    fn new(exp: Experiment, quick: bool, env: Option<&str>, config: Option<&Path>) -> Result<Self> {
+        let text = config
+            .map(|p| {
+                std::fs::read_to_string(p).map_err(|source| CliError::Io {
+                    path: p.to_path_buf(),
+                    source,
+                })
+            })
+            .transpose()?;
+        let what = config.map_or("settings".to_string(), |p| {
+            format!("--config {}", p.display())
+        });
+        let settings = match exp {
+            Experiment::CartPole => {
+                if env.is_some() {
+                    return Err(CliError::input(
+                        "--env",
+                        "--env applies to p2-maze only (p2-cartpole runs CartPole-v1)",
+                    ));
+                }
+                let base = if quick {
+                    quick_config()
+                } else {
+                    P2Config::default()
+                };
+                Settings::CartPole(match &text {
+                    Some(t) => harness::override_settings(&base, t, &what)?,
+                    None => base,
+                })
             }
-            (Experiment::CartPole, None) if quick => Settings::CartPole(quick_config()),
-            (Experiment::CartPole, None) => Settings::CartPole(P2Config::default()),
-            (Experiment::Maze, env) => {
-                let env = env.unwrap_or(PixelMazeEnv::ID);
-                let mut runs = MazeConfig::for_env(env).map_err(|e| e.to_string())?;
+            Experiment::Maze => {
+                let mut over: toml::Table = match &text {
+                    Some(t) => {
+                        toml::from_str(t).map_err(|e| CliError::input(&what, e.to_string()))?
+                    }
+                    None => toml::Table::new(),
+                };
+                let file_env = match over.get("env") {
+                    None => None,
+                    Some(toml::Value::String(e)) => Some(e.clone()),
+                    Some(v) => {
+                        return Err(CliError::input(
+                            &what,
+                            format!("env = {v}: the maze's id is a string"),
+                        ))
+                    }
+                };
+                let env = match (env, file_env.as_deref()) {
+                    (Some(a), Some(b)) if a != b => {
+                        return Err(CliError::input(
+                            "--env",
+                            format!("{a}, but {what} says env = \"{b}\""),
+                        ))
+                    }
+                    (Some(e), _) | (None, Some(e)) => e,
+                    (None, None) => PixelMazeEnv::ID,
+                };
+                let mut runs = MazeConfig::for_env(env)
+                    .map_err(|e| CliError::input("--env", e.to_string()))?;
                 let mut quality = QualityConfig::default();
                 if quick {
                     let (q_runs, q_quality) = quick_maze_config();
@@ -171,12 +187,22 @@ impl Settings {
                     };
                     quality = q_quality;
                 }
+                if let Some(q) = over.remove("quality") {
+                    let toml::Value::Table(q) = q else {
+                        return Err(CliError::input(&what, "quality must be a table, [quality]"));
+                    };
+                    quality = harness::override_with_table(&quality, q, &what)?;
+                }
                 Settings::Maze {
-                    runs: Box::new(runs),
+                    runs: Box::new(harness::override_with_table(&runs, over, &what)?),
                     quality,
                 }
             }
-        })
+        };
+        settings
+            .validate()
+            .map_err(|e| CliError::input(&what, e.to_string()))?;
+        Ok(settings)
     }
 
     /// The environment's id.
@@ -187,23 +213,13 @@ impl Settings {
         }
     }
 
-    fn from_toml(exp: Experiment, text: &str) -> std::result::Result<Self, String> {
-        match exp {
-            Experiment::CartPole => toml::from_str(text)
-                .map(Settings::CartPole)
-                .map_err(|e| e.to_string()),
-            Experiment::Maze => {
-                let runs: Box<MazeConfig> = toml::from_str(text).map_err(|e| e.to_string())?;
-                let quality = QualityConfig::default();
-                Ok(Settings::Maze { runs, quality })
-            }
-        }
-    }
-
     fn validate(&self) -> PipelineResult<()> {
         match self {
             Settings::CartPole(c) => c.validate(),
-            Settings::Maze { runs, .. } => runs.validate(),
+            Settings::Maze { runs, quality } => {
+                runs.validate()?;
+                quality.validate()
+            }
         }
     }
 
@@ -283,9 +299,9 @@ impl Settings {
                  the first {} episodes real only, then {} imagined per {} real, imagined \
                  transitions in the same replay buffer; model refit every {} real episode(s), \
                  {} minibatches of {} drawn from all real transitions; at most {} real episodes \
-                 per run, each run stops once solved. F1 experiment: a with-model run of the \
-                 first seed that goes on past solved; copies of the model after {:?} real \
-                 episodes, each scored on the next {} real episodes",
+                 per run, each run stops once solved. F1 experiment: a with-model run of seed(s) \
+                 {:?} that goes on past solved; copies of the model after {:?} real episodes, \
+                 each scored on the next {} real episodes",
                 c.dqn.conv.channels,
                 c.dqn.hidden,
                 c.dqn.learning_rate,
@@ -309,6 +325,7 @@ impl Settings {
                 c.fit.steps,
                 c.fit.batch_size,
                 c.max_real_episodes,
+                quality.seeds,
                 quality.checkpoints,
                 quality.heldout_episodes,
             ),
@@ -331,6 +348,7 @@ pub fn quick_maze_config() -> (MazeConfig, QualityConfig) {
     let q = QualityConfig {
         checkpoints: vec![2, 5],
         heldout_episodes: 2,
+        ..QualityConfig::default()
     };
     (c, q)
 }
@@ -345,26 +363,6 @@ pub fn quick_config() -> P2Config {
     c.fit_rows = 256;
     c
 }
-
-/// The files and folders `tandem reproduce p2-cartpole` writes (what `--overwrite` removes).
-pub const LAYOUT: Layout = Layout {
-    owned: &["config.json", "runs", "table.json", "table.md", "fig6.svg"],
-    resumable: false,
-};
-
-/// The files and folders `tandem reproduce p2-maze` writes.
-pub const MAZE_LAYOUT: Layout = Layout {
-    owned: &[
-        "config.json",
-        "runs",
-        "table.json",
-        "table.md",
-        "fig7.svg",
-        "fig8.svg",
-        "quality.json",
-    ],
-    resumable: false,
-};
 
 /// One method's figures in `table.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -634,46 +632,6 @@ pub fn curves(records: &[RunRecord], exp: Experiment, env: &str, window: usize) 
     }
 }
 
-/// Keeps no checkpoints; stops on SIGINT/SIGTERM.
-struct StopOnSignal(Stop);
-
-impl Checkpoints for StopOnSignal {
-    fn load(&mut self, _key: &str) -> PipelineResult<Option<Checkpoint>> {
-        Ok(None)
-    }
-    fn save(&mut self, _key: &str, _ckpt: &Checkpoint) -> PipelineResult<()> {
-        Ok(())
-    }
-    fn stop_requested(&self) -> bool {
-        self.0.requested()
-    }
-}
-
-fn io_err(path: PathBuf) -> impl FnOnce(std::io::Error) -> CliError {
-    move |source| CliError::Io { path, source }
-}
-
-/// Writes a finished run's `curve.csv` and `record.json`.
-fn write_record(dir: &RunDir, r: &RunRecord) -> Result<()> {
-    let sub = dir
-        .path()
-        .join("runs")
-        .join(format!("{}__seed{}", r.method.name(), r.seed));
-    std::fs::create_dir_all(&sub).map_err(io_err(sub.clone()))?;
-    let rows: Vec<Vec<f64>> = r
-        .real_returns
-        .iter()
-        .enumerate()
-        .map(|(k, ret)| vec![(k + 1) as f64, *ret])
-        .collect();
-    let curve = csv(&["real_episode", "return"], &rows);
-    let path = sub.join("curve.csv");
-    tandem_nn::write_atomic(&path, curve.as_bytes()).map_err(io_err(path))?;
-    let text = to_json_pretty(r).map_err(|e| CliError::Other(format!("record.json: {e}")))?;
-    let path = sub.join("record.json");
-    tandem_nn::write_atomic(&path, text.as_bytes()).map_err(io_err(path))
-}
-
 /// Fig. 7: for each point of the F1 experiment, the shown held-out transition's last input
 /// frame, its true next frame and the model's prediction (probabilities as colour intensity,
 /// pixels at or above the threshold outlined). Channels are drawn as colours (red obstacles,
@@ -753,190 +711,172 @@ pub fn fig7(q: &Quality, threshold: f64) -> String {
     s
 }
 
-/// What `config.json` records.
-#[derive(Debug, Serialize)]
-struct RunConfig<'a> {
-    config: &'a Settings,
-    seeds: u64,
-    first_seed: u64,
-    quick: bool,
-    jobs: u64,
-    status: &'a str,
-    wall_seconds: Option<f64>,
+/// The F1 experiment's run (`runs/model_f1__seed<k>/`).
+pub const F1_RUN: &str = "model_f1";
+
+/// What a finished run leaves in `record.json`: a method's run, or the maze's F1 experiment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum P2Record {
+    /// The pixel model's F1 experiment.
+    Quality(Quality),
+    /// A method's run.
+    Run(RunRecord),
 }
 
-/// One unit of work.
-#[derive(Debug, Clone, Copy)]
-enum Job {
-    /// A run of one method and seed.
-    Run(u64, Method),
-    /// The pixel model's F1 experiment for one seed.
-    Quality(u64),
+/// `tandem reproduce p2-cartpole` or `p2-maze` as a study of the shared [`harness`]: one job per
+/// method and seed, and on the maze the F1 experiment on [`QualityConfig::seeds`].
+pub struct P2Study {
+    exp: Experiment,
+    env: Option<String>,
 }
 
-/// Runs `tandem reproduce p2-cartpole` or `p2-maze`.
-pub fn p2(exp: Experiment, args: &P2Args) -> Result<()> {
-    tandem_nn::set_gemm_threads(1);
-    let stop = Stop::on_signals().map_err(|e| CliError::Other(format!("signal handlers: {e}")))?;
-    let settings = match &args.config {
-        Some(path) => {
-            let what = format!("--config {}", path.display());
-            let text = std::fs::read_to_string(path).map_err(io_err(path.clone()))?;
-            Settings::from_toml(exp, &text).map_err(|e| CliError::input(&what, e))?
+impl P2Study {
+    /// `exp`, on the maze `env` (`None`: the `--config` file's, `PixelMaze-v0`, or on
+    /// `--resume` the recorded one).
+    pub fn new(exp: Experiment, env: Option<String>) -> Self {
+        Self { exp, env }
+    }
+}
+
+impl Study for P2Study {
+    type Settings = Settings;
+    type Record = P2Record;
+
+    fn name(&self) -> &str {
+        self.exp.name()
+    }
+
+    fn default_seeds(&self) -> u64 {
+        10
+    }
+
+    fn settings(&self, quick: bool, config: Option<&Path>) -> Result<Settings> {
+        Settings::new(self.exp, quick, self.env.as_deref(), config)
+    }
+
+    fn overrides_settings(&self) -> bool {
+        self.env.is_some()
+    }
+
+    fn jobs(&self, s: &Settings, seed: u64) -> Vec<Vec<String>> {
+        // The F1 experiment first: its job is the longest on PixelMaze-v0.
+        let f1 = matches!(s, Settings::Maze { quality, .. } if quality.seeds.contains(&seed));
+        f1.then(|| vec![F1_RUN.to_string()])
+            .into_iter()
+            .chain(Method::ALL.iter().map(|m| vec![m.name().to_string()]))
+            .collect()
+    }
+
+    fn length(&self, s: &Settings, run: &str) -> u64 {
+        match s {
+            Settings::Maze { quality, .. } if run == F1_RUN => quality.episodes(),
+            _ => s.solved().2,
         }
-        None => Settings::defaults(exp, args.quick, args.env.as_deref())
-            .map_err(|e| CliError::input("--env", e))?,
-    };
-    settings.validate().map_err(CliError::other)?;
-    ensure_finite(&settings).map_err(CliError::other)?;
-    let seeds = args.seeds.unwrap_or(10);
-    let first = args.first_seed;
-    let seed_list: Vec<u64> = (first..first.saturating_add(seeds)).collect();
-    let existing = if args.overwrite {
-        Existing::Overwrite
-    } else {
-        Existing::Refuse
-    };
-    let dir = RunDir::create(args.out.as_deref(), exp.name(), exp.layout(), existing)
-        .map_err(CliError::other)?;
-    let write_config = |status: &str, wall: Option<f64>| -> Result<()> {
-        let rc = RunConfig {
-            config: &settings,
-            seeds,
-            first_seed: first,
-            quick: args.quick,
-            jobs: args.jobs,
-            status,
-            wall_seconds: wall,
+    }
+
+    fn run(
+        &self,
+        s: &Settings,
+        run: &str,
+        seed: u64,
+        store: &mut dyn Checkpoints,
+        progress: &mut dyn FnMut(u64),
+    ) -> std::result::Result<P2Record, JobError> {
+        let mut on_event = |e: Event| {
+            if let Event::Real { episode, .. } = e {
+                progress(episode + 1);
+            }
         };
-        let text = to_json_pretty(&rc).map_err(|e| CliError::Other(format!("config.json: {e}")))?;
-        dir.write("config.json", &text)
-            .map(drop)
-            .map_err(io_err(dir.path().join("config.json")))
-    };
-    write_config("running", None)?;
-    let start = Instant::now();
-    let multi = MultiProgress::new();
-    if args.quiet {
-        multi.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
-    let style =
-        ProgressStyle::with_template("{prefix:>22} [{bar:30}] {pos}/{len} {msg} ({elapsed})")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> ");
-    // The F1 experiment (the maze's, on the first seed) first: its job is the longest.
-    let mut jobs: Vec<Job> = Vec::new();
-    if let Settings::Maze { .. } = settings {
-        jobs.push(Job::Quality(first));
-    }
-    for &seed in &seed_list {
-        jobs.extend(Method::ALL.iter().map(|&m| Job::Run(seed, m)));
-    }
-    let (_, _, max_episodes) = settings.solved();
-    let next = AtomicUsize::new(0);
-    let records: Mutex<Vec<RunRecord>> = Mutex::new(Vec::new());
-    let qualities: Mutex<Vec<Quality>> = Mutex::new(Vec::new());
-    let errors: Mutex<Vec<(u64, String)>> = Mutex::new(Vec::new());
-    std::thread::scope(|scope| {
-        for _ in 0..(args.jobs as usize).min(jobs.len()) {
-            scope.spawn(|| loop {
-                let k = next.fetch_add(1, Ordering::Relaxed);
-                if k >= jobs.len() || stop.requested() {
-                    break;
-                }
-                let (seed, r) = match jobs[k] {
-                    Job::Run(seed, m) => {
-                        let bar = multi.add(ProgressBar::new(max_episodes));
-                        bar.set_style(style.clone());
-                        bar.set_prefix(format!("seed {seed} {}", m.name()));
-                        let mut store = StopOnSignal(stop.clone());
-                        let r = settings.run(m, seed, &mut store, &mut |e| {
-                            if let Event::Real { episode, ret, .. } = e {
-                                bar.set_position(episode + 1);
-                                bar.set_message(format!("return {ret:.0}"));
-                            }
-                        });
-                        bar.finish();
-                        let r = r.map_err(|e| e.to_string()).and_then(|r| {
-                            write_record(&dir, &r).map_err(|e| e.to_string())?;
-                            records.lock().expect("no panics holding it").push(r);
-                            Ok(())
-                        });
-                        (seed, r)
-                    }
-                    Job::Quality(seed) => {
-                        let Settings::Maze { runs, quality } = &settings else {
-                            continue;
-                        };
-                        let bar = multi.add(ProgressBar::new_spinner());
-                        bar.set_prefix(format!("seed {seed} model F1"));
-                        bar.set_message(
-                            "a with-model run past solved, scoring copies of the model",
-                        );
-                        let store = StopOnSignal(stop.clone());
-                        let r = p2_maze::model_quality(runs, quality, seed, &store)
-                            .map(|q| qualities.lock().expect("no panics holding it").push(q))
-                            .map_err(|e| e.to_string());
-                        bar.finish();
-                        (seed, r)
-                    }
-                };
-                match r {
-                    Ok(()) => {}
-                    Err(_) if stop.requested() => {}
-                    Err(e) => errors.lock().expect("no panics holding it").push((seed, e)),
-                }
-            });
+        if run == F1_RUN {
+            let Settings::Maze { runs, quality } = s else {
+                return Err(JobError::Failed(format!("{run} runs on the maze only")));
+            };
+            let q = p2_maze::model_quality(runs, quality, seed, &*store, &mut on_event)?;
+            return Ok(P2Record::Quality(q));
         }
-    });
-    let wall = start.elapsed().as_secs_f64();
-    let mut errors = errors.into_inner().expect("threads joined");
-    errors.sort();
-    if let Some((seed, e)) = errors.first() {
-        return Err(CliError::Other(format!("seed {seed}: {e}")));
+        let method = Method::ALL
+            .into_iter()
+            .find(|m| m.name() == run)
+            .ok_or_else(|| JobError::Failed(format!("unknown run {run}")))?;
+        Ok(P2Record::Run(s.run(method, seed, store, &mut on_event)?))
     }
-    if stop.requested() {
-        write_config("interrupted", Some(wall))?;
-        return Err(CliError::Interrupted {
-            what: format!(
-                "finished runs are in {}; start the reproduction again to complete it",
-                dir.path().display()
-            ),
-            code: stop.exit_code().unwrap_or(EXIT_SIGINT),
-        });
+
+    fn curve(&self, r: &P2Record) -> (Vec<&'static str>, Vec<Vec<f64>>) {
+        match r {
+            P2Record::Run(r) => {
+                let rows = r
+                    .real_returns
+                    .iter()
+                    .enumerate()
+                    .map(|(k, ret)| vec![(k + 1) as f64, *ret])
+                    .collect();
+                (vec!["real_episode", "return"], rows)
+            }
+            P2Record::Quality(q) => {
+                let rows = q
+                    .points
+                    .iter()
+                    .map(|p| vec![p.episodes as f64, p.agent, p.obstacles, p.goal])
+                    .collect();
+                (
+                    vec!["training_episodes", "agent", "obstacles", "goal"],
+                    rows,
+                )
+            }
+        }
     }
-    let mut records = records.into_inner().expect("threads joined");
-    records.sort_by_key(|r| (r.seed, r.method.name()));
-    let mut qualities = qualities.into_inner().expect("threads joined");
-    qualities.sort_by_key(|q| q.seed);
-    let (target, window, _) = settings.solved();
-    let mut t = table(&records, target, settings.solved_text());
-    t.f1 = f1_table(&qualities);
-    ensure_finite(&t).map_err(CliError::other)?;
-    let md = markdown(&t, exp, settings.env(), &settings.describe(), wall);
-    let json = to_json_pretty(&t).map_err(|e| CliError::Other(format!("table.json: {e}")))?;
-    let mut files = vec![
-        ("table.json", json),
-        ("table.md", md.clone()),
-        (
+
+    fn report_files(&self) -> &'static [&'static str] {
+        match self.exp {
+            Experiment::CartPole => &["table.json", "table.md", "fig6.svg"],
+            Experiment::Maze => &[
+                "table.json",
+                "table.md",
+                "fig7.svg",
+                "fig8.svg",
+                "quality.json",
+            ],
+        }
+    }
+
+    fn report(
+        &self,
+        dir: &RunDir,
+        s: &Settings,
+        records: &[P2Record],
+        wall: f64,
+    ) -> Result<String> {
+        let exp = self.exp;
+        let mut runs = Vec::new();
+        let mut qualities = Vec::new();
+        for r in records {
+            match r {
+                P2Record::Run(r) => runs.push(r.clone()),
+                P2Record::Quality(q) => qualities.push(q.clone()),
+            }
+        }
+        let (target, window, _) = s.solved();
+        let mut t = table(&runs, target, s.solved_text());
+        t.f1 = f1_table(&qualities);
+        ensure_finite(&t).map_err(CliError::other)?;
+        let md = markdown(&t, exp, s.env(), &s.describe(), wall);
+        let json = to_json_pretty(&t).map_err(|e| CliError::Other(format!("table.json: {e}")))?;
+        harness::write(dir, "table.json", &json)?;
+        harness::write(dir, "table.md", &md)?;
+        harness::write(
+            dir,
             exp.figure().0,
-            curves(&records, exp, settings.env(), window).svg(),
-        ),
-    ];
-    if let (Settings::Maze { runs, .. }, Some(q)) = (&settings, qualities.first()) {
-        files.push(("fig7.svg", fig7(q, runs.model.threshold)));
-        let text = to_json_pretty(&qualities)
-            .map_err(|e| CliError::Other(format!("quality.json: {e}")))?;
-        files.push(("quality.json", text));
+            &curves(&runs, exp, s.env(), window).svg(),
+        )?;
+        if let (Settings::Maze { runs, .. }, Some(q)) = (s, qualities.first()) {
+            harness::write(dir, "fig7.svg", &fig7(q, runs.model.threshold))?;
+            let text = to_json_pretty(&qualities)
+                .map_err(|e| CliError::Other(format!("quality.json: {e}")))?;
+            harness::write(dir, "quality.json", &text)?;
+        }
+        Ok(md)
     }
-    for (name, text) in files {
-        dir.write(name, &text)
-            .map_err(io_err(dir.path().join(name)))?;
-    }
-    write_config("complete", Some(wall))?;
-    println!("{md}");
-    println!("wrote {}", dir.path().display());
-    Ok(())
 }
 
 #[cfg(test)]

@@ -423,7 +423,7 @@ impl Study for P3Study {
         self.ablate || self.oracle || matches!(self.target, Target::Mujoco(Some(_)))
     }
 
-    fn jobs(&self, s: &P3Settings) -> Vec<Vec<String>> {
+    fn jobs(&self, s: &P3Settings, _seed: u64) -> Vec<Vec<String>> {
         let mut runs: Vec<String> = Method::ALL.iter().map(|m| m.name().to_string()).collect();
         if s.oracle {
             runs.push(ORACLE.to_string());

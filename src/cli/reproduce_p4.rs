@@ -259,7 +259,7 @@ impl<T: P4Task> Study for P4Study<T> {
         Ok(s)
     }
 
-    fn jobs(&self, _s: &Self::Settings) -> Vec<Vec<String>> {
+    fn jobs(&self, _s: &Self::Settings, _seed: u64) -> Vec<Vec<String>> {
         LocalMethod::ALL
             .iter()
             .map(|m| vec![m.name().to_string()])

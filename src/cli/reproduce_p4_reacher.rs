@@ -190,7 +190,7 @@ impl Study for ReacherStudy {
         Ok(s)
     }
 
-    fn jobs(&self, _s: &ReacherSettings) -> Vec<Vec<String>> {
+    fn jobs(&self, _s: &ReacherSettings, _seed: u64) -> Vec<Vec<String>> {
         METHODS.iter().map(|m| vec![m.to_string()]).collect()
     }
 

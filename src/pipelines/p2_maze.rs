@@ -443,6 +443,10 @@ pub struct QualityConfig {
     pub checkpoints: Vec<u64>,
     /// On the transitions of this many real episodes after each checkpoint.
     pub heldout_episodes: u64,
+    /// The seeds whose F1 experiment `tandem reproduce p2-maze` runs (ours: seed 0 alone, as
+    /// p2 reports one set of scores; each costs a with-model run of the last checkpoint's
+    /// episodes).
+    pub seeds: Vec<u64>,
 }
 
 impl Default for QualityConfig {
@@ -450,7 +454,30 @@ impl Default for QualityConfig {
         Self {
             checkpoints: vec![10, 100, 300],
             heldout_episodes: 10,
+            seeds: vec![0],
         }
+    }
+}
+
+impl QualityConfig {
+    /// Checks that every checkpoint and the held-out episodes are at least one.
+    pub fn validate(&self) -> Result<()> {
+        if self.heldout_episodes == 0
+            || self.checkpoints.is_empty()
+            || self.checkpoints.contains(&0)
+        {
+            return Err(PipelineError::Config(
+                "quality: heldout_episodes and every checkpoint must be >= 1, and there must be \
+                 at least one checkpoint"
+                    .into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Real episodes of one F1 experiment: the last checkpoint's and its held-out episodes.
+    pub fn episodes(&self) -> u64 {
+        self.checkpoints.iter().copied().max().unwrap_or(0) + self.heldout_episodes
     }
 }
 
@@ -524,22 +551,19 @@ fn score(p: &Probe) -> Result<QualityPoint> {
 /// The pixel model's F1 experiment for `seed`: a with-model run of `cfg` that ignores "solved"
 /// and `max_real_episodes`, playing until the last checkpoint's held-out episodes are in. It
 /// polls `stop` (and returns [`PipelineError::Stopped`]) but keeps no checkpoints: the copies
-/// of the model are not in them, so a stopped experiment starts again.
+/// of the model are not in them, so a stopped experiment starts again. `on_event` hears of every
+/// finished episode. [`QualityConfig::seeds`] is not consulted: `seed` is the one to run.
 pub fn model_quality(
     cfg: &MazeConfig,
     quality: &QualityConfig,
     seed: u64,
     stop: &dyn Checkpoints,
+    on_event: &mut dyn FnMut(Event),
 ) -> Result<Quality> {
-    if quality.heldout_episodes == 0 || quality.checkpoints.contains(&0) {
-        return Err(PipelineError::Config(
-            "quality: heldout_episodes and every checkpoint must be >= 1".into(),
-        ));
-    }
+    quality.validate()?;
     let t0 = Instant::now();
-    let last = quality.checkpoints.iter().copied().max().unwrap_or(0) + quality.heldout_episodes;
     let cfg = MazeConfig {
-        max_real_episodes: last,
+        max_real_episodes: quality.episodes(),
         solved_return: f64::MAX,
         ..cfg.clone()
     };
@@ -549,7 +573,7 @@ pub fn model_quality(
         &cfg,
         seed,
         &mut store,
-        &mut |_| {},
+        on_event,
         Some(quality),
     )?;
     Ok(Quality {
