@@ -757,9 +757,23 @@ fn merge_toml(base: &mut toml::Value, over: toml::Value) {
     }
 }
 
+/// The `--config` file at `path` as a TOML table, for a study that takes some keys out before
+/// applying the rest ([`override_with_table`]).
+pub fn read_table(path: &Path) -> Result<toml::Table> {
+    let text = std::fs::read_to_string(path).map_err(io(path))?;
+    toml::from_str(&text).map_err(|e| CliError::input(settings_name(Some(path)), e.to_string()))
+}
+
+/// How errors name a study's settings: `--config PATH` for a file's, `settings` for the
+/// defaults.
+pub fn settings_name(config: Option<&Path>) -> String {
+    config.map_or("settings".to_string(), |p| {
+        format!("--config {}", p.display())
+    })
+}
+
 /// Reads a `--config` file and applies it to `base` ([`override_settings`]).
 pub fn read_overrides<C: Serialize + DeserializeOwned>(base: C, path: Option<&Path>) -> Result<C> {
     let Some(p) = path else { return Ok(base) };
-    let text = std::fs::read_to_string(p).map_err(io(p))?;
-    override_settings(&base, &text, &format!("--config {}", p.display()))
+    override_with_table(&base, read_table(p)?, &settings_name(path))
 }

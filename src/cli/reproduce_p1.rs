@@ -137,9 +137,7 @@ impl Study for P1Study {
             .ok_or_else(|| CliError::input("--env", format!("{env}: p1 runs {}", mujoco_ids())))?;
         let base = if quick { base.quick() } else { base };
         let s = harness::read_overrides(base, config)?;
-        let what = config.map_or("settings".to_string(), |p| {
-            format!("--config {}", p.display())
-        });
+        let what = harness::settings_name(config);
         s.validate(&what)?;
         Ok(s)
     }

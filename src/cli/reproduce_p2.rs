@@ -120,17 +120,7 @@ impl Settings {
     /// experiment's ([`QualityConfig`]) in a `[quality]` table; keys not given keep their
     /// defaults, unknown ones are errors.
     fn new(exp: Experiment, quick: bool, env: Option<&str>, config: Option<&Path>) -> Result<Self> {
-        let text = config
-            .map(|p| {
-                std::fs::read_to_string(p).map_err(|source| CliError::Io {
-                    path: p.to_path_buf(),
-                    source,
-                })
-            })
-            .transpose()?;
-        let what = config.map_or("settings".to_string(), |p| {
-            format!("--config {}", p.display())
-        });
+        let what = harness::settings_name(config);
         let settings = match exp {
             Experiment::CartPole => {
                 if env.is_some() {
@@ -144,18 +134,13 @@ impl Settings {
                 } else {
                     P2Config::default()
                 };
-                Settings::CartPole(match &text {
-                    Some(t) => harness::override_settings(&base, t, &what)?,
-                    None => base,
-                })
+                Settings::CartPole(harness::read_overrides(base, config)?)
             }
             Experiment::Maze => {
-                let mut over: toml::Table = match &text {
-                    Some(t) => {
-                        toml::from_str(t).map_err(|e| CliError::input(&what, e.to_string()))?
-                    }
-                    None => toml::Table::new(),
-                };
+                let mut over = config
+                    .map(harness::read_table)
+                    .transpose()?
+                    .unwrap_or_default();
                 let file_env = match over.get("env") {
                     None => None,
                     Some(toml::Value::String(e)) => Some(e.clone()),

@@ -412,9 +412,7 @@ impl Study for P3Study {
             s.ablate_elites = ELITE_FRACTIONS.to_vec();
         }
         s.oracle |= self.oracle;
-        let what = config.map_or("settings".to_string(), |p| {
-            format!("--config {}", p.display())
-        });
+        let what = harness::settings_name(config);
         s.validate(&what)?;
         Ok(s)
     }

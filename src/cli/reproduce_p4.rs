@@ -252,9 +252,7 @@ impl<T: P4Task> Study for P4Study<T> {
             base.local.samples = 4;
         }
         let s = harness::read_overrides(base, config)?;
-        let what = config.map_or("settings".to_string(), |p| {
-            format!("--config {}", p.display())
-        });
+        let what = harness::settings_name(config);
         s.validate::<T>(&what)?;
         Ok(s)
     }

@@ -183,9 +183,7 @@ impl Study for ReacherStudy {
             base.ddpg.agent.batch_size = 32;
         }
         let s = harness::read_overrides(base, config)?;
-        let what = config.map_or("settings".to_string(), |p| {
-            format!("--config {}", p.display())
-        });
+        let what = harness::settings_name(config);
         s.validate(&what)?;
         Ok(s)
     }
