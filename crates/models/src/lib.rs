@@ -129,8 +129,8 @@ pub use model_env::{
     branched_rollouts, canonical_pair, Imagined, Judge, Judges, ModelEnv, RolloutPolicy,
 };
 pub use pixel_model::{
-    f1_score, PixelBatch, PixelEpisodes, PixelFit, PixelModel, PixelModelConfig, PixelModelEnv,
-    PixelPrediction,
+    f1_score, PixelBatch, PixelEpisodes, PixelFit, PixelLayers, PixelModel, PixelModelConfig,
+    PixelModelEnv, PixelPrediction,
 };
 pub use plant_model::PlantModel;
 pub use residual::{ResidualModel, ResidualModelConfig};

@@ -15,7 +15,8 @@
 //! is predicted "on" when its probability reaches [`PixelModelConfig::threshold`] (p2: 0.2, which
 //! they found to recall agents, obstacles and the goal much better than L1 or L2 losses on this
 //! stochastic environment). The layers: `k4 s2` convolutions halve the image twice and a `k3 s1`
-//! one keeps it (`16 → 8 → 4 → 4`), mirrored by the decoder; frames may be rectangular. p2 puts
+//! one keeps it (`16 → 8 → 4 → 4`), mirrored by the decoder; frames may be rectangular
+//! ([`PixelLayers`] also offers the authors' released layout, stride 1 throughout). p2 puts
 //! batch normalization after every layer; this model puts it after every layer but the first and
 //! the outputs ([`PixelModelConfig::batch_norm`], on by default). Frames must be binary (0 or 1
 //! per pixel and channel): the targets of a multi-label classifier.
@@ -108,6 +109,9 @@ pub struct PixelModelConfig {
     pub n_actions: usize,
     /// Output channels of the three encoder convolutions (mirrored by the decoder).
     pub channels: [usize; 3],
+    /// How the convolutions shape the image: halving it twice (ours, the default) or keeping
+    /// nearly full resolution (the authors' released maze model).
+    pub layers: PixelLayers,
     /// Width of the encoding `h_enc` and of `h_dec`.
     pub features: usize,
     /// Width of the multiplicative action interaction `W_enc h_enc ⊙ W_a a`.
@@ -138,6 +142,7 @@ impl Default for PixelModelConfig {
             frames: 4,
             n_actions: 5,
             channels: [32, 64, 64],
+            layers: PixelLayers::Strided,
             features: 256,
             factors: 256,
             optimizer: OptimizerConfig::adam(1e-2),
@@ -151,15 +156,51 @@ impl Default for PixelModelConfig {
     }
 }
 
+/// The convolutions' strides and kernels, mirrored by the transposed convolutions of the decoder.
+///
+/// `Strided` (the default) halves the image twice: `k4 s2 p1`, `k4 s2 p1`, `k3 s1 p1`
+/// (`16 → 8 → 4 → 4`), so the fully connected layers see a `4 × 4` map; it is cheap and learns
+/// v0's maze of 2 × 2-pixel cells. `FullResolution` is the layout of the model p2's authors
+/// released for their maze: stride 1 without padding, `k4`, `k3`, `k3` (`16 → 13 → 11 → 9`), so
+/// a one-pixel object keeps its own place in the `9 × 9` map; about 2.5 times the work per
+/// step at the default widths.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum PixelLayers {
+    /// `16 → 8 → 4 → 4` (height and width multiples of 4).
+    #[default]
+    Strided,
+    /// `16 → 13 → 11 → 9` (height and width at least 8).
+    FullResolution,
+}
+
+impl PixelLayers {
+    /// The height and width of the last convolution's map for an `h × w` image.
+    pub fn map_size(self, h: usize, w: usize) -> (usize, usize) {
+        match self {
+            Self::Strided => (h / 4, w / 4),
+            Self::FullResolution => (h - 7, w - 7),
+        }
+    }
+}
+
 impl PixelModelConfig {
     /// Checks the settings.
     pub fn validate(&self) -> Result<(), ModelError> {
         let bad = |m: String| Err(ModelError::Other(format!("pixel model config: {m}")));
         let [h, w, c] = self.image;
-        if h == 0 || w == 0 || c == 0 || h % 4 != 0 || w % 4 != 0 {
+        let fits = match self.layers {
+            PixelLayers::Strided => h > 0 && w > 0 && h % 4 == 0 && w % 4 == 0,
+            PixelLayers::FullResolution => h >= 8 && w >= 8,
+        };
+        if !fits || c == 0 {
+            let need = match self.layers {
+                PixelLayers::Strided => "positive multiples of 4",
+                PixelLayers::FullResolution => "at least 8",
+            };
             return bad(format!(
-                "image {:?}: height and width must be positive multiples of 4, channels >= 1",
-                self.image
+                "image {:?}: with {:?} layers height and width must be {need}, channels >= 1",
+                self.image, self.layers
             ));
         }
         if self.frames == 0 || self.n_actions == 0 {
@@ -669,34 +710,33 @@ impl PixelModel {
         let [h, w, c] = config.image;
         let [c1, c2, c3] = config.channels;
         let (f, k) = (config.features, config.factors);
-        let flat = c3 * (h / 4) * (w / 4);
+        let (mh, mw) = config.layers.map_size(h, w);
+        let flat = c3 * mh * mw;
         let mut ps = ParamSet::new();
-        let down = candle_nn::Conv2dConfig {
-            padding: 1,
-            stride: 2,
+        // (kernel, stride, padding) of the three convolutions; the decoder mirrors them.
+        let spec: [(usize, usize, usize); 3] = match config.layers {
+            PixelLayers::Strided => [(4, 2, 1), (4, 2, 1), (3, 1, 1)],
+            PixelLayers::FullResolution => [(4, 1, 0), (3, 1, 0), (3, 1, 0)],
+        };
+        let conv = |(_, stride, padding): (usize, usize, usize)| candle_nn::Conv2dConfig {
+            padding,
+            stride,
             ..Default::default()
         };
-        let keep = candle_nn::Conv2dConfig {
-            padding: 1,
-            stride: 1,
-            ..Default::default()
-        };
-        let up = candle_nn::ConvTranspose2dConfig {
-            padding: 1,
-            stride: 2,
-            ..Default::default()
-        };
-        let keep_t = candle_nn::ConvTranspose2dConfig {
-            padding: 1,
-            stride: 1,
-            ..Default::default()
-        };
+        let conv_t =
+            |(_, stride, padding): (usize, usize, usize)| candle_nn::ConvTranspose2dConfig {
+                padding,
+                stride,
+                ..Default::default()
+            };
         let e = nn_other;
         let enc = [
-            ps.conv2d("enc0", config.frames * c, c1, 4, down, rng)
+            ps.conv2d("enc0", config.frames * c, c1, spec[0].0, conv(spec[0]), rng)
                 .map_err(e)?,
-            ps.conv2d("enc1", c1, c2, 4, down, rng).map_err(e)?,
-            ps.conv2d("enc2", c2, c3, 3, keep, rng).map_err(e)?,
+            ps.conv2d("enc1", c1, c2, spec[1].0, conv(spec[1]), rng)
+                .map_err(e)?,
+            ps.conv2d("enc2", c2, c3, spec[2].0, conv(spec[2]), rng)
+                .map_err(e)?,
         ];
         let fc_enc = ps.linear("fc_enc", flat, f, rng).map_err(e)?;
         let w_enc = weight_only(&mut ps, "w_enc", f, k, rng)?;
@@ -704,10 +744,12 @@ impl PixelModel {
         let w_dec = ps.linear("w_dec", k, f, rng).map_err(e)?;
         let fc_dec = ps.linear("fc_dec", f, flat, rng).map_err(e)?;
         let dec = [
-            ps.conv_transpose2d("dec0", c3, c2, 3, keep_t, rng)
+            ps.conv_transpose2d("dec0", c3, c2, spec[2].0, conv_t(spec[2]), rng)
                 .map_err(e)?,
-            ps.conv_transpose2d("dec1", c2, c1, 4, up, rng).map_err(e)?,
-            ps.conv_transpose2d("dec2", c1, c, 4, up, rng).map_err(e)?,
+            ps.conv_transpose2d("dec1", c2, c1, spec[1].0, conv_t(spec[1]), rng)
+                .map_err(e)?,
+            ps.conv_transpose2d("dec2", c1, c, spec[0].0, conv_t(spec[0]), rng)
+                .map_err(e)?,
         ];
         let reward_head = ps.linear("reward", f, 1, rng).map_err(e)?;
         let done_head = ps.linear("done", f, 1, rng).map_err(e)?;
@@ -825,10 +867,8 @@ impl PixelModel {
         let joint = self.w_enc.forward(&h_enc)?.mul(&self.w_a.forward(&a)?)?;
         let h_dec = norm_relu(self.w_dec.forward(&joint)?)?;
         let [_, _, c3] = self.config.channels;
-        let mut y = self
-            .fc_dec
-            .forward(&h_dec)?
-            .reshape((n, c3, h / 4, w / 4))?;
+        let (mh, mw) = self.config.layers.map_size(h, w);
+        let mut y = self.fc_dec.forward(&h_dec)?.reshape((n, c3, mh, mw))?;
         y = norm_relu(y)?;
         for (i, d) in self.dec.iter().enumerate() {
             y = conv_transpose2d_layer(d, &y)?;
@@ -1387,6 +1427,51 @@ mod tests {
         assert!(m.loss_on(&wide, &[0, 1, 2]).unwrap() < first);
         let p = m.predict(&[0.0; 64], &[0]).unwrap();
         assert_eq!(p.frame_probs.len(), 32);
+    }
+
+    #[test]
+    fn full_resolution_layers_keep_the_map_and_train_with_exact_gradients() {
+        // 8×16 frames: stride-1 convolutions without padding leave a 1×9 map, and the decoder's
+        // transposed convolutions must give back exactly 8×16.
+        let cfg = PixelModelConfig {
+            image: [8, 16, 1],
+            layers: PixelLayers::FullResolution,
+            ..tiny(5)
+        };
+        assert_eq!(cfg.layers.map_size(8, 16), (1, 9));
+        let wide = widened(&walker_data(8, 5, 5), 8);
+        assert_gradient_matches_finite_differences(cfg.clone(), &wide);
+        let mut m = PixelModel::new(cfg).unwrap();
+        let p = m.predict(&[0.0; 2 * 128], &[1]).unwrap();
+        assert_eq!(p.frame_probs.len(), 128);
+        let first = m.loss_on(&wide, &[0, 1, 2]).unwrap();
+        m.fit(&wide, &PixelFit::default()).unwrap();
+        assert!(m.loss_on(&wide, &[0, 1, 2]).unwrap() < first);
+    }
+
+    #[test]
+    fn each_layout_states_the_frames_it_takes() {
+        let with = |image, layers| PixelModelConfig {
+            image,
+            layers,
+            ..tiny(0)
+        };
+        // Any size from 8 up at full resolution, multiples of 4 strided.
+        assert!(PixelModel::new(with([9, 10, 1], PixelLayers::FullResolution)).is_ok());
+        assert!(PixelModel::new(with([8, 8, 1], PixelLayers::Strided)).is_ok());
+        for (image, layers) in [
+            ([7, 8, 1], PixelLayers::FullResolution),
+            ([9, 10, 1], PixelLayers::Strided),
+        ] {
+            let err = PixelModel::new(with(image, layers))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains("height and width must be"), "{err}");
+        }
+        // The setting reads from a configuration file by name; the default is `strided`.
+        let c: PixelModelConfig = serde_json::from_str(r#"{"layers": "full_resolution"}"#).unwrap();
+        assert_eq!(c.layers, PixelLayers::FullResolution);
+        assert_eq!(PixelModelConfig::default().layers, PixelLayers::Strided);
     }
 
     /// The gradient of a model built from `cfg` on (the first six transitions of) `d` agrees with
