@@ -162,8 +162,8 @@ impl Default for PixelModelConfig {
 /// (`16 → 8 → 4 → 4`), so the fully connected layers see a `4 × 4` map; it is cheap and learns
 /// v0's maze of 2 × 2-pixel cells. `FullResolution` is the layout of the model p2's authors
 /// released for their maze: stride 1 without padding, `k4`, `k3`, `k3` (`16 → 13 → 11 → 9`), so
-/// a one-pixel object keeps its own place in the `9 × 9` map; about 2.5 times the work per
-/// step at the default widths.
+/// a one-pixel object keeps its own place in the `9 × 9` map; at the default widths p2's F1
+/// experiment on the maze took about twice as long with it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum PixelLayers {
@@ -175,11 +175,13 @@ pub enum PixelLayers {
 }
 
 impl PixelLayers {
-    /// The height and width of the last convolution's map for an `h × w` image.
+    /// The height and width of the last convolution's map for an `h × w` image of a size the
+    /// layout takes ([`PixelModelConfig::validate`]); an image too small for it gives an empty
+    /// map.
     pub fn map_size(self, h: usize, w: usize) -> (usize, usize) {
         match self {
             Self::Strided => (h / 4, w / 4),
-            Self::FullResolution => (h - 7, w - 7),
+            Self::FullResolution => (h.saturating_sub(7), w.saturating_sub(7)),
         }
     }
 }
@@ -189,18 +191,18 @@ impl PixelModelConfig {
     pub fn validate(&self) -> Result<(), ModelError> {
         let bad = |m: String| Err(ModelError::Other(format!("pixel model config: {m}")));
         let [h, w, c] = self.image;
-        let fits = match self.layers {
-            PixelLayers::Strided => h > 0 && w > 0 && h % 4 == 0 && w % 4 == 0,
-            PixelLayers::FullResolution => h >= 8 && w >= 8,
+        let (fits, layers, need) = match self.layers {
+            PixelLayers::Strided => (
+                h > 0 && w > 0 && h % 4 == 0 && w % 4 == 0,
+                "strided",
+                "positive multiples of 4",
+            ),
+            PixelLayers::FullResolution => (h >= 8 && w >= 8, "full_resolution", "at least 8"),
         };
         if !fits || c == 0 {
-            let need = match self.layers {
-                PixelLayers::Strided => "positive multiples of 4",
-                PixelLayers::FullResolution => "at least 8",
-            };
             return bad(format!(
-                "image {:?}: with {:?} layers height and width must be {need}, channels >= 1",
-                self.image, self.layers
+                "image {:?}: with {layers} layers height and width must be {need}, channels >= 1",
+                self.image
             ));
         }
         if self.frames == 0 || self.n_actions == 0 {
@@ -1439,6 +1441,7 @@ mod tests {
             ..tiny(5)
         };
         assert_eq!(cfg.layers.map_size(8, 16), (1, 9));
+        assert_eq!(cfg.layers.map_size(4, 16), (0, 9));
         let wide = widened(&walker_data(8, 5, 5), 8);
         assert_gradient_matches_finite_differences(cfg.clone(), &wide);
         let mut m = PixelModel::new(cfg).unwrap();
@@ -1466,7 +1469,7 @@ mod tests {
             let err = PixelModel::new(with(image, layers))
                 .unwrap_err()
                 .to_string();
-            assert!(err.contains("height and width must be"), "{err}");
+            assert!(err.contains("layers height and width must be"), "{err}");
         }
         // The setting reads from a configuration file by name; the default is `strided`.
         let c: PixelModelConfig = serde_json::from_str(r#"{"layers": "full_resolution"}"#).unwrap();
