@@ -1,5 +1,6 @@
 //! `tandem reproduce p3-leg`: the quick study's files, seeds run apart and merged, the elite
-//! ablation, and a resume that asks for other settings.
+//! ablation, and a resume that asks for other settings; the committed leg and p1 (p3-mujoco's
+//! loop) studies merged again from their records.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -229,6 +230,38 @@ fn the_committed_leg_results_render_again_from_their_records() {
             "{m}"
         );
         assert_eq!(table[m]["seeds"], serde_json::json!([0, 1, 2, 3, 4]), "{m}");
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// p1 runs on p3-mujoco's loop and harness: its committed HalfCheetah table
+/// (`results/p1/halfcheetah/`) is the merge of the three one-seed studies committed beside it,
+/// each run as its own process (two of them resumed in later sessions).
+#[test]
+fn the_committed_p1_table_is_the_merge_of_its_one_seed_studies() {
+    let p1 = Path::new(env!("CARGO_MANIFEST_DIR")).join("results/p1");
+    let seeds: Vec<String> = (0..3)
+        .map(|k| {
+            p1.join(format!("halfcheetah-seed{k}"))
+                .display()
+                .to_string()
+        })
+        .collect();
+    let root = root("p1-committed");
+    let out = root.join("merged");
+    let mut args = vec!["reproduce", "merge"];
+    args.extend(seeds.iter().map(String::as_str));
+    args.extend(["--out", out.to_str().unwrap()]);
+    ok(&tandem(&args));
+    let again = std::fs::read_to_string(out.join("table.json")).unwrap();
+    let committed = p1.join("halfcheetah");
+    assert_eq!(
+        again,
+        std::fs::read_to_string(committed.join("table.json")).unwrap()
+    );
+    let table = json(&committed.join("table.json"));
+    for m in ["sac", "mbpo", "incremental_dyna"] {
+        assert_eq!(table[m]["seeds"], serde_json::json!([0, 1, 2]), "{m}");
     }
     let _ = std::fs::remove_dir_all(&root);
 }
