@@ -37,6 +37,24 @@ fn quick_leg_seed(flag: &str, out: &str) -> Output {
     ])
 }
 
+/// Merges the committed study directories `dirs` into a temporary folder, asserts that the
+/// `table.json` written there equals `committed`'s byte for byte, and returns that table.
+fn merges_again_to(name: &str, dirs: &[PathBuf], committed: &Path) -> Value {
+    let root = root(name);
+    let out = root.join("merged");
+    let mut args = vec!["reproduce".to_owned(), "merge".to_owned()];
+    args.extend(dirs.iter().map(|d| d.display().to_string()));
+    args.extend(["--out".to_owned(), out.display().to_string()]);
+    ok(&tandem(
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+    ));
+    let again = std::fs::read_to_string(out.join("table.json")).unwrap();
+    let before = std::fs::read_to_string(committed.join("table.json")).unwrap();
+    assert_eq!(again, before, "{} merged again", committed.display());
+    let _ = std::fs::remove_dir_all(&root);
+    serde_json::from_str(&before).unwrap()
+}
+
 fn root(name: &str) -> PathBuf {
     let r = std::env::temp_dir().join(format!("tandem-p3-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&r);
@@ -210,19 +228,7 @@ fn the_oracle_adds_mbpo_with_the_true_leg() {
 #[test]
 fn the_committed_leg_results_render_again_from_their_records() {
     let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("results/p3-leg");
-    let root = root("committed");
-    let out = root.join("again");
-    ok(&tandem(&[
-        "reproduce",
-        "merge",
-        committed.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]));
-    let again = std::fs::read_to_string(out.join("table.json")).unwrap();
-    let before = std::fs::read_to_string(committed.join("table.json")).unwrap();
-    assert_eq!(again, before);
-    let table = json(&committed.join("table.json"));
+    let table = merges_again_to("leg-committed", &[committed.clone()], &committed);
     for m in ["sac", "mbpo", "m_demorl", "mbpo_oracle"] {
         assert_eq!(
             table[m]["return_at_epoch"].as_object().unwrap().len(),
@@ -231,7 +237,6 @@ fn the_committed_leg_results_render_again_from_their_records() {
         );
         assert_eq!(table[m]["seeds"], serde_json::json!([0, 1, 2, 3, 4]), "{m}");
     }
-    let _ = std::fs::remove_dir_all(&root);
 }
 
 /// p1 runs on p3-mujoco's loop and harness: its committed HalfCheetah table
@@ -240,28 +245,11 @@ fn the_committed_leg_results_render_again_from_their_records() {
 #[test]
 fn the_committed_p1_table_is_the_merge_of_its_one_seed_studies() {
     let p1 = Path::new(env!("CARGO_MANIFEST_DIR")).join("results/p1");
-    let seeds: Vec<String> = (0..3)
-        .map(|k| {
-            p1.join(format!("halfcheetah-seed{k}"))
-                .display()
-                .to_string()
-        })
+    let seeds: Vec<PathBuf> = (0..3)
+        .map(|k| p1.join(format!("halfcheetah-seed{k}")))
         .collect();
-    let root = root("p1-committed");
-    let out = root.join("merged");
-    let mut args = vec!["reproduce", "merge"];
-    args.extend(seeds.iter().map(String::as_str));
-    args.extend(["--out", out.to_str().unwrap()]);
-    ok(&tandem(&args));
-    let again = std::fs::read_to_string(out.join("table.json")).unwrap();
-    let committed = p1.join("halfcheetah");
-    assert_eq!(
-        again,
-        std::fs::read_to_string(committed.join("table.json")).unwrap()
-    );
-    let table = json(&committed.join("table.json"));
+    let table = merges_again_to("p1-committed", &seeds, &p1.join("halfcheetah"));
     for m in ["sac", "mbpo", "incremental_dyna"] {
         assert_eq!(table[m]["seeds"], serde_json::json!([0, 1, 2]), "{m}");
     }
-    let _ = std::fs::remove_dir_all(&root);
 }
