@@ -228,7 +228,11 @@ fn the_oracle_adds_mbpo_with_the_true_leg() {
 #[test]
 fn the_committed_leg_results_render_again_from_their_records() {
     let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("results/p3-leg");
-    let table = merges_again_to("leg-committed", &[committed.clone()], &committed);
+    let table = merges_again_to(
+        "leg-committed",
+        std::slice::from_ref(&committed),
+        &committed,
+    );
     for m in ["sac", "mbpo", "m_demorl", "mbpo_oracle"] {
         assert_eq!(
             table[m]["return_at_epoch"].as_object().unwrap().len(),

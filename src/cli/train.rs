@@ -385,7 +385,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     let start_step = trainer.steps();
     let mut last_evals = 0;
     let mut progress = |t: &Trainer| {
-        if t.steps() % 100 == 0 || t.log().evals.len() != last_evals {
+        if t.steps().is_multiple_of(100) || t.log().evals.len() != last_evals {
             bar.set_position(t.steps());
             let ev = t.log().evals.last().map(|e| e.mean);
             let tr = t.log().episodes.last().map(|e| e.ret_window_mean);

@@ -252,7 +252,7 @@ impl GlobalPolicy {
     /// The mean actions of a batch of states (`B × S` row-major in, `B × A` out).
     pub fn mean(&self, states: &[f64], ws: &mut MlpWorkspace) -> Result<Vec<f64>> {
         let n = self.state_dim;
-        if n == 0 || states.len() % n != 0 {
+        if n == 0 || !states.len().is_multiple_of(n) {
             return Err(PipelineError::Config(format!(
                 "{} state values are not rows of {n}",
                 states.len()

@@ -440,7 +440,7 @@ where
                 None => real = Some(new),
             }
             // The model on (a draw of) all real transitions so far.
-            if done_real % cfg.fit_every == 0 {
+            if done_real.is_multiple_of(cfg.fit_every) {
                 let all = real.as_ref().expect("just extended");
                 let j = done_real / cfg.fit_every;
                 let mut rng = seeds.rng(&format!("fit-{j}"));
@@ -480,7 +480,7 @@ where
                 }
             }
         }
-        if done_real % cfg.checkpoint_every == 0 {
+        if done_real.is_multiple_of(cfg.checkpoint_every) {
             let model = model_env.as_ref().map(|m| m.model());
             save(store, &p, &agent, model, real.as_ref())?;
         }

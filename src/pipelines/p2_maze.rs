@@ -379,7 +379,7 @@ fn run_probed(
             probes.retain(|pr| pr.left > 0);
             data.push_episode(&frames.frames, &frames.actions, &frames.rewards, terminated)?;
             menv.add_start(frames.frames[0].clone())?;
-            if done_real % cfg.fit_every == 0 {
+            if done_real.is_multiple_of(cfg.fit_every) {
                 let fit = PixelFit {
                     seed: seeds.derive(&format!("fit-{}", done_real / cfg.fit_every)),
                     ..cfg.fit.clone()
@@ -419,7 +419,7 @@ fn run_probed(
                 }
             }
         }
-        if done_real % cfg.checkpoint_every == 0 {
+        if done_real.is_multiple_of(cfg.checkpoint_every) {
             let mut ckpt = Checkpoint::new();
             lp.agent.save(&mut ckpt)?;
             lp.save(LOOP, &mut ckpt)?;

@@ -366,7 +366,10 @@ impl Agent for Dqn {
     /// `target_update_interval` environment steps (stable-baselines3 `DQN._on_step`, τ = 1).
     fn on_env_step(&mut self) {
         self.env_steps += 1;
-        if self.env_steps % self.config.target_update_interval as u64 == 0 {
+        if self
+            .env_steps
+            .is_multiple_of(self.config.target_update_interval as u64)
+        {
             self.sync_target();
         }
     }

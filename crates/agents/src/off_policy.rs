@@ -533,7 +533,11 @@ impl<A: OffPolicyAgent> OffPolicyLoop<A> {
         if opts.learn {
             self.s.counts.learn_steps += 1;
             if self.s.counts.primary_pushed > sch.learning_starts as u64
-                && self.s.counts.learn_steps % sch.train_freq as u64 == 0
+                && self
+                    .s
+                    .counts
+                    .learn_steps
+                    .is_multiple_of(sch.train_freq as u64)
             {
                 self.update(sch.gradient_steps)?;
             }
@@ -572,7 +576,7 @@ impl<A: OffPolicyAgent> OffPolicyLoop<A> {
             }
             let m = self.agent.update(&self.batch)?;
             self.s.counts.updates += 1;
-            if self.s.counts.updates % 64 == 0 || self.s.schedule.gradient_steps == 1 {
+            if self.s.counts.updates.is_multiple_of(64) || self.s.schedule.gradient_steps == 1 {
                 self.s.last_update = m.0.iter().map(|(k, v)| (k.to_string(), *v)).collect();
             }
         }

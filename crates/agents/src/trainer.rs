@@ -328,7 +328,7 @@ impl Trainer {
                 self.finish_episode(&rec)?;
             }
             let steps = self.steps();
-            let every = |n: u64| n > 0 && steps % n == 0;
+            let every = |n: u64| n > 0 && steps.is_multiple_of(n);
             let evaluated = every(self.settings.eval_interval);
             if evaluated {
                 self.evaluate(eval_env)?;

@@ -261,7 +261,7 @@ impl RunningNormalizer {
     /// Adds a batch of f64 rows (`rows × dim`, row-major). Non-finite data is an error (nothing
     /// added).
     pub fn update_f64(&mut self, batch: &[f64]) -> Result<()> {
-        if batch.len() % self.dim.max(1) != 0 {
+        if !batch.len().is_multiple_of(self.dim.max(1)) {
             return Err(NnError::ShapeMismatch {
                 what: "normalizer batch".into(),
                 expected: format!("a multiple of {}", self.dim),
@@ -382,7 +382,7 @@ impl RunningNormalizer {
     }
 
     fn check_rows(&self, len: usize) -> Result<()> {
-        if self.dim == 0 || len % self.dim != 0 {
+        if self.dim == 0 || !len.is_multiple_of(self.dim) {
             return Err(NnError::ShapeMismatch {
                 what: "normalizer input".into(),
                 expected: format!("a multiple of {}", self.dim),

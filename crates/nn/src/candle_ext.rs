@@ -144,7 +144,7 @@ impl ParamSet {
         rng: &mut Rng,
     ) -> Result<candle_nn::Conv2d> {
         let groups = cfg.groups.max(1);
-        if c_in % groups != 0 || c_out % groups != 0 {
+        if !c_in.is_multiple_of(groups) || !c_out.is_multiple_of(groups) {
             return Err(NnError::InvalidConfig(format!(
                 "conv2d `{name}`: channels {c_in}→{c_out} not divisible by groups {groups}"
             )));

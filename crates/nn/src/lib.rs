@@ -55,6 +55,15 @@
 //! store compiled to branches (about 11% of a single-thread SAC update in `perf`) and, with AVX2,
 //! to masked stores (4.5%; slow on AMD cores); the select costs 2.3%.
 //!
+//! On CPUs with AVX-512 (the Intel Xeon machines this project also runs on), `gemm`'s 16-lane
+//! kernels run (its `x86-v4` feature): a 20 000 × 200 × 200 product at about 90 GFLOP/s on one
+//! core against 37–41 with the AVX2 kernels, 256 × 200 × 200 at 140 against 79. `kernels.rs`
+//! keeps the numbers those of the AVX2 kernels bit for bit: it runs the products whose order
+//! depends on the lane count (dot-product forms) itself in the AVX2 order, and cuts contractions
+//! longer than 512 into blocks that do not depend on the CPU's caches (before, `gemm` sized them
+//! from the caches, so products with such contractions, e.g. weight gradients of batches over 512,
+//! could differ between machines; on the Xeon their bits changed with this).
+//!
 //! Networks compute in `f32`; physics and planning stay in `f64` and convert at the boundary.
 //! candle's CPU generator cannot be seeded, so every random number here (initialization, dropout,
 //! sampling noise) comes from [`tandem_core::seeding::Rng`].
@@ -87,7 +96,8 @@
 //! assert!((pred[0] - 0.0).abs() < 0.05);
 //! ```
 //!
-//! Dependencies: `gemm` (the matrix kernels candle itself uses on CPU), `safetensors` (the
+//! Dependencies: `gemm` (the matrix kernels candle itself uses on CPU; with `x86-v4` for its
+//! AVX-512 kernels), `safetensors` (the
 //! checkpoint format; already a dependency of candle), `candle-core`/`candle-nn` (general
 //! autograd, gradient oracle), `rand`/`rand_distr` (seeded initialization and noise), `serde`,
 //! `serde_json` (JSON payloads inside checkpoints), `thiserror`, `rayon` (two-thread task

@@ -322,7 +322,7 @@ mod tests {
 
     /// Simpson's rule over equally spaced samples (even number of intervals).
     fn simpson(y: &[f64], h: f64) -> f64 {
-        assert!((y.len() - 1) % 2 == 0);
+        assert!((y.len() - 1).is_multiple_of(2));
         let n = y.len() - 1;
         let mut s = y[0] + y[n];
         for (i, v) in y.iter().enumerate().take(n).skip(1) {
