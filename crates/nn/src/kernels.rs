@@ -26,6 +26,8 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+use crate::simd::multiversion;
+
 static GEMM_THREADS: AtomicUsize = AtomicUsize::new(1);
 
 /// Sets how many threads the hand-derived MLP's matrix products use (default 1).
@@ -214,92 +216,62 @@ fn dot_rows(
     }
 }
 
-/// Eight lanes, lane `l` the fused multiply-add chain of `x[p]·y[p]` over `p ≡ l (mod 8)`.
-#[inline]
-fn fma_lanes8(x: &[f32], y: &[f32]) -> [f32; 8] {
-    #[cfg(target_arch = "x86_64")]
-    {
-        #[target_feature(enable = "avx2,fma")]
-        unsafe fn wide(x: &[f32], y: &[f32]) -> [f32; 8] {
-            lanes8_body(x, y)
-        }
-        if std::is_x86_feature_detected!("fma") && std::is_x86_feature_detected!("avx2") {
-            // SAFETY: `wide` needs AVX2 and FMA, which the CPU was just checked to have.
-            return unsafe { wide(x, y) };
-        }
-    }
-    lanes8_body(x, y)
-}
-
-#[inline(always)]
-fn lanes8_body(x: &[f32], y: &[f32]) -> [f32; 8] {
-    let mut acc = [0.0f32; 8];
-    let (xc, xt) = x.as_chunks::<8>();
-    let (yc, yt) = y.as_chunks::<8>();
-    for (xv, yv) in xc.iter().zip(yc) {
-        for l in 0..8 {
-            acc[l] = xv[l].mul_add(yv[l], acc[l]);
-        }
-    }
-    for (l, (xs, ys)) in xt.iter().zip(yt).enumerate() {
-        acc[l] = xs.mul_add(*ys, acc[l]);
-    }
-    acc
-}
-
-/// The dot product of `x` and `y` in the order of `gemm`'s AVX2 gemv (see [`dot_rows`]).
-#[inline]
-fn dot_gemv8(x: &[f32], y: &[f32]) -> f32 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        #[target_feature(enable = "avx2,fma")]
-        unsafe fn wide(x: &[f32], y: &[f32]) -> f32 {
-            gemv8_body(x, y)
-        }
-        if std::is_x86_feature_detected!("fma") && std::is_x86_feature_detected!("avx2") {
-            // SAFETY: `wide` needs AVX2 and FMA, which the CPU was just checked to have.
-            return unsafe { wide(x, y) };
-        }
-    }
-    gemv8_body(x, y)
-}
-
-#[inline(always)]
-fn gemv8_body(x: &[f32], y: &[f32]) -> f32 {
-    #[inline(always)]
-    fn add(a: [f32; 8], b: [f32; 8]) -> [f32; 8] {
-        std::array::from_fn(|l| a[l] + b[l])
-    }
-    let k = x.len();
-    let mut acc = [[0.0f32; 8]; 8];
-    let (x64, _) = x.as_chunks::<64>();
-    let (y64, _) = y.as_chunks::<64>();
-    for (xv, yv) in x64.iter().zip(y64) {
-        for (r, accr) in acc.iter_mut().enumerate() {
+multiversion! {
+    /// Eight lanes, lane `l` the fused multiply-add chain of `x[p]·y[p]` over `p ≡ l (mod 8)`.
+    fn fma_lanes8(x: &[f32], y: &[f32]) -> [f32; 8] {
+        let mut acc = [0.0f32; 8];
+        let (xc, xt) = x.as_chunks::<8>();
+        let (yc, yt) = y.as_chunks::<8>();
+        for (xv, yv) in xc.iter().zip(yc) {
             for l in 0..8 {
-                accr[l] = xv[8 * r + l].mul_add(yv[8 * r + l], accr[l]);
+                acc[l] = xv[l].mul_add(yv[l], acc[l]);
             }
         }
-    }
-    let mut v = add(
-        add(add(acc[0], acc[1]), add(acc[2], acc[3])),
-        add(add(acc[4], acc[5]), add(acc[6], acc[7])),
-    );
-    let mut depth = x64.len() * 64;
-    while depth + 8 <= k {
-        for l in 0..8 {
-            v[l] = x[depth + l].mul_add(y[depth + l], v[l]);
+        for (l, (xs, ys)) in xt.iter().zip(yt).enumerate() {
+            acc[l] = xs.mul_add(*ys, acc[l]);
         }
-        depth += 8;
+        acc
     }
-    let mut s = v[0];
-    for lane in &v[1..] {
-        s += lane;
+}
+
+multiversion! {
+    /// The dot product of `x` and `y` in the order of `gemm`'s AVX2 gemv (see [`dot_rows`]).
+    fn dot_gemv8(x: &[f32], y: &[f32]) -> f32 {
+        #[inline(always)]
+        fn add(a: [f32; 8], b: [f32; 8]) -> [f32; 8] {
+            std::array::from_fn(|l| a[l] + b[l])
+        }
+        let k = x.len();
+        let mut acc = [[0.0f32; 8]; 8];
+        let (x64, _) = x.as_chunks::<64>();
+        let (y64, _) = y.as_chunks::<64>();
+        for (xv, yv) in x64.iter().zip(y64) {
+            for (r, accr) in acc.iter_mut().enumerate() {
+                for l in 0..8 {
+                    accr[l] = xv[8 * r + l].mul_add(yv[8 * r + l], accr[l]);
+                }
+            }
+        }
+        let mut v = add(
+            add(add(acc[0], acc[1]), add(acc[2], acc[3])),
+            add(add(acc[4], acc[5]), add(acc[6], acc[7])),
+        );
+        let mut depth = x64.len() * 64;
+        while depth + 8 <= k {
+            for l in 0..8 {
+                v[l] = x[depth + l].mul_add(y[depth + l], v[l]);
+            }
+            depth += 8;
+        }
+        let mut s = v[0];
+        for lane in &v[1..] {
+            s += lane;
+        }
+        for p in depth..k {
+            s = x[p].mul_add(y[p], s);
+        }
+        s
     }
-    for p in depth..k {
-        s = x[p].mul_add(y[p], s);
-    }
-    s
 }
 
 /// `c (m×n) = [c +] a (m×k) · bᵀ` where `b` is stored n×k. (Forward: `Y = X Wᵀ`.)
