@@ -302,7 +302,7 @@ impl ProbabilisticEnsemble {
                 return Ok(());
             }
             let out = m.net.forward(input, rows.len(), ws)?;
-            m.head.forward(out, rows.len(), g)
+            m.head.predict(out, rows.len(), g)
         };
         let macs = b * self.members[0].net.num_params();
         let bufs = &mut bufs[..e];
@@ -470,7 +470,7 @@ fn member_eval(
     for chunk in idx.chunks(1024) {
         data.gather(chunk, &mut xb, &mut yb);
         let out = m.net.forward(&xb, chunk.len(), &mut ws)?;
-        m.head.forward(out, chunk.len(), &mut g)?;
+        m.head.predict(out, chunk.len(), &mut g)?;
         let l = gaussian_nll(&g.mean, &g.log_var, &yb, None, None)?;
         nll += f64::from(l) * chunk.len() as f64;
         mse += g

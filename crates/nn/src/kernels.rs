@@ -140,6 +140,34 @@ fn gemm_raw(
     }
 }
 
+/// Which code computes `gemm_nt(m, n, k, …)`. Each element's arithmetic depends only on the
+/// route and `k`, not on `m`: row blocks of a product give the whole product's bits exactly when
+/// they take its route.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum NtRoute {
+    /// [`dot_small`]: `m·n ≤ 256`.
+    DotSmall,
+    /// [`dot_rows`]: one row or one column, `k > 2`.
+    DotRows,
+    /// `gemm`'s outer-product path: `k ≤ 2`.
+    Outer,
+    /// `gemm`'s main kernels: one fused multiply-add chain per element and contraction block,
+    /// whatever the operands' layout, so `cᵀ = b aᵀ` through [`gemm_nn`] gives the same bits.
+    Main,
+}
+
+pub(crate) fn nt_route(m: usize, n: usize, k: usize) -> NtRoute {
+    if m * n <= SMALL_DOT {
+        NtRoute::DotSmall
+    } else if k <= 2 {
+        NtRoute::Outer
+    } else if m == 1 || n == 1 {
+        NtRoute::DotRows
+    } else {
+        NtRoute::Main
+    }
+}
+
 /// Largest output (elements) that `gemm` computes with its dot-product ("horizontal") kernels.
 const SMALL_DOT: usize = 16 * 16;
 
@@ -487,6 +515,36 @@ mod tests {
                 same_bits(&c, &want, &format!("nn {m}×{n}×{k}"));
             }
         }
+    }
+
+    /// On [`NtRoute::Main`], `Y = X Wᵀ` (row-major) and `Yᵀ = W Xᵀ` (feature-major, as
+    /// [`crate::Mlp`]'s inference keeps its activations) are the same bits.
+    #[test]
+    fn main_kernel_products_give_the_same_bits_feature_major() {
+        let mut checked = 0;
+        for m in [2, 3, 7, 16, 17, 50, 100, 129, 256, 500] {
+            for n in [2, 5, 6, 17, 36, 64, 200, 256] {
+                for k in [3, 4, 23, 200, 513, 1100] {
+                    if nt_route(m, n, k) != NtRoute::Main || m * n * k > 30_000_000 {
+                        continue;
+                    }
+                    let (x, w) = (data(m * k, 0.37), data(n * k, 0.11));
+                    let mut xt = vec![0.0; m * k];
+                    for i in 0..m {
+                        for p in 0..k {
+                            xt[p * m + i] = x[i * k + p];
+                        }
+                    }
+                    let (mut y, mut yt) = (vec![0.0; m * n], vec![0.0; m * n]);
+                    gemm_nt(m, n, k, &x, &w, &mut y, false);
+                    gemm_nn(n, m, k, &w, &xt, &mut yt, false);
+                    let back: Vec<f32> = (0..m * n).map(|e| yt[(e % n) * m + e / n]).collect();
+                    same_bits(&back, &y, &format!("{m}×{n}×{k}"));
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 300, "only {checked} shapes checked");
     }
 
     /// The dot-product products follow `gemm`'s AVX2 orders, written here as plain index loops:

@@ -50,8 +50,12 @@
 //! the two row halves of a batch side by side when the pass has at least 2^22 multiply-adds and
 //! each half 64 rows (a planner's population, MBPO's imagined rows): `gemm` gives a row the same
 //! bits in any product of more than about 22 rows, so the numbers are the whole pass's. The
-//! element-wise loops (activations, bias gradients, Adam, polyak) are compiled twice, baseline and AVX2, and picked at run time (`simd.rs`), with bit-identical
-//! results. The ReLU backward writes a separate buffer through a select: the in-place conditional
+//! element-wise loops (activations, bias gradients, Adam, polyak) are compiled three times,
+//! baseline, AVX2 and AVX-512, and the widest the CPU runs is picked at run time (`simd.rs`), with
+//! bit-identical results. Inference passes on `gemm`'s main kernels keep their activations
+//! feature-major between layers (the rows along the kernels' vector lanes; `Mlp`'s
+//! `forward_feature_major` says why), and a pass split over two threads hands each thread its
+//! row half through all layers at once; the kernels' arithmetic, and so the bits, do not change. The ReLU backward writes a separate buffer through a select: the in-place conditional
 //! store compiled to branches (about 11% of a single-thread SAC update in `perf`) and, with AVX2,
 //! to masked stores (4.5%; slow on AMD cores); the select costs 2.3%.
 //!

@@ -19,7 +19,7 @@ use tandem_core::seeding::Rng;
 use crate::checkpoint::{Checkpoint, Checkpointable};
 use crate::error::{check_finite, check_len, NnError, Result};
 use crate::fastmath;
-use crate::kernels::{gemm_nn, gemm_nt, gemm_tn};
+use crate::kernels::{gemm_nn, gemm_nt, gemm_tn, nt_route, NtRoute};
 use crate::simd::multiversion;
 
 /// Element-wise activation of a layer.
@@ -224,6 +224,9 @@ pub struct LayerShape {
     pub bias_offset: usize,
 }
 
+/// One layer's output rows and, when kept, its pre-activations.
+type LayerOut<'a> = (&'a mut [f32], Option<&'a mut [f32]>);
+
 /// A multilayer perceptron with flat `f32` parameters and hand-derived gradients.
 ///
 /// * [`Mlp::forward`]: inference (no dropout), allocation-free once the workspace has seen the
@@ -422,10 +425,6 @@ impl Mlp {
         ws.tape = None;
         check_len("mlp input", batch * self.input_dim(), input.len())?;
         check_finite("mlp input", input)?;
-        ws.ensure(self, batch);
-        if train {
-            ws.x0[..input.len()].copy_from_slice(input);
-        }
         let n_layers = self.layers.len();
         let drop_p = if train && rng.is_some() {
             self.config.dropout
@@ -434,54 +433,85 @@ impl Mlp {
         };
         let dropout = DropoutSampler::new(drop_p);
         // Row blocks are independent unless dropout draws masks in row order.
-        let split =
-            (!dropout.active() && split_rows(batch, self.num_params())).then_some(batch / 2);
-        for l in 0..n_layers {
-            let s = self.layers[l];
-            let act = self.activation(l);
-            let (prev, rest) = ws.layers.split_at_mut(l);
-            let cur = &mut rest[0];
-            let x: &[f32] = if l == 0 {
-                input
-            } else {
-                prev[l - 1].input_of_next()
-            };
-            let n = batch * s.fan_out;
-            let w = &self.params[s.weight_offset..s.bias_offset];
-            let b = &self.params[s.bias_offset..s.bias_offset + s.fan_out];
-            let x = &x[..batch * s.fan_in];
-            let y = &mut cur.y[..n];
-            let z = (train && act.needs_pre()).then(|| &mut cur.z[..n]);
-            let layer = |rows: usize, x: &[f32], y: &mut [f32], z: Option<&mut [f32]>| {
-                gemm_nt(rows, s.fan_out, s.fan_in, x, w, y, false);
-                bias_activation(y, b, act, z);
-            };
+        let split = (!dropout.active() && self.splits_rows(batch)).then_some(batch / 2);
+        // Inference on `gemm`'s main kernels: feature-major (see `forward_feature_major`).
+        let fm_ok = |rows: usize| {
+            self.layers
+                .iter()
+                .all(|s| nt_route(rows, s.fan_out, s.fan_in) == NtRoute::Main)
+        };
+        let feature_major =
+            !train && fm_ok(batch) && split.is_none_or(|h| fm_ok(h) && fm_ok(batch - h));
+        ws.ensure(self, batch, train, feature_major);
+        if train {
+            ws.x0[..input.len()].copy_from_slice(input);
+        }
+        if feature_major {
+            let last = n_layers - 1;
+            let out_dim = self.output_dim();
+            let out = &mut ws.layers[last].y[..batch * out_dim];
+            let [fm1, fm2] = &mut ws.fm;
             match split {
-                // A large batch: the two row blocks side by side. Each row's numbers are the
-                // ones of the whole product (`gemm` reduces every row alike).
                 Some(h) => {
-                    let (x1, x2) = x.split_at(h * s.fan_in);
-                    let (y1, y2) = y.split_at_mut(h * s.fan_out);
-                    let (z1, z2) = match z {
-                        Some(z) => {
-                            let (z1, z2) = z.split_at_mut(h * s.fan_out);
-                            (Some(z1), Some(z2))
-                        }
-                        None => (None, None),
-                    };
-                    rayon::join(|| layer(h, x1, y1, z1), || layer(batch - h, x2, y2, z2));
+                    let (o1, o2) = out.split_at_mut(h * out_dim);
+                    let (x1, x2) = input.split_at(h * self.input_dim());
+                    rayon::join(
+                        || self.forward_feature_major(h, x1, fm1, o1),
+                        || self.forward_feature_major(batch - h, x2, fm2, o2),
+                    );
                 }
-                None => layer(batch, x, y, z),
+                None => self.forward_feature_major(batch, input, fm1, out),
             }
-            let hidden = l + 1 < n_layers;
-            cur.dropped = false;
-            if hidden && dropout.active() {
-                let r = rng.as_deref_mut().expect("dropout active only with an rng");
-                dropout.fill_mask(&mut cur.mask[..n], r);
-                for ((h, y), m) in cur.h[..n].iter_mut().zip(&cur.y[..n]).zip(&cur.mask[..n]) {
-                    *h = y * m;
+            for buf in &mut ws.layers[..n_layers] {
+                buf.dropped = false;
+            }
+        } else if let Some(h) = split {
+            // A large batch: the two row halves through all layers side by side (one hand-over
+            // per pass, not one per layer). Each row's numbers are the whole pass's: every layer
+            // takes the same kernel route for both halves as for the whole batch.
+            let mut halves: [Vec<LayerOut<'_>>; 2] = [Vec::new(), Vec::new()];
+            for (l, buf) in ws.layers[..n_layers].iter_mut().enumerate() {
+                let s = self.layers[l];
+                let n = batch * s.fan_out;
+                buf.dropped = false;
+                let (y1, y2) = buf.y[..n].split_at_mut(h * s.fan_out);
+                let (z1, z2) = if train && self.activation(l).needs_pre() {
+                    let (z1, z2) = buf.z[..n].split_at_mut(h * s.fan_out);
+                    (Some(z1), Some(z2))
+                } else {
+                    (None, None)
+                };
+                halves[0].push((y1, z1));
+                halves[1].push((y2, z2));
+            }
+            let [first, second] = &mut halves;
+            let (x1, x2) = input.split_at(h * self.input_dim());
+            rayon::join(
+                || self.layers_forward(h, x1, first),
+                || self.layers_forward(batch - h, x2, second),
+            );
+        } else {
+            for l in 0..n_layers {
+                let s = self.layers[l];
+                let (prev, rest) = ws.layers.split_at_mut(l);
+                let cur = &mut rest[0];
+                let x: &[f32] = if l == 0 {
+                    input
+                } else {
+                    prev[l - 1].input_of_next()
+                };
+                let n = batch * s.fan_out;
+                let z = (train && self.activation(l).needs_pre()).then(|| &mut cur.z[..n]);
+                self.layer_forward(l, batch, &x[..batch * s.fan_in], &mut cur.y[..n], z);
+                cur.dropped = false;
+                if l + 1 < n_layers && dropout.active() {
+                    let r = rng.as_deref_mut().expect("dropout active only with an rng");
+                    dropout.fill_mask(&mut cur.mask[..n], r);
+                    for ((h, y), m) in cur.h[..n].iter_mut().zip(&cur.y[..n]).zip(&cur.mask[..n]) {
+                        *h = y * m;
+                    }
+                    cur.dropped = true;
                 }
-                cur.dropped = true;
             }
         }
         let out = &ws.layers[n_layers - 1].y[..batch * self.output_dim()];
@@ -493,6 +523,102 @@ impl Mlp {
             });
         }
         Ok(())
+    }
+
+    /// Layer `l` over `rows` rows without dropout: `y = act(x Wᵀ + b)`, keeping `z = x Wᵀ + b`
+    /// when given.
+    fn layer_forward(
+        &self,
+        l: usize,
+        rows: usize,
+        x: &[f32],
+        y: &mut [f32],
+        z: Option<&mut [f32]>,
+    ) {
+        let s = self.layers[l];
+        let b = &self.params[s.bias_offset..s.bias_offset + s.fan_out];
+        let w = &self.params[s.weight_offset..s.bias_offset];
+        gemm_nt(rows, s.fan_out, s.fan_in, x, w, y, false);
+        bias_activation(y, b, self.activation(l), z);
+    }
+
+    /// Inference over one block of `rows` rows (`input` and `out` row-major) with the activations
+    /// feature-major in between (`features × rows`): `gemm` then runs the rows along its vector
+    /// lanes and reads the row-major `W` as it is. Row-major activations put the features there
+    /// instead, so `gemm` packed `W` into its kernel's layout element by element on every product
+    /// (an eighth of a CEM plan through the ensemble) and ran the last 8 of a 200-wide layer's
+    /// features in a half-empty 16-lane kernel. Every layer must be on [`NtRoute::Main`] at `rows`, so each
+    /// element is the same fused multiply-add chain as in the row-major pass: the same bits.
+    fn forward_feature_major(
+        &self,
+        rows: usize,
+        input: &[f32],
+        bufs: &mut [Vec<f32>; 2],
+        out: &mut [f32],
+    ) {
+        let widest = self
+            .layers
+            .iter()
+            .fold(self.input_dim(), |w, s| w.max(s.fan_out));
+        for b in bufs.iter_mut() {
+            if b.len() < widest * rows {
+                b.resize(widest * rows, 0.0);
+            }
+        }
+        let [x, y] = bufs;
+        let (mut x, mut y) = (x, y);
+        let din = self.input_dim();
+        for (r, row) in input.chunks_exact(din).enumerate() {
+            for (p, v) in row.iter().enumerate() {
+                x[p * rows + r] = *v;
+            }
+        }
+        for (l, s) in self.layers.iter().enumerate() {
+            let w = &self.params[s.weight_offset..s.bias_offset];
+            let b = &self.params[s.bias_offset..s.bias_offset + s.fan_out];
+            let yl = &mut y[..s.fan_out * rows];
+            gemm_nn(
+                s.fan_out,
+                rows,
+                s.fan_in,
+                w,
+                &x[..s.fan_in * rows],
+                yl,
+                false,
+            );
+            bias_activation_by_row(yl, rows, b, self.activation(l));
+            std::mem::swap(&mut x, &mut y);
+        }
+        let dout = self.output_dim();
+        for (r, row) in out.chunks_exact_mut(dout).enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = x[j * rows + r];
+            }
+        }
+    }
+
+    /// All layers over one block of `rows` rows, each writing its `(y, z)` of `bufs`.
+    fn layers_forward(&self, rows: usize, input: &[f32], bufs: &mut [LayerOut<'_>]) {
+        for l in 0..bufs.len() {
+            let (prev, rest) = bufs.split_at_mut(l);
+            let x: &[f32] = if l == 0 { input } else { prev[l - 1].0 };
+            let (y, z) = &mut rest[0];
+            self.layer_forward(l, rows, x, y, z.as_deref_mut());
+        }
+    }
+
+    /// Whether a forward pass over `batch` rows runs its two row halves on two threads:
+    /// [`split_rows`], and every layer takes the same kernel route (see
+    /// [`crate::kernels::NtRoute`]) for each half as for the whole batch, so each row's numbers
+    /// are those of one thread.
+    fn splits_rows(&self, batch: usize) -> bool {
+        let h = batch / 2;
+        split_rows(batch, self.num_params())
+            && self.layers.iter().all(|s| {
+                let whole = nt_route(batch, s.fan_out, s.fan_in);
+                nt_route(h, s.fan_out, s.fan_in) == whole
+                    && nt_route(batch - h, s.fan_out, s.fan_in) == whole
+            })
     }
 
     /// Backward pass after [`Mlp::forward_train`] on the same `ws` (and unchanged parameters).
@@ -624,6 +750,30 @@ const MIN_BLOCK: usize = 64;
 /// [`MIN_BLOCK`] rows.
 fn split_rows(batch: usize, params: usize) -> bool {
     batch >= 2 * MIN_BLOCK && batch * params >= 1 << 22 && rayon::current_num_threads() > 1
+}
+
+multiversion! {
+    /// `y[j, :] = act(y[j, :] + b[j])` over feature-major rows of `width` values (the element-wise
+    /// operations of [`bias_activation`], bias per row instead of per column).
+    fn bias_activation_by_row(y: &mut [f32], width: usize, b: &[f32], act: Activation) {
+        macro_rules! rows {
+            ($f:expr) => {
+                for (yr, bv) in y.chunks_exact_mut(width).zip(b) {
+                    for yv in yr.iter_mut() {
+                        *yv = $f(*yv + bv);
+                    }
+                }
+            };
+        }
+        match act {
+            Activation::Identity => rows!(|v: f32| v),
+            Activation::Relu => rows!(|v: f32| v.max(0.0)),
+            Activation::Tanh => rows!(fastmath::tanh),
+            Activation::Sigmoid => rows!(fastmath::sigmoid),
+            Activation::Elu => rows!(|v: f32| if v > 0.0 { v } else { fastmath::exp_m1(v) }),
+            Activation::Silu => rows!(|v: f32| v * fastmath::sigmoid(v)),
+        }
+    }
 }
 
 multiversion! {
@@ -886,10 +1036,14 @@ pub struct MlpWorkspace {
     g_b: Vec<f32>,
     g_c: Vec<f32>,
     tape: Option<Tape>,
+    /// Ping-pong buffers of the feature-major inference pass, one pair per row half.
+    fm: [[Vec<f32>; 2]; 2],
 }
 
 impl MlpWorkspace {
-    fn ensure(&mut self, net: &Mlp, batch: usize) {
+    /// Grows what a pass over `batch` rows uses: a training pass everything the backward pass
+    /// reads, an inference pass the layer outputs (only the last one when `feature_major`).
+    fn ensure(&mut self, net: &Mlp, batch: usize, train: bool, feature_major: bool) {
         let n_layers = net.layers.len();
         if self.layers.len() < n_layers {
             self.layers.resize_with(n_layers, LayerBuf::default);
@@ -899,9 +1053,17 @@ impl MlpWorkspace {
                 v.resize(n, 0.0);
             }
         };
+        let last = n_layers - 1;
+        if !train {
+            for (l, s) in net.layers.iter().enumerate() {
+                if l == last || !feature_major {
+                    grow(&mut self.layers[l].y, batch * s.fan_out);
+                }
+            }
+            return;
+        }
         grow(&mut self.x0, batch * net.input_dim());
         let mut widest = net.input_dim();
-        let last = n_layers - 1;
         for (l, s) in net.layers.iter().enumerate() {
             let n = batch * s.fan_out;
             widest = widest.max(s.fan_out);
@@ -1121,6 +1283,37 @@ mod tests {
                 .zip(one.iter().zip(&two))
             {
                 same(what, a, b);
+            }
+        }
+    }
+
+    /// A batch whose halves would take another kernel route than the whole (64 rows × 4 outputs
+    /// is a dot-product product, 128 × 4 `gemm`'s main kernel) is not split: two threads give the
+    /// numbers of one.
+    #[test]
+    fn halves_on_another_kernel_route_are_not_split() {
+        let mut rng = rng_from_seed(5);
+        let net = Mlp::new(MlpConfig::new(&[23, 200, 200, 4]), &mut rng).unwrap();
+        for batch in [128, 129, 130, 200] {
+            let x = random_vec(batch * 23, &mut rng);
+            let run = |threads: usize| {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                pool.install(|| {
+                    let mut ws = net.workspace();
+                    (
+                        net.splits_rows(batch),
+                        net.forward(&x, batch, &mut ws).unwrap().to_vec(),
+                    )
+                })
+            };
+            let ((split1, one), (split2, two)) = (run(1), run(2));
+            assert!(!split1);
+            assert_eq!(split2, batch >= 130, "batch {batch}");
+            for (i, (a, b)) in one.iter().zip(&two).enumerate() {
+                assert_eq!(a.to_bits(), b.to_bits(), "batch {batch}, element {i}");
             }
         }
     }

@@ -2,16 +2,16 @@
 //! polyak updates).
 //!
 //! The workspace compiles for baseline x86-64 (SSE2: 4 lanes). [`multiversion!`] compiles a
-//! function's body a second time with AVX2 and FMA enabled (8 lanes) and picks that copy at run
-//! time when the CPU has both. Results are bit-identical between the two copies: Rust never
+//! function's body again with AVX2 and FMA enabled (8 lanes) and with AVX-512F too (16 lanes),
+//! and picks the widest copy the CPU runs. Results are bit-identical between the copies: Rust never
 //! contracts `a*b+c` into a fused multiply-add nor reassociates float operations, so each element
 //! sees exactly the same IEEE operations in the same order; only the number of lanes per
 //! instruction changes. An explicit `mul_add` is one rounding in both copies (an instruction in
 //! the wide one, a call to libm's `fmaf` in the baseline one).
 
-/// Defines `fn name(args) -> ret { body }` that runs an AVX2-and-FMA-compiled copy of `body` when
-/// the CPU supports both (checked once by the standard library, then a cached load) and the
-/// baseline copy otherwise. Arguments must be plain identifiers; the body is inlined into both copies.
+/// Defines `fn name(args) -> ret { body }` that runs an AVX-512-compiled copy of `body` on a CPU
+/// with AVX-512F and FMA, an AVX2-and-FMA-compiled copy on one with those (each checked once by
+/// the standard library, then a cached load), and the baseline copy otherwise. Arguments must be plain identifiers; the body is inlined into both copies.
 macro_rules! multiversion {
     (
         $(#[$meta:meta])*
@@ -24,6 +24,15 @@ macro_rules! multiversion {
             fn body($($arg: $ty),*) $(-> $ret)? $body
             #[cfg(target_arch = "x86_64")]
             {
+                #[target_feature(enable = "avx512f,avx2,fma")]
+                #[allow(clippy::too_many_arguments)]
+                unsafe fn wide512($($arg: $ty),*) $(-> $ret)? {
+                    body($($arg),*)
+                }
+                if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("fma") {
+                    // SAFETY: `wide512` needs AVX-512F (which implies AVX2) and FMA, just checked.
+                    return unsafe { wide512($($arg),*) };
+                }
                 #[target_feature(enable = "avx2,fma")]
                 #[allow(clippy::too_many_arguments)]
                 unsafe fn wide($($arg: $ty),*) $(-> $ret)? {
