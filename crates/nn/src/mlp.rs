@@ -434,14 +434,13 @@ impl Mlp {
         let dropout = DropoutSampler::new(drop_p);
         // Row blocks are independent unless dropout draws masks in row order.
         let split = (!dropout.active() && self.splits_rows(batch)).then_some(batch / 2);
-        // Inference on `gemm`'s main kernels: feature-major (see `forward_feature_major`).
-        let fm_ok = |rows: usize| {
-            self.layers
+        // Inference on `gemm`'s main kernels: feature-major (see `forward_feature_major`). A
+        // split's halves take the whole batch's routes (`splits_rows`), so they run there too.
+        let feature_major = !train
+            && self
+                .layers
                 .iter()
-                .all(|s| nt_route(rows, s.fan_out, s.fan_in) == NtRoute::Main)
-        };
-        let feature_major =
-            !train && fm_ok(batch) && split.is_none_or(|h| fm_ok(h) && fm_ok(batch - h));
+                .all(|s| nt_route(batch, s.fan_out, s.fan_in) == NtRoute::Main);
         ws.ensure(self, batch, train, feature_major);
         if train {
             ws.x0[..input.len()].copy_from_slice(input);
@@ -547,8 +546,9 @@ impl Mlp {
     /// lanes and reads the row-major `W` as it is. Row-major activations put the features there
     /// instead, so `gemm` packed `W` into its kernel's layout element by element on every product
     /// (an eighth of a CEM plan through the ensemble) and ran the last 8 of a 200-wide layer's
-    /// features in a half-empty 16-lane kernel. Every layer must be on [`NtRoute::Main`] at `rows`, so each
-    /// element is the same fused multiply-add chain as in the row-major pass: the same bits.
+    /// features in a half-empty 16-lane kernel. Every layer must be on [`NtRoute::Main`] at
+    /// `rows`, so each element is the same fused multiply-add chain as in the row-major pass: the
+    /// same bits.
     fn forward_feature_major(
         &self,
         rows: usize,
@@ -752,6 +752,22 @@ fn split_rows(batch: usize, params: usize) -> bool {
     batch >= 2 * MIN_BLOCK && batch * params >= 1 << 22 && rayon::current_num_threads() > 1
 }
 
+/// Runs the loop macro `$each` with the scalar form of activation `$act` (through
+/// [`fastmath`]): one loop per activation with the match outside it, since a per-element match does
+/// not vectorize. The batched activation kernels below share this one table.
+macro_rules! by_activation {
+    ($act:expr, $each:ident) => {
+        match $act {
+            Activation::Identity => $each!(|v: f32| v),
+            Activation::Relu => $each!(|v: f32| v.max(0.0)),
+            Activation::Tanh => $each!(fastmath::tanh),
+            Activation::Sigmoid => $each!(fastmath::sigmoid),
+            Activation::Elu => $each!(|v: f32| if v > 0.0 { v } else { fastmath::exp_m1(v) }),
+            Activation::Silu => $each!(|v: f32| v * fastmath::sigmoid(v)),
+        }
+    };
+}
+
 multiversion! {
     /// `y[j, :] = act(y[j, :] + b[j])` over feature-major rows of `width` values (the element-wise
     /// operations of [`bias_activation`], bias per row instead of per column).
@@ -765,35 +781,13 @@ multiversion! {
                 }
             };
         }
-        match act {
-            Activation::Identity => rows!(|v: f32| v),
-            Activation::Relu => rows!(|v: f32| v.max(0.0)),
-            Activation::Tanh => rows!(fastmath::tanh),
-            Activation::Sigmoid => rows!(fastmath::sigmoid),
-            Activation::Elu => rows!(|v: f32| if v > 0.0 { v } else { fastmath::exp_m1(v) }),
-            Activation::Silu => rows!(|v: f32| v * fastmath::sigmoid(v)),
-        }
+        by_activation!(act, rows);
     }
 }
 
 multiversion! {
     /// `y[r, :] = act(y[r, :] + b)`, keeping `z = y + b` when asked (SiLU's backward needs it).
     fn bias_activation(y: &mut [f32], b: &[f32], act: Activation, z: Option<&mut [f32]>) {
-        // One loop per activation, the match outside it: a per-element match does not vectorize.
-        macro_rules! by_activation {
-            ($each:ident) => {
-                match act {
-                    Activation::Identity => $each!(|v: f32| v),
-                    Activation::Relu => $each!(|v: f32| v.max(0.0)),
-                    Activation::Tanh => $each!(fastmath::tanh),
-                    Activation::Sigmoid => $each!(fastmath::sigmoid),
-                    Activation::Elu => {
-                        $each!(|v: f32| if v > 0.0 { v } else { fastmath::exp_m1(v) })
-                    }
-                    Activation::Silu => $each!(|v: f32| v * fastmath::sigmoid(v)),
-                }
-            };
-        }
         let width = b.len();
         if let Some(z) = z {
             // Bias first (keeping z), then the activation over the whole block.
@@ -811,7 +805,7 @@ multiversion! {
                     }
                 };
             }
-            by_activation!(all);
+            by_activation!(act, all);
             return;
         }
         macro_rules! rows {
@@ -823,7 +817,7 @@ multiversion! {
                 }
             };
         }
-        by_activation!(rows);
+        by_activation!(act, rows);
     }
 }
 
@@ -1236,6 +1230,15 @@ mod tests {
     /// A large forward pass (inference or training) runs its two row halves on two threads with
     /// the bits of the whole pass on one thread, and so do the gradients after it, for each
     /// activation (an odd batch: halves of unequal size).
+    /// `f` on a rayon pool of `threads` threads.
+    fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(f)
+    }
+
     #[test]
     fn split_passes_give_the_numbers_of_one_thread() {
         let mut rng = rng_from_seed(11);
@@ -1248,11 +1251,7 @@ mod tests {
             let batch = 1001;
             let x = random_vec(batch * 23, &mut rng);
             let run = |threads: usize| {
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap();
-                pool.install(|| {
+                on_threads(threads, || {
                     assert_eq!(split_rows(batch, net.num_params()), threads > 1);
                     let mut ws = net.workspace();
                     let out = net.forward(&x, batch, &mut ws).unwrap().to_vec();
@@ -1297,11 +1296,7 @@ mod tests {
         for batch in [128, 129, 130, 200] {
             let x = random_vec(batch * 23, &mut rng);
             let run = |threads: usize| {
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap();
-                pool.install(|| {
+                on_threads(threads, || {
                     let mut ws = net.workspace();
                     (
                         net.splits_rows(batch),

@@ -11,7 +11,8 @@
 
 /// Defines `fn name(args) -> ret { body }` that runs an AVX-512-compiled copy of `body` on a CPU
 /// with AVX-512F and FMA, an AVX2-and-FMA-compiled copy on one with those (each checked once by
-/// the standard library, then a cached load), and the baseline copy otherwise. Arguments must be plain identifiers; the body is inlined into both copies.
+/// the standard library, then a cached load), and the baseline copy otherwise. Arguments must be
+/// plain identifiers; the body is inlined into all three copies.
 macro_rules! multiversion {
     (
         $(#[$meta:meta])*
