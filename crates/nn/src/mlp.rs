@@ -1227,9 +1227,6 @@ mod tests {
         (flat, dx)
     }
 
-    /// A large forward pass (inference or training) runs its two row halves on two threads with
-    /// the bits of the whole pass on one thread, and so do the gradients after it, for each
-    /// activation (an odd batch: halves of unequal size).
     /// `f` on a rayon pool of `threads` threads.
     fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
         rayon::ThreadPoolBuilder::new()
@@ -1239,6 +1236,66 @@ mod tests {
             .install(f)
     }
 
+    /// The bias-and-activation kernels (wide copies, whole-block or per-row loops) give exactly
+    /// `act(y + b)` of the scalar [`Activation::apply`], element by element, for every
+    /// activation and for widths that leave vector tails, with and without keeping `z`.
+    #[test]
+    fn bias_activation_kernels_give_the_bits_of_the_scalar_activation() {
+        let mut rng = rng_from_seed(8);
+        for act in [
+            Activation::Identity,
+            Activation::Relu,
+            Activation::Tanh,
+            Activation::Sigmoid,
+            Activation::Elu,
+            Activation::Silu,
+        ] {
+            for (rows, width) in [(1, 1), (3, 7), (100, 200), (37, 100), (5, 33)] {
+                let y0: Vec<f32> = random_vec(rows * width, &mut rng)
+                    .iter()
+                    .map(|v| 12.0 * v)
+                    .collect();
+                let b = random_vec(width, &mut rng);
+                let want: Vec<f32> = y0
+                    .iter()
+                    .enumerate()
+                    .map(|(i, v)| act.apply(std::hint::black_box(v + b[i % width])))
+                    .collect();
+                let same = |what: &str, got: &[f32]| {
+                    for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+                        assert_eq!(
+                            g.to_bits(),
+                            w.to_bits(),
+                            "{act:?} {what} {rows}x{width} [{i}]"
+                        );
+                    }
+                };
+                let mut y = y0.clone();
+                bias_activation(&mut y, &b, act, None);
+                same("row-major", &y);
+                let mut y = y0.clone();
+                let mut z = vec![0.0; y.len()];
+                bias_activation(&mut y, &b, act, Some(&mut z));
+                same("row-major keeping z", &y);
+                // Feature-major: the transpose, bias per row.
+                let mut yt = vec![0.0; y0.len()];
+                for r in 0..rows {
+                    for j in 0..width {
+                        yt[j * rows + r] = y0[r * width + j];
+                    }
+                }
+                bias_activation_by_row(&mut yt, rows, &b, act);
+                let back: Vec<f32> = (0..rows * width)
+                    .map(|i| yt[(i % width) * rows + i / width])
+                    .collect();
+                same("feature-major", &back);
+            }
+        }
+    }
+
+    /// A large forward pass (inference or training) runs its two row halves on two threads with
+    /// the bits of the whole pass on one thread, and so do the gradients after it, for each
+    /// activation (an odd batch: halves of unequal size).
     #[test]
     fn split_passes_give_the_numbers_of_one_thread() {
         let mut rng = rng_from_seed(11);
