@@ -264,69 +264,217 @@ impl ProbabilisticEnsemble {
 
     /// Runs every elite on its rows of the standardized inputs `x` (`b` rows of `din`): elite
     /// slot `i` (member `self.elites[i]`) takes the rows `assign` gives it (all rows when `assign`
-    /// is `None`), its standardized means and log-variances left in `bufs[i].g` and its row
-    /// indices in `bufs[i].rows`. The members run side by side on rayon's threads when the work
-    /// is large enough to pay for it; each has its own buffers, so the numbers do not depend on
-    /// the scheduling.
+    /// is `None`), its standardized means and log-variances left in `bufs.slots[i]` with its row
+    /// indices. When the work is large enough to pay for it, the slots' rows are dealt to rayon's
+    /// threads in blocks of equal size ([`deal_rows`]): five elites on two threads would
+    /// otherwise leave one thread idle for a third of the pass. A slot's rows are cut only where
+    /// each block gets exactly the numbers of the whole slot's pass
+    /// ([`Mlp::rows_run_apart`]), and every block has its own buffers, so the numbers do not
+    /// depend on the threads.
     fn elite_forwards(
         &self,
         x: &[f32],
         b: usize,
         assign: Option<&[usize]>,
-        bufs: &mut Vec<MemberScratch>,
+        bufs: &mut EliteScratch,
     ) -> Result<(), ModelError> {
         let din = self.state_dim + self.action_dim;
+        let dim = self.out_dim();
         let e = self.elites.len();
-        bufs.resize_with(e, MemberScratch::default);
-        let run = |(i, sc): (usize, &mut MemberScratch)| -> tandem_nn::Result<()> {
-            let m = &self.members[self.elites[i]];
-            let MemberScratch { x: xb, ws, g, rows } = sc;
-            rows.clear();
-            let input = match assign {
-                None => {
-                    rows.extend(0..b);
-                    x
-                }
+        let EliteScratch {
+            slots,
+            blocks,
+            group_lens,
+        } = bufs;
+        slots.resize_with(e, SlotScratch::default);
+        for (i, sc) in slots.iter_mut().enumerate() {
+            sc.rows.clear();
+            match assign {
+                None => sc.rows.extend(0..b),
                 Some(assign) => {
-                    rows.extend((0..b).filter(|&r| assign[r] == i));
-                    xb.clear();
-                    for &r in rows.iter() {
-                        xb.extend_from_slice(&x[r * din..(r + 1) * din]);
+                    sc.rows.extend((0..b).filter(|&r| assign[r] == i));
+                    sc.x.clear();
+                    for &r in &sc.rows {
+                        sc.x.extend_from_slice(&x[r * din..(r + 1) * din]);
                     }
-                    &xb[..]
                 }
-            };
-            if rows.is_empty() {
-                g.mean.clear();
-                g.log_var.clear();
-                return Ok(());
             }
-            let out = m.net.forward(input, rows.len(), ws)?;
-            m.head.predict(out, rows.len(), g)
-        };
-        let macs = b * self.members[0].net.num_params();
-        let bufs = &mut bufs[..e];
-        if macs >= PARALLEL_MIN_MACS && rayon::current_num_threads() > 1 {
-            bufs.par_iter_mut().enumerate().try_for_each(run)
-        } else {
-            bufs.iter_mut().enumerate().try_for_each(run)
         }
-        .map_err(nn_other)
+        let macs = b * self.members[0].net.num_params();
+        let threads = if macs >= PARALLEL_MIN_MACS {
+            rayon::current_num_threads()
+        } else {
+            1
+        };
+        let net = |i: usize| &self.members[self.elites[i]].net;
+        let dealt = deal_rows(
+            e,
+            |i| slots[i].rows.len(),
+            threads,
+            |i, whole, part| net(i).rows_run_apart(whole, part),
+            blocks,
+            group_lens,
+        );
+        let blocks = &mut blocks[..dealt];
+        let run = |bl: &mut BlockScratch| -> tandem_nn::Result<()> {
+            let m = &self.members[self.elites[bl.slot]];
+            let input = match assign {
+                None => x,
+                Some(_) => &slots[bl.slot].x[..],
+            };
+            let rows = bl.end - bl.start;
+            let out = m
+                .net
+                .forward(&input[bl.start * din..bl.end * din], rows, &mut bl.ws)?;
+            m.head.predict(out, rows, &mut bl.g)
+        };
+        run_groups(blocks, group_lens, &run).map_err(nn_other)?;
+        // Each slot's outputs in row order (the blocks are in slot and row order); a slot in one
+        // block takes that block's buffers as they are.
+        let mut k = 0;
+        for (i, sc) in slots.iter_mut().enumerate() {
+            let first = k;
+            while k < blocks.len() && blocks[k].slot == i {
+                k += 1;
+            }
+            match &mut blocks[first..k] {
+                [one] => {
+                    std::mem::swap(&mut sc.mean, &mut one.g.mean);
+                    std::mem::swap(&mut sc.log_var, &mut one.g.log_var);
+                }
+                several => {
+                    sc.mean.clear();
+                    sc.log_var.clear();
+                    for bl in several {
+                        sc.mean.extend_from_slice(&bl.g.mean);
+                        sc.log_var.extend_from_slice(&bl.g.log_var);
+                    }
+                }
+            }
+            debug_assert_eq!(sc.mean.len(), sc.rows.len() * dim);
+        }
+        Ok(())
     }
 }
 
-/// Work (multiply-adds over all elites' rows) below which the elites run one after the other:
-/// handing a member to another thread costs a few microseconds.
+/// Work (multiply-adds over all elites' rows) below which the elites run one after the other on
+/// one thread: handing rows to another thread costs a few microseconds.
 const PARALLEL_MIN_MACS: usize = 1 << 20;
 
-/// Reusable buffers of one elite's batched inference: its gathered inputs, network workspace,
-/// Gaussian outputs and row indices.
+/// Rows per vector of the widest kernels (16 `f32` lanes): a slot's rows are cut at multiples of
+/// it, so no block adds a half-empty vector.
+const ROW_ALIGN: usize = 16;
+
+/// Deals the rows of `slots` elite slots (`count(i)` rows for slot `i`) to `threads` groups of
+/// about equal rows, in slot and row order: the blocks `(slot, start, end)` go to the front of
+/// `blocks` (its storage reused; the number dealt is returned) and the number of blocks of each
+/// group to `group_lens`. A slot's rows are cut only at multiples of [`ROW_ALIGN`] and only where
+/// `apart(slot, whole, part)` holds for both resulting blocks; otherwise the group boundary moves
+/// to the nearer end of that slot. Empty slots get no block.
+fn deal_rows(
+    slots: usize,
+    count: impl Fn(usize) -> usize,
+    threads: usize,
+    apart: impl Fn(usize, usize, usize) -> bool,
+    blocks: &mut Vec<BlockScratch>,
+    group_lens: &mut Vec<usize>,
+) -> usize {
+    fn push(blocks: &mut Vec<BlockScratch>, k: usize, slot: usize, start: usize, end: usize) {
+        if blocks.len() == k {
+            blocks.push(BlockScratch::default());
+        }
+        let bl = &mut blocks[k];
+        (bl.slot, bl.start, bl.end) = (slot, start, end);
+    }
+    let total: usize = (0..slots).map(&count).sum();
+    let threads = threads.max(1);
+    group_lens.clear();
+    let (mut dealt, mut group, mut done, mut in_group) = (0, 0, 0, 0);
+    for slot in 0..slots {
+        let n = count(slot);
+        let mut start = 0;
+        while start < n {
+            let rest = n - start;
+            // Rows dealt when this group should end.
+            let boundary = total * (group + 1) / threads;
+            let last_group = group + 1 == threads;
+            let (end, close) = if last_group || done + rest <= boundary {
+                (n, !last_group && done + rest == boundary)
+            } else {
+                let room = boundary.saturating_sub(done);
+                let cut = (room + ROW_ALIGN / 2) / ROW_ALIGN * ROW_ALIGN;
+                if cut > 0 && cut < rest && apart(slot, n, cut) && apart(slot, n, rest - cut) {
+                    (start + cut, true)
+                } else if in_group == 0 || 2 * room >= rest {
+                    (n, true)
+                } else {
+                    // The whole rest goes to the next group.
+                    group_lens.push(in_group);
+                    (group, in_group) = (group + 1, 0);
+                    continue;
+                }
+            };
+            push(blocks, dealt, slot, start, end);
+            dealt += 1;
+            (done, in_group, start) = (done + end - start, in_group + 1, end);
+            if close {
+                group_lens.push(in_group);
+                (group, in_group) = (group + 1, 0);
+            }
+        }
+    }
+    if in_group > 0 {
+        group_lens.push(in_group);
+    }
+    dealt
+}
+
+/// Runs `f` on every block, the groups (`group_lens[g]` consecutive blocks each) side by side
+/// ([`tandem_nn::join`]), each group's blocks in order on one thread. The first error is returned.
+fn run_groups<E: Send>(
+    blocks: &mut [BlockScratch],
+    group_lens: &[usize],
+    f: &(impl Fn(&mut BlockScratch) -> Result<(), E> + Sync),
+) -> Result<(), E> {
+    match group_lens {
+        [] => Ok(()),
+        [_] => blocks.iter_mut().try_for_each(f),
+        _ => {
+            let (left, right) = group_lens.split_at(group_lens.len() / 2);
+            let (bl, br) = blocks.split_at_mut(left.iter().sum());
+            let (a, b) = tandem_nn::join(|| run_groups(bl, left, f), || run_groups(br, right, f));
+            a.and(b)
+        }
+    }
+}
+
+/// Reusable buffers of one elite slot's batched inference: its row indices, its gathered inputs
+/// (when the rows are assigned to elites) and its standardized means and log-variances.
 #[derive(Debug, Default)]
-struct MemberScratch {
+struct SlotScratch {
+    rows: Vec<usize>,
     x: Vec<f32>,
+    mean: Vec<f32>,
+    log_var: Vec<f32>,
+}
+
+/// Reusable buffers of one block of a slot's rows (`start..end` of the slot's rows): the
+/// network's workspace and the Gaussian outputs.
+#[derive(Debug, Default)]
+struct BlockScratch {
+    slot: usize,
+    start: usize,
+    end: usize,
     ws: MlpWorkspace,
     g: GaussianOutput,
-    rows: Vec<usize>,
+}
+
+/// All buffers of the elites' inference.
+#[derive(Debug, Default)]
+struct EliteScratch {
+    slots: Vec<SlotScratch>,
+    blocks: Vec<BlockScratch>,
+    group_lens: Vec<usize>,
 }
 
 /// The elites' inference buffers behind a mutex, so that `predict` through `&self` allocates only
@@ -334,7 +482,7 @@ struct MemberScratch {
 /// imagined rows). A contended lock falls back to fresh buffers, so concurrent callers never wait
 /// and get the same numbers. Cloning gives empty buffers.
 #[derive(Debug, Default)]
-struct Scratch(Mutex<Vec<MemberScratch>>);
+struct Scratch(Mutex<EliteScratch>);
 
 impl Clone for Scratch {
     fn clone(&self) -> Self {
@@ -508,7 +656,7 @@ impl DynamicsModel for ProbabilisticEnsemble {
         let mut rewards = self.cfg.learn_reward.then(|| Array1::zeros(b));
         let e = self.elites.len();
         let mut guard = self.scratch.0.try_lock();
-        let mut fresh = Vec::new();
+        let mut fresh = EliteScratch::default();
         let bufs = match guard.as_deref_mut() {
             Ok(bufs) => bufs,
             Err(_) => &mut fresh,
@@ -520,13 +668,12 @@ impl DynamicsModel for ProbabilisticEnsemble {
                 let mut mean_acc = Array2::<f64>::zeros((b, dim));
                 let mut sq_acc = Array2::<f64>::zeros((b, dim));
                 let mut var_acc = Array2::<f64>::zeros((b, dim));
-                for sc in &bufs[..e] {
-                    let g = &sc.g;
+                for sc in &bufs.slots[..e] {
                     for r in 0..b {
                         for j in 0..dim {
-                            let mu = self.out_norm.invert(j, g.mean[r * dim + j]);
+                            let mu = self.out_norm.invert(j, sc.mean[r * dim + j]);
                             let sd = self.out_norm.std[j];
-                            let v = f64::from(g.log_var[r * dim + j]).exp() * sd * sd;
+                            let v = f64::from(sc.log_var[r * dim + j]).exp() * sd * sd;
                             mean_acc[[r, j]] += mu;
                             sq_acc[[r, j]] += mu * mu;
                             var_acc[[r, j]] += v;
@@ -556,13 +703,12 @@ impl DynamicsModel for ProbabilisticEnsemble {
                 self.elite_forwards(&x, b, Some(&assign), bufs)?;
                 // Noise is drawn elite by elite, rows in order: the same stream whatever ran in
                 // parallel.
-                for sc in &bufs[..e] {
-                    let g = &sc.g;
+                for sc in &bufs.slots[..e] {
                     for (q, &r) in sc.rows.iter().enumerate() {
                         for j in 0..dim {
-                            let mu = self.out_norm.invert(j, g.mean[q * dim + j]);
+                            let mu = self.out_norm.invert(j, sc.mean[q * dim + j]);
                             let sd = self.out_norm.std[j];
-                            let v = f64::from(g.log_var[q * dim + j]).exp() * sd * sd;
+                            let v = f64::from(sc.log_var[q * dim + j]).exp() * sd * sd;
                             if j < s {
                                 let noise: f64 = if self.cfg.sample {
                                     StandardNormal.sample(rng)
@@ -1043,6 +1189,143 @@ mod tests {
         assert_eq!(one.1, two.1);
         assert_eq!(one.2, two.2);
         assert_eq!(one.3, two.3);
+    }
+
+    /// The blocks `deal_rows` gives, as `(slot, start, end)` per group.
+    fn dealt(
+        counts: &[usize],
+        threads: usize,
+        apart: impl Fn(usize, usize, usize) -> bool,
+    ) -> Vec<Vec<(usize, usize, usize)>> {
+        let (mut blocks, mut lens) = (Vec::new(), Vec::new());
+        let n = deal_rows(
+            counts.len(),
+            |i| counts[i],
+            threads,
+            apart,
+            &mut blocks,
+            &mut lens,
+        );
+        assert_eq!(lens.iter().sum::<usize>(), n);
+        let mut it = blocks[..n].iter().map(|b| (b.slot, b.start, b.end));
+        lens.iter()
+            .map(|&l| it.by_ref().take(l).collect())
+            .collect()
+    }
+
+    #[test]
+    fn rows_are_dealt_in_equal_aligned_blocks_where_they_may_be_cut() {
+        let yes = |_: usize, _: usize, _: usize| true;
+        // Five elites of 100 rows on two threads: the middle one is cut at 48 rows.
+        assert_eq!(
+            dealt(&[100; 5], 2, yes),
+            vec![
+                vec![(0, 0, 100), (1, 0, 100), (2, 0, 48)],
+                vec![(2, 48, 100), (3, 0, 100), (4, 0, 100)]
+            ]
+        );
+        // Where the cut would change the numbers, the nearer end of the slot is the boundary.
+        let no = |_: usize, _: usize, _: usize| false;
+        assert_eq!(
+            dealt(&[100; 5], 2, no),
+            vec![
+                vec![(0, 0, 100), (1, 0, 100), (2, 0, 100)],
+                vec![(3, 0, 100), (4, 0, 100)]
+            ]
+        );
+        let only_whole = |_: usize, whole: usize, part: usize| part * 2 >= whole;
+        assert_eq!(
+            dealt(&[100, 30, 100], 2, only_whole),
+            vec![vec![(0, 0, 100), (1, 0, 30)], vec![(2, 0, 100)]]
+        );
+        // One thread: every non-empty slot whole, in one group.
+        assert_eq!(dealt(&[7, 0, 9], 1, yes), vec![vec![(0, 0, 7), (2, 0, 9)]]);
+        // Random slot sizes, 1-4 threads: the blocks cover each slot's rows once and in order,
+        // no more groups than threads, cuts on multiples of 16, groups within a block of equal.
+        let mut rng = rng_from_seed(2);
+        for _ in 0..300 {
+            let k = rng.random_range(1..8);
+            let counts: Vec<usize> = (0..k).map(|_| rng.random_range(0..3000)).collect();
+            let threads = rng.random_range(1..5);
+            let groups = dealt(&counts, threads, yes);
+            assert!(groups.len() <= threads && groups.iter().all(|g| !g.is_empty()));
+            let flat: Vec<_> = groups.concat();
+            let mut next = vec![0; k];
+            for &(slot, start, end) in &flat {
+                assert_eq!(start, next[slot], "{counts:?}");
+                assert!(end > start && (end == counts[slot] || end % ROW_ALIGN == 0));
+                next[slot] = end;
+            }
+            assert_eq!(next, counts);
+            let total: usize = counts.iter().sum();
+            for g in &groups {
+                let rows: usize = g.iter().map(|&(_, a, b)| b - a).sum();
+                let largest = counts.iter().max().unwrap();
+                assert!(
+                    rows <= total / threads + ROW_ALIGN.max(*largest),
+                    "{counts:?}"
+                );
+            }
+        }
+    }
+
+    /// Inference large enough to deal its rows to threads (five elites of 3×200, 500 rows: one
+    /// elite's rows cut between two threads) gives the numbers of one thread, bit for bit, in
+    /// every propagation mode, on two and three threads.
+    #[test]
+    fn rows_dealt_to_threads_give_the_numbers_of_one() {
+        let cfg = EnsembleConfig {
+            members: 5,
+            elites: 5,
+            hidden: vec![200, 200, 200],
+            seed: 4,
+            ..EnsembleConfig::default()
+        };
+        let ens = ProbabilisticEnsemble::new(3, 1, cfg).unwrap();
+        let net = ens.member_network(0).unwrap();
+        assert!(500 * net.num_params() >= PARALLEL_MIN_MACS);
+        assert!(net.rows_run_apart(100, 48) && net.rows_run_apart(100, 52));
+        let mut rng = rng_from_seed(9);
+        let s = Array2::from_shape_fn((500, 3), |_| rng.random_range(-1.0..1.0));
+        let a = Array2::from_shape_fn((500, 1), |_| rng.random_range(-2.0..2.0));
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut ens = ens.clone();
+                let mut out = vec![];
+                for mode in [
+                    Propagation::FixedMember,
+                    Propagation::RandomMember,
+                    Propagation::Expectation,
+                ] {
+                    ens.set_propagation(mode);
+                    // Twice: the second call reuses the buffers the first left.
+                    for seed in [4, 5] {
+                        let p = ens
+                            .predict(
+                                &ModelInput::new(s.view(), a.view()),
+                                &mut rng_from_seed(seed),
+                            )
+                            .unwrap();
+                        out.push((p.next_states, p.variance.unwrap(), p.rewards.unwrap()));
+                    }
+                }
+                out
+            })
+        };
+        let one = run(1);
+        for threads in [2, 3] {
+            let many = run(threads);
+            for (k, (a, b)) in one.iter().zip(&many).enumerate() {
+                let bits = |m: &Array2<f64>| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a.0), bits(&b.0), "{threads} threads, call {k}");
+                assert_eq!(bits(&a.1), bits(&b.1), "{threads} threads, call {k}");
+                assert_eq!(a.2, b.2, "{threads} threads, call {k}");
+            }
+        }
     }
 
     #[test]

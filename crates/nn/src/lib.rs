@@ -22,7 +22,8 @@
 //!   pass on the CPU), and a per-channel bias add with a fast gradient.
 //! * [`SharedWorkspace`]: a network workspace behind a mutex, for inference through `&self`
 //!   (models' `predict`, agents' batched acting).
-//! * [`join`]: run two closures on two threads (rayon), e.g. SAC's twin critics.
+//! * [`join`]: run two closures on two threads, e.g. SAC's twin critics; on two-thread machines
+//!   the second runs on a helper that stays awake between calls ([`pair`]).
 //! * [`fastmath`]: vectorizable `exp`/`sigmoid`/`tanh` (≤ 5e-7 error) used by the activations.
 //! * Errors: one enum, [`NnError`]; shape mismatches and non-finite numbers are errors.
 //! * [`budget`]: memory estimates checked against a limit (default 8 GiB,
@@ -119,11 +120,11 @@ pub mod loss;
 pub mod mlp;
 pub mod normalizer;
 pub mod optim;
+pub mod pair;
 pub mod shared;
 mod simd;
 
-/// Runs two closures, potentially in parallel (rayon's `join`), returning both results.
-pub use rayon::join;
+pub use pair::join;
 
 pub use checkpoint::{write_atomic, Checkpoint, Checkpointable, CHECKSUM_KEY};
 pub use error::{check_finite, NnError, Result};

@@ -454,7 +454,7 @@ impl Mlp {
                 Some(h) => {
                     let (o1, o2) = out.split_at_mut(h * out_dim);
                     let (x1, x2) = input.split_at(h * self.input_dim());
-                    rayon::join(
+                    crate::join(
                         || self.forward_feature_major(h, x1, fm1, o1),
                         || self.forward_feature_major(batch - h, x2, fm2, o2),
                     );
@@ -485,7 +485,7 @@ impl Mlp {
             }
             let [first, second] = &mut halves;
             let (x1, x2) = input.split_at(h * self.input_dim());
-            rayon::join(
+            crate::join(
                 || self.layers_forward(h, x1, first),
                 || self.layers_forward(batch - h, x2, second),
             );
@@ -614,11 +614,27 @@ impl Mlp {
     fn splits_rows(&self, batch: usize) -> bool {
         let h = batch / 2;
         split_rows(batch, self.num_params())
-            && self.layers.iter().all(|s| {
-                let whole = nt_route(batch, s.fan_out, s.fan_in);
-                nt_route(h, s.fan_out, s.fan_in) == whole
-                    && nt_route(batch - h, s.fan_out, s.fan_in) == whole
-            })
+            && self.rows_run_apart(batch, h)
+            && self.rows_run_apart(batch, batch - h)
+    }
+
+    /// Whether an inference pass over a block of `part` rows gives each of them exactly the
+    /// numbers of a pass over all `whole` rows: every layer's product takes the same kernel route
+    /// at both sizes (see [`crate::kernels::NtRoute`]; a few hundred rows through 200-wide layers
+    /// do, while 64 rows × 4 outputs take a dot-product kernel where 128 take `gemm`'s). A caller
+    /// may then cut a batch into such blocks and run them apart, on other threads, without
+    /// changing a bit.
+    ///
+    /// ```
+    /// use tandem_nn::{Mlp, MlpConfig};
+    /// let net = Mlp::new(MlpConfig::new(&[4, 200, 200, 6]), &mut tandem_core::seeding::rng_from_seed(0))?;
+    /// assert!(net.rows_run_apart(100, 48));
+    /// # Ok::<(), tandem_nn::NnError>(())
+    /// ```
+    pub fn rows_run_apart(&self, whole: usize, part: usize) -> bool {
+        self.layers
+            .iter()
+            .all(|s| nt_route(part, s.fan_out, s.fan_in) == nt_route(whole, s.fan_out, s.fan_in))
     }
 
     /// Backward pass after [`Mlp::forward_train`] on the same `ws` (and unchanged parameters).
@@ -711,7 +727,7 @@ impl Mlp {
             let input_grad = |d: &mut [f32]| gemm_nn(batch, s.fan_in, s.fan_out, g, w, d, false);
             match (grads.as_deref_mut(), d_in) {
                 (Some(gr), Some(d)) if split_backward(batch * s.fan_in * s.fan_out) => {
-                    rayon::join(|| weight_grad(gr), || input_grad(d));
+                    crate::join(|| weight_grad(gr), || input_grad(d));
                 }
                 (gr, d) => {
                     if let Some(gr) = gr {
