@@ -25,7 +25,11 @@ pub const SPIN: Duration = Duration::from_micros(300);
 
 const IDLE: u8 = 0;
 const POSTED: u8 = 1;
-const DONE: u8 = 2;
+const RUNNING: u8 = 2;
+const DONE: u8 = 3;
+
+/// Spins of a caller waiting for the helper's result before it parks.
+const WAIT_SPINS: u32 = 1 << 12;
 
 /// A type-erased job: `run(data)` runs it and stores its result behind `data`.
 #[derive(Clone, Copy)]
@@ -34,16 +38,20 @@ struct Job {
     data: *mut (),
 }
 
-/// The helper's mailbox: one caller at a time (`claimed`) writes `job`, then `state` goes
-/// `IDLE → POSTED` (caller) `→ DONE` (helper) `→ IDLE` (caller).
+/// The helper's mailbox: one caller at a time (`claimed`) writes `job` and `waiter`, then `state`
+/// goes `IDLE → POSTED` (caller) `→ RUNNING → DONE` (helper) `→ IDLE` (caller), or back
+/// `POSTED → IDLE` when the caller takes its job back before the helper started it (a helper
+/// that the operating system has not scheduled, on a machine with more busy threads than cores).
 struct Mailbox {
     claimed: AtomicBool,
     state: AtomicU8,
     job: UnsafeCell<Job>,
+    waiter: UnsafeCell<Option<Thread>>,
 }
 
-// SAFETY: `job` is written only by the caller holding `claimed`, before it publishes the job with a
-// release store of `POSTED`, and read only by the helper after an acquire load of `POSTED`.
+// SAFETY: `job` and `waiter` are written only by the caller holding `claimed`, before it publishes
+// the job with a release store of `POSTED`, and read only by the helper after it won the
+// `POSTED → RUNNING` exchange (acquire), until its release store of `DONE`.
 unsafe impl Sync for Mailbox {}
 
 unsafe fn no_job(_: *mut ()) {}
@@ -55,6 +63,7 @@ static MAILBOX: Mailbox = Mailbox {
         run: no_job,
         data: std::ptr::null_mut(),
     }),
+    waiter: UnsafeCell::new(None),
 };
 
 thread_local! {
@@ -82,7 +91,15 @@ fn helper_loop() {
     loop {
         let idle_since = Instant::now();
         let mut spins = 0u32;
-        while MAILBOX.state.load(Ordering::Acquire) != POSTED {
+        loop {
+            if MAILBOX.state.load(Ordering::Relaxed) == POSTED
+                && MAILBOX
+                    .state
+                    .compare_exchange(POSTED, RUNNING, Ordering::Acquire, Ordering::Relaxed)
+                    .is_ok()
+            {
+                break;
+            }
             spins = spins.wrapping_add(1);
             if spins.is_multiple_of(64) {
                 if idle_since.elapsed() > SPIN {
@@ -96,11 +113,14 @@ fn helper_loop() {
                 std::hint::spin_loop();
             }
         }
-        // SAFETY: see `Mailbox`: the job was published by the acquire load above.
-        let job = unsafe { *MAILBOX.job.get() };
+        // SAFETY: see `Mailbox`: this thread won the job.
+        let (job, waiter) = unsafe { (*MAILBOX.job.get(), (*MAILBOX.waiter.get()).clone()) };
         // SAFETY: the caller keeps `job.data` alive until it sees `DONE`; `run` catches panics.
         unsafe { (job.run)(job.data) };
         MAILBOX.state.store(DONE, Ordering::Release);
+        if let Some(w) = waiter {
+            w.unpark();
+        }
     }
 }
 
@@ -125,8 +145,11 @@ unsafe fn run_slot<B: FnOnce() -> RB, RB>(data: *mut ()) {
 /// thread outside the pool runs `b` on a helper thread that keeps spinning briefly between jobs
 /// (see the module docs); a call from inside the pool, one made while the helper is taken by
 /// another thread, or one with more threads goes to `rayon::join`; a call nested in a pair
-/// (inside `a` or `b`), or with one thread, runs `a` then `b` here. A panic in either closure is
-/// raised here once both have finished.
+/// (inside `a` or `b`), or with one thread, runs `a` then `b` here. If the helper has not started
+/// `b` when `a` is done (on a machine with more busy threads than cores the operating system may
+/// not have scheduled it), `b` runs here too, and a caller waiting for a started `b` parks after a
+/// short spin: a busy machine costs no more than running the two in turn. A panic in either
+/// closure is raised here once both have finished.
 ///
 /// ```
 /// let data = vec![1.0f32; 1000];
@@ -177,22 +200,34 @@ where
             run: run_slot::<B, RB>,
             data: (&mut slot as *mut Slot<B, RB>).cast(),
         };
+        *MAILBOX.waiter.get() = Some(thread::current());
     }
     MAILBOX.state.store(POSTED, Ordering::Release);
     helper.unpark();
     IN_PAIR.with(|p| p.set(true));
     let ra = panic::catch_unwind(AssertUnwindSafe(a));
-    IN_PAIR.with(|p| p.set(false));
-    // `slot` is borrowed by the helper until `DONE`: wait for it even if `a` panicked.
-    let mut spins = 0u32;
-    while MAILBOX.state.load(Ordering::Acquire) != DONE {
-        spins = spins.wrapping_add(1);
-        if spins.is_multiple_of(64) {
-            thread::yield_now();
-        } else {
-            std::hint::spin_loop();
+    if MAILBOX
+        .state
+        .compare_exchange(POSTED, IDLE, Ordering::Acquire, Ordering::Relaxed)
+        .is_ok()
+    {
+        // The helper had not started `b`: run it here.
+        // SAFETY: the job is no longer posted, so the helper will not touch `slot`.
+        unsafe { run_slot::<B, RB>((&mut slot as *mut Slot<B, RB>).cast()) };
+    } else {
+        // `slot` is borrowed by the helper until `DONE`: wait for it even if `a` panicked.
+        let mut spins = 0u32;
+        while MAILBOX.state.load(Ordering::Acquire) != DONE {
+            spins = spins.wrapping_add(1);
+            if spins < WAIT_SPINS {
+                std::hint::spin_loop();
+            } else {
+                // The helper unparks this thread after `DONE`.
+                thread::park();
+            }
         }
     }
+    IN_PAIR.with(|p| p.set(false));
     MAILBOX.state.store(IDLE, Ordering::Relaxed);
     MAILBOX.claimed.store(false, Ordering::Release);
     let rb = slot.out.take().expect("the helper ran the posted closure");
@@ -218,25 +253,41 @@ mod tests {
     /// results come back; borrowed data is shared safely.
     #[test]
     fn second_closure_runs_on_the_helper_and_nested_joins_in_place() {
+        use std::sync::atomic::AtomicBool;
         let here = thread::current().id();
         let data: Vec<u64> = (0..10_000).collect();
-        let (ta, (tb, nested)) = join_with(
-            2,
-            || (thread::current().id(), data[..5000].iter().sum::<u64>()),
-            || {
-                let inner = join_with(2, || thread::current().id(), || thread::current().id());
-                (
-                    (thread::current().id(), data[5000..].iter().sum::<u64>()),
-                    inner,
-                )
-            },
-        );
-        assert_eq!(ta.0, here);
-        assert_ne!(tb.0, here);
-        assert_eq!(ta.1 + tb.1, data.iter().sum::<u64>());
-        // Nested in the helper: both halves there.
-        assert_eq!(nested.0, tb.0);
-        assert_eq!(nested.1, tb.0);
+        // `a` waits until `b` has started, so `b` cannot be taken back; another test may hold
+        // the helper for a moment (then rayon runs `b`): try again.
+        let on_helper = (0..200).any(|_| {
+            let started = AtomicBool::new(false);
+            let (ta, (tb, nested)) = join_with(
+                2,
+                || {
+                    let t0 = Instant::now();
+                    while !started.load(Ordering::Acquire) && t0.elapsed() < Duration::from_secs(5)
+                    {
+                        std::hint::spin_loop();
+                    }
+                    (thread::current().id(), data[..5000].iter().sum::<u64>())
+                },
+                || {
+                    started.store(true, Ordering::Release);
+                    let inner = join_with(2, || thread::current().id(), || thread::current().id());
+                    (
+                        (
+                            thread::current().id(),
+                            data[5000..].iter().sum::<u64>(),
+                            thread::current().name() == Some("tandem-join"),
+                        ),
+                        inner,
+                    )
+                },
+            );
+            assert_eq!(ta.1 + tb.1, data.iter().sum::<u64>());
+            // On the helper: `a` here, and a join nested in `b` wholly on the helper.
+            tb.2 && ta.0 == here && nested == (tb.0, tb.0)
+        });
+        assert!(on_helper);
         // Many joins from several threads at once (the helper taken: rayon), all correct.
         thread::scope(|s| {
             for t in 0..4u64 {
