@@ -265,11 +265,11 @@ impl ProbabilisticEnsemble {
     /// Runs every elite on its rows of the standardized inputs `x` (`b` rows of `din`): elite
     /// slot `i` (member `self.elites[i]`) takes the rows `assign` gives it (all rows when `assign`
     /// is `None`), its standardized means and log-variances left in `bufs.slots[i]` with its row
-    /// indices. When the work is large enough to pay for it, the slots' rows are dealt to rayon's
-    /// threads in blocks of equal size ([`deal_rows`]): five elites on two threads would
-    /// otherwise leave one thread idle for a third of the pass. A slot's rows are cut only where
-    /// each block gets exactly the numbers of the whole slot's pass
-    /// ([`Mlp::rows_run_apart`]), and every block has its own buffers, so the numbers do not
+    /// indices. When the work is large enough to pay for it, the slots' rows are dealt in equal
+    /// blocks to as many groups as rayon's pool has threads ([`deal_rows`]), run side by side
+    /// (one elite per thread left one of two threads idle a third of the pass with five elites).
+    /// A slot's rows are cut only where each block gets exactly the numbers of the whole slot's
+    /// pass ([`Mlp::rows_run_apart`]), and every block has its own buffers, so the numbers do not
     /// depend on the threads.
     fn elite_forwards(
         &self,
