@@ -924,6 +924,7 @@ impl DynamicsModel for ProbabilisticEnsemble {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testutil::on_threads;
     use crate::{MlpModel, MlpModelConfig, TransitionsBuilder};
     use tandem_core::seeding::rng_from_seed;
 
@@ -1156,11 +1157,7 @@ mod tests {
             Array2::from_shape_fn((1200, 1), |(i, _)| ((i * 7) % 13) as f64 / 6.5 - 1.0),
         );
         let run = |threads: usize| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            pool.install(|| {
+            on_threads(threads, || {
                 let mut ens = ProbabilisticEnsemble::new(1, 1, small(9)).unwrap();
                 let report = ens.fit(&data, &fit).unwrap();
                 let mut out = vec![];
@@ -1289,11 +1286,7 @@ mod tests {
         let s = Array2::from_shape_fn((500, 3), |_| rng.random_range(-1.0..1.0));
         let a = Array2::from_shape_fn((500, 1), |_| rng.random_range(-2.0..2.0));
         let run = |threads: usize| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            pool.install(|| {
+            on_threads(threads, || {
                 let mut ens = ens.clone();
                 let mut out = vec![];
                 for mode in [

@@ -70,3 +70,12 @@ pub(crate) fn zero_change_rmse(data: &Transitions) -> f64 {
     let e = &data.states - &data.next_states;
     (e.mapv(|v| v * v).sum() / e.len() as f64).sqrt()
 }
+
+/// `f` on a rayon pool of `threads` threads.
+pub(crate) fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}

@@ -124,6 +124,16 @@ pub mod pair;
 pub mod shared;
 mod simd;
 
+/// `f` on a rayon pool of `threads` threads (the crate's tests of split and paired work).
+#[cfg(test)]
+pub(crate) fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}
+
 pub use pair::join;
 
 pub use checkpoint::{write_atomic, Checkpoint, Checkpointable, CHECKSUM_KEY};

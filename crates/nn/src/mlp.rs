@@ -1155,6 +1155,7 @@ impl Checkpointable for Mlp {
 #[allow(clippy::needless_range_loop)]
 mod tests {
     use super::*;
+    use crate::on_threads;
     use candle_core::{Device, Tensor, Var};
     use tandem_core::seeding::rng_from_seed;
 
@@ -1241,15 +1242,6 @@ mod tests {
             .to_vec1::<f64>()
             .unwrap();
         (flat, dx)
-    }
-
-    /// `f` on a rayon pool of `threads` threads.
-    fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(f)
     }
 
     /// The bias-and-activation kernels (wide copies, whole-block or per-row loops) give exactly

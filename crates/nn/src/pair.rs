@@ -6,8 +6,8 @@
 //! rayon's workers sleep after a few microseconds without work. A planner joins once per
 //! prediction, 150 times a plan, with tens of microseconds of serial work between; SAC joins its
 //! twin critics a few times per update. The helper here spins for [`SPIN`] after each job before
-//! it parks, so a join that follows within that time starts its second half in about a
-//! microsecond (measured: 2–34 µs of overhead per join against rayon's 48–100 µs, for halves of
+//! it parks, so a join that follows within that time hands its second half over at once
+//! (measured: 2–34 µs of overhead per join against rayon's 48–100 µs, for halves of
 //! 100–2000 µs). OpenMP runtimes (PyTorch's threads) spin the same way.
 //!
 //! Which threads run what never changes a result: callers split work into parts whose numbers do
@@ -67,8 +67,8 @@ static MAILBOX: Mailbox = Mailbox {
 };
 
 thread_local! {
-    /// Set on the helper, and on a caller while its first closure runs: a join nested in either
-    /// runs its closures one after the other (both cores are busy already).
+    /// Set on the helper, and on a caller from posting its second closure until that is done: a
+    /// join nested in either runs its closures one after the other (both cores are busy already).
     static IN_PAIR: Cell<bool> = const { Cell::new(false) };
 }
 
@@ -240,14 +240,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(f)
-    }
+    use crate::on_threads;
 
     /// From outside a two-thread pool, `b` runs on the helper; nested joins run in place; both
     /// results come back; borrowed data is shared safely.
