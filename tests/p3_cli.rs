@@ -243,17 +243,21 @@ fn the_committed_leg_results_render_again_from_their_records() {
     }
 }
 
-/// p1 runs on p3-mujoco's loop and harness: its committed HalfCheetah table
-/// (`results/p1/halfcheetah/`) is the merge of the three one-seed studies committed beside it,
-/// each run as its own process (two of them resumed in later sessions).
+/// p1 runs on p3-mujoco's loop and harness: its committed tables (`results/p1/halfcheetah/`,
+/// `results/p1/hopper/`) are the merges of the three one-seed studies committed beside each, each
+/// run as its own process (several resumed in later sessions).
 #[test]
-fn the_committed_p1_table_is_the_merge_of_its_one_seed_studies() {
+fn the_committed_p1_tables_are_the_merges_of_their_one_seed_studies() {
     let p1 = Path::new(env!("CARGO_MANIFEST_DIR")).join("results/p1");
-    let seeds: Vec<PathBuf> = (0..3)
-        .map(|k| p1.join(format!("halfcheetah-seed{k}")))
-        .collect();
-    let table = merges_again_to("p1-committed", &seeds, &p1.join("halfcheetah"));
-    for m in ["sac", "mbpo", "incremental_dyna"] {
-        assert_eq!(table[m]["seeds"], serde_json::json!([0, 1, 2]), "{m}");
+    for task in ["halfcheetah", "hopper"] {
+        let seeds: Vec<PathBuf> = (0..3).map(|k| p1.join(format!("{task}-seed{k}"))).collect();
+        let table = merges_again_to(&format!("p1-committed-{task}"), &seeds, &p1.join(task));
+        for m in ["sac", "mbpo", "incremental_dyna"] {
+            assert_eq!(
+                table[m]["seeds"],
+                serde_json::json!([0, 1, 2]),
+                "{task} {m}"
+            );
+        }
     }
 }
