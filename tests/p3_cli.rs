@@ -245,7 +245,8 @@ fn the_committed_leg_results_render_again_from_their_records() {
 
 /// p1 runs on p3-mujoco's loop and harness: its committed tables (`results/p1/halfcheetah/`,
 /// `results/p1/hopper/`) are the merges of the three one-seed studies committed beside each, each
-/// run as its own process (several resumed in later sessions).
+/// run as its own process (several resumed in later sessions); the one Walker2d-v5 study
+/// (`results/p1/walker2d-seed0/`) merges alone to its own table.
 #[test]
 fn the_committed_p1_tables_are_the_merges_of_their_one_seed_studies() {
     let p1 = Path::new(env!("CARGO_MANIFEST_DIR")).join("results/p1");
@@ -259,5 +260,11 @@ fn the_committed_p1_tables_are_the_merges_of_their_one_seed_studies() {
                 "{task} {m}"
             );
         }
+    }
+    // Walker2d-v5 has one seed: merging its study alone gives its own table again.
+    let walker = p1.join("walker2d-seed0");
+    let table = merges_again_to("p1-committed-walker2d", &[walker.clone()], &walker);
+    for m in ["sac", "mbpo", "incremental_dyna"] {
+        assert_eq!(table[m]["seeds"], serde_json::json!([0]), "walker2d {m}");
     }
 }
