@@ -263,7 +263,11 @@ fn the_committed_p1_tables_are_the_merges_of_their_one_seed_studies() {
     }
     // Walker2d-v5 has one seed: merging its study alone gives its own table again.
     let walker = p1.join("walker2d-seed0");
-    let table = merges_again_to("p1-committed-walker2d", &[walker.clone()], &walker);
+    let table = merges_again_to(
+        "p1-committed-walker2d",
+        std::slice::from_ref(&walker),
+        &walker,
+    );
     for m in ["sac", "mbpo", "incremental_dyna"] {
         assert_eq!(table[m]["seeds"], serde_json::json!([0]), "walker2d {m}");
     }
