@@ -5,12 +5,12 @@
 //!
 //! `cargo run --release --example dyna_sac [seed] [real_steps] [G]` (defaults 0, 5000, 10).
 use tandem::agents::{evaluate, EpisodeRunner, OffPolicyLoop, Sac, SacConfig, StepOptions};
+use tandem::algos::dyna::{imagine, sample_starts};
 use tandem::core::SeedStream;
 use tandem::dynamics::classic::GymPendulumParams;
 use tandem::envs::{make, PendulumTask, Task};
 use tandem::models::{DynamicsModel, FitConfig, Judges, MlpModel, MlpModelConfig};
 use tandem::models::{OptimizerConfig, TransitionsBuilder};
-use tandem::pipelines::dyna::{imagine, sample_starts};
 
 const FIT_EVERY: u64 = 250; // real steps between model fits and rollout batches
 const ROLLOUTS: usize = 2000; // branched rollouts per batch, from random real states

@@ -3,16 +3,16 @@
 //! `ŝ' = s + L_θ(s, a_prev) (a − a_prev)` is trained on `D_env`; after every real step `M`
 //! one-step model rollouts from real states (each with the real control before it) fill
 //! `D_model`, scored with the task's reward; SAC takes `G` updates on minibatches of 5% `D_env`,
-//! 95% `D_model`. `tandem::pipelines::p1` is the same loop with checkpoints, exact sample counts
+//! 95% `D_model`. `tandem::algos::incremental_dyna` is the same loop with checkpoints, exact sample counts
 //! and the rollouts batched after each refit (`tandem reproduce p1` runs it on MuJoCo).
 //!
 //! `cargo run --release --example incremental_dyna [seed] [real_steps]` (defaults 0, 5000).
 use tandem::agents::{evaluate, EpisodeRunner, OffPolicyLoop, Sac, StepOptions};
+use tandem::algos::incremental_dyna::{IncrementalRollouts, P1Config};
+use tandem::algos::mbpo::{pendulum_problem, Imagination, Imagine, MbpoConfig};
 use tandem::core::SeedStream;
 use tandem::envs::{control_dim, Task};
 use tandem::models::{DynamicsModel, TransitionsBuilder};
-use tandem::pipelines::mbpo::{pendulum_problem, Imagination, Imagine, MbpoConfig};
-use tandem::pipelines::p1::{IncrementalRollouts, P1Config};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let arg = |i: usize| std::env::args().nth(i).and_then(|s| s.parse::<u64>().ok());

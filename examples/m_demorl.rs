@@ -4,15 +4,15 @@
 //! sequences sampled around SAC's own actions through the elites, the best 10% averaged into a
 //! mirror-descent step, cost −r̂ with SAC's −V at the horizon — put their model rollouts in D_MPC
 //! (lines 9–15); SAC then takes G updates on D_ENV ∪ D_MPC (lines 16–18).
-//! `tandem::pipelines::p3` is the same loop with checkpoints and exact sample counts.
+//! `tandem::algos::m_demorl` is the same loop with checkpoints and exact sample counts.
 //!
 //! `cargo run --release --example m_demorl [seed] [real_steps]` (defaults 0, 5000).
 use tandem::agents::{evaluate, EpisodeRunner, OffPolicyLoop, Sac, StepOptions};
+use tandem::algos::m_demorl::{MpcPlans, P3Config};
+use tandem::algos::mbpo::{pendulum_problem, Imagination, Imagine};
 use tandem::core::SeedStream;
 use tandem::envs::{control_dim, Task};
 use tandem::models::{DynamicsModel, EnsembleConfig, ProbabilisticEnsemble, TransitionsBuilder};
-use tandem::pipelines::mbpo::{pendulum_problem, Imagination, Imagine};
-use tandem::pipelines::p3::{MpcPlans, P3Config};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let arg = |i: usize| std::env::args().nth(i).and_then(|s| s.parse::<u64>().ok());

@@ -1,15 +1,15 @@
 //! MBPO (Janner et al. 2019, Algorithm 2) on Pendulum-v1 with the `MbpoConfig::pendulum` preset:
 //! SAC acts in the real system; every 250 real steps the probabilistic ensemble is refitted on
 //! `D_env` and branched rollouts of length `k` from real states fill `D_model`; SAC takes `G`
-//! updates per real step on minibatches of 5% `D_env`, 95% `D_model`. `tandem::pipelines::mbpo`
+//! updates per real step on minibatches of 5% `D_env`, 95% `D_model`. `tandem::algos::mbpo`
 //! is the same loop with checkpoints and exact sample counts.
 //!
 //! `cargo run --release --example mbpo [seed] [real_steps]` (defaults 0, 5000).
 use tandem::agents::{evaluate, EpisodeRunner, OffPolicyLoop, Sac, StepOptions};
+use tandem::algos::mbpo::{pendulum_problem, Imagination, Imagine, MbpoConfig, Rollouts};
 use tandem::core::SeedStream;
 use tandem::envs::{control_dim, Task};
 use tandem::models::{DynamicsModel, EnsembleConfig, ProbabilisticEnsemble, TransitionsBuilder};
-use tandem::pipelines::mbpo::{pendulum_problem, Imagination, Imagine, MbpoConfig, Rollouts};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let arg = |i: usize| std::env::args().nth(i).and_then(|s| s.parse::<u64>().ok());

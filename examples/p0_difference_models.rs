@@ -8,12 +8,12 @@
 //! The comparison with cold and warm start over seeds is `tandem reproduce p0-pendulum`.
 
 use tandem::agents::{EpisodeRunner, StepOptions};
-use tandem::envs::{make, SampleCounter};
-use tandem::models::{DynamicsModel, FitConfig, ModelEnv, ResidualModel, Transitions};
-use tandem::pipelines::p0::{
+use tandem::algos::difference_models::{
     agent_spaces, collect, ddpg_agent, mean_return, p0_loop, pendulum_problem, pretrain, Method,
     P0Config,
 };
+use tandem::envs::{make, SampleCounter};
+use tandem::models::{DynamicsModel, FitConfig, ModelEnv, ResidualModel, Transitions};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let arg = |i: usize, d: u64| {

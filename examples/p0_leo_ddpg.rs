@@ -13,14 +13,14 @@
 //! motors' full voltage, signed work, no critic penalty, updates after 100 transitions; starting
 //! mid-step or standing. About 30 minutes on one core.
 
+use tandem::agents::adapter::Feature;
 use tandem::agents::{EpisodeRunner, StepOptions};
+use tandem::algos::difference_models::{
+    agent_spaces, ddpg_agent, leo_measures, leo_task, measured_episode, p0_loop, Method, P0Config,
+};
 use tandem::core::SeedStream;
 use tandem::envs::{leo_parts, LeoModel, LeoStart};
 use tandem::models::{ModelEnv, PlantModel};
-use tandem::pipelines::adapter::Feature;
-use tandem::pipelines::p0::{
-    agent_spaces, ddpg_agent, leo_measures, leo_task, measured_episode, p0_loop, Method, P0Config,
-};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

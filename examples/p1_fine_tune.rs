@@ -9,7 +9,7 @@
 //! 3. the environment changes: the motors apply `k a + bias` for the command `a` (a torque
 //!    offset, a miscalibration; and half-strength motors with an offset);
 //! 4. the pre-trained policy runs on the changed leg alone, and with the residual incremental
-//!    policy from the error-evolution model (9) (`tandem::pipelines::p1::fine_tune`: LQR on
+//!    policy from the error-evolution model (9) (`tandem::algos::incremental_dyna::fine_tune`: LQR on
 //!    `e_{k+1} = e_k + L_k Δa_e` with `e = s − s_d`, `s_d` the joint state on the foot's
 //!    trajectory at the current phase), 10 episodes each, with `L0` held, `L0` refit online
 //!    after every episode, and the offline `L_θ` refit online.
@@ -17,6 +17,10 @@
 //! `cargo run --release --example p1_fine_tune [seed] [epochs]` (defaults 0, 60).
 use nalgebra::DVector;
 use tandem::agents::{Agent, Mode, Sac};
+use tandem::algos::incremental_dyna::{fine_tune, FineTuneConfig, FineTuneEpisode, P1Config};
+use tandem::algos::m_demorl::P3Config;
+use tandem::algos::mbpo::{leg2r_problem_with, run_sac};
+use tandem::algos::{Checkpoints, InMemory};
 use tandem::core::{Action, SeedStream};
 use tandem::dynamics::rigid_plant::RigidBodyPlant;
 use tandem::dynamics::Clocked;
@@ -25,10 +29,6 @@ use tandem::envs::{Env, Leg2RConfig, Leg2REnv, Leg2RModel, Task, TimeLimit};
 use tandem::models::{
     DynamicsModel, FitConfig, IncrementalModel, IncrementalModelConfig, TransitionsBuilder,
 };
-use tandem::pipelines::mbpo::{leg2r_problem_with, run_sac};
-use tandem::pipelines::p1::{fine_tune, FineTuneConfig, FineTuneEpisode, P1Config};
-use tandem::pipelines::p3::P3Config;
-use tandem::pipelines::{Checkpoints, InMemory};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let arg = |i: usize| std::env::args().nth(i).and_then(|s| s.parse::<u64>().ok());

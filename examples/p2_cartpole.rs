@@ -5,14 +5,14 @@
 //! start state of a real episode.
 //!
 //! `cargo run --release --example p2_cartpole [seed] [real_episodes]` (defaults 0, 600).
-//! `tandem reproduce p2-cartpole` runs the same loop (`tandem::pipelines::p2`) over seeds.
+//! `tandem reproduce p2-cartpole` runs the same loop (`tandem::algos::imagined_episodes`) over seeds.
 use rand::Rng as _;
 use tandem::agents::{EpisodicAgent, Reinforce, ReinforceConfig};
+use tandem::algos::imagined_episodes::play;
 use tandem::core::SeedStream;
 use tandem::envs::{make, CartPoleTask, Env, Task};
 use tandem::models::{DynamicsModel, FitConfig, Judges, MlpModel, MlpModelConfig, ModelEnv};
 use tandem::models::{Transitions, TransitionsBuilder};
-use tandem::pipelines::p2::play;
 
 const N: u64 = 100; // real episodes before the first imagined one
 const FIT_ROWS: usize = 2048; // each refit: 5 passes over this many real transitions drawn from all

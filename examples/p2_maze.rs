@@ -6,12 +6,12 @@
 //! they were real (same replay buffer, same update schedule).
 //!
 //! `cargo run --release --example p2_maze [seed] [real_episodes]` (defaults 0, 300).
-//! `tandem reproduce p2-maze` runs the same loop (`tandem::pipelines::p2_maze`) over seeds.
+//! `tandem reproduce p2-maze` runs the same loop (`tandem::algos::imagined_pixels`) over seeds.
 use tandem::agents::{Dqn, EpisodeRunner, OffPolicyLoop, StepOptions};
+use tandem::algos::imagined_pixels::maze_dqn;
 use tandem::core::SeedStream;
 use tandem::envs::{make, Env};
 use tandem::models::{PixelEpisodes, PixelFit, PixelModel, PixelModelConfig, PixelModelEnv};
-use tandem::pipelines::p2_maze::maze_dqn;
 
 const N: u64 = 100; // real episodes before the first imagined one
 

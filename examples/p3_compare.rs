@@ -1,12 +1,12 @@
 //! SAC, MBPO and M-DeMoRL on Pendulum-v1 (`P3Config::pendulum`) for a few seeds at one budget of
-//! real steps, through `tandem::pipelines::p3::run`: the return of each evaluation, the wall time
+//! real steps, through `tandem::algos::m_demorl::run`: the return of each evaluation, the wall time
 //! and SAC's update rate per run.
 //!
 //! `cargo run --release --example p3_compare [seeds] [real_steps] [first_seed]` (defaults 2,
 //! 5000, 0).
-use tandem::pipelines::mbpo::pendulum_problem;
-use tandem::pipelines::p3::{run, Method, P3Config};
-use tandem::pipelines::Ephemeral;
+use tandem::algos::m_demorl::{run, Method, P3Config};
+use tandem::algos::mbpo::pendulum_problem;
+use tandem::algos::Ephemeral;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let arg = |i: usize| std::env::args().nth(i).and_then(|s| s.parse::<u64>().ok());

@@ -9,21 +9,21 @@
 //! defaults in that form. The method `ddpg` trains p4's model-free baseline on the same task
 //! (`P4_DDPG=FILE` for its settings, `ReacherDdpg`), measured on the same test targets.
 //!
-//! One MDGPS iteration ([`tandem::pipelines::mdgps::train_mdgps`]):
+//! One MDGPS iteration ([`tandem::algos::mdgps::train_mdgps`]):
 //!
 //! 1. sample every condition's local controller on the system;
 //! 2. fit TVLG dynamics per condition and linearize the global policy around the samples;
 //! 3. update each local controller, its step bounded by KL against the linearized policy;
 //! 4. regress the global policy onto the local controllers' actions at the sampled states.
 
-use tandem::mujoco::p4::ReacherCost;
-use tandem::pipelines::gps::LocalMethod;
-use tandem::pipelines::mdgps::{train_mdgps, MdgpsConfig};
-use tandem::pipelines::p4::{
+use tandem::algos::gps::LocalMethod;
+use tandem::algos::manipulation::{
     reacher_config, reacher_problem, reacher_test_set, train_ddpg_reacher, ReacherDdpg,
     REACHER_TEST_CONDITIONS, REACHER_TEST_SEED,
 };
-use tandem::pipelines::Ephemeral;
+use tandem::algos::mdgps::{train_mdgps, MdgpsConfig};
+use tandem::algos::Ephemeral;
+use tandem::mujoco::p4::ReacherCost;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

@@ -8,14 +8,14 @@
 //! the loop's settings (`LocalConfig`, every field) from a TOML file; `--print-config` prints the
 //! defaults in that form.
 //!
-//! The loop ([`tandem::pipelines::gps::train_local`]) is GPS's: per iteration, sample the
+//! The loop ([`tandem::algos::gps::train_local`]) is GPS's: per iteration, sample the
 //! controller, fit TVLG dynamics to the samples, and update the controller (PILQR: LQR-FLM under
 //! per-step KL bounds, then PI² on the residual costs-to-go the fitted model does not explain).
 
+use tandem::algos::gps::{train_local, LocalConfig, LocalMethod, LocalProblem};
+use tandem::algos::manipulation::{door_problem, pusher_problem};
+use tandem::algos::Ephemeral;
 use tandem::mujoco::p4::{DoorCost, PusherCost};
-use tandem::pipelines::gps::{train_local, LocalConfig, LocalMethod, LocalProblem};
-use tandem::pipelines::p4::{door_problem, pusher_problem};
-use tandem::pipelines::Ephemeral;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

@@ -1,8 +1,9 @@
 //! # tandem
 //!
 //! Sample-efficient robot learning, with model-based and model-free methods run in tandem.
-//! This facade re-exports the workspace crates and holds the [`pipelines`]: the papers' loops,
-//! written generically over the traits.
+//! This facade re-exports the workspace crates, among them [`algos`], the model-based algorithms
+//! composed from the others, and holds what the `tandem` program adds: run directories, reports
+//! and the environment registry.
 //!
 //! | module | crate | owns |
 //! |---|---|---|
@@ -12,7 +13,8 @@
 //! | [`nn`] | `tandem-nn` | MLPs, optimizers, heads, normalizers, checkpoints |
 //! | [`models`] | `tandem-models` | `DynamicsModel` and the learned models |
 //! | [`planners`] | `tandem-planners` | MPC planners and TVLG trajectory optimizers |
-//! | [`agents`] | `tandem-agents` | DDPG, SAC, REINFORCE, DQN, replay |
+//! | [`agents`] | `tandem-agents` | DDPG, SAC, REINFORCE, DQN, replay, agent adapters |
+//! | [`algos`] | `tandem-algos` | MBPO, Dyna, M-DeMoRL, difference models, imagined episodes, GPS, MDGPS |
 //! | [`mujoco`] | `tandem-mujoco` | gymnasium's MuJoCo v5 tasks and MJCF scenes (real MuJoCo with the feature `mujoco`) |
 //!
 //! [`run`] writes run directories; [`report`] renders reproduction tables and figures;
@@ -21,6 +23,7 @@
 //! with the feature `mujoco`, gymnasium's MuJoCo tasks.
 
 pub use tandem_agents as agents;
+pub use tandem_algos as algos;
 pub use tandem_core as core;
 pub use tandem_dynamics as dynamics;
 pub use tandem_envs as envs;
@@ -30,7 +33,6 @@ pub use tandem_nn as nn;
 pub use tandem_planners as planners;
 
 pub mod interrupt;
-pub mod pipelines;
 pub mod report;
 pub mod run;
 

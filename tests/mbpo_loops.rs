@@ -8,16 +8,15 @@ use std::collections::BTreeMap;
 use std::rc::Rc;
 
 use ndarray::array;
+use tandem::algos::incremental_dyna::{self, P1Config};
+use tandem::algos::m_demorl::{self, Method, P3Config};
+use tandem::algos::mbpo::{leg2r_problem, pendulum_problem, run_sac, Event, MbpoConfig, RunRecord};
+use tandem::algos::{AlgoError, Checkpoints, Ephemeral};
 use tandem::core::seeding::rng_from_seed;
+use tandem::core::LinearSchedule;
 use tandem::dynamics::classic::GymPendulum;
 use tandem::models::IncrementalModelConfig;
-use tandem::models::{DynamicsModel, ModelInput, PlantModel};
-use tandem::pipelines::mbpo::{
-    leg2r_problem, pendulum_problem, run_sac, Event, LinearSchedule, MbpoConfig, RunRecord,
-};
-use tandem::pipelines::p1::{self, P1Config};
-use tandem::pipelines::p3::{self, InActions, Method, P3Config};
-use tandem::pipelines::{Checkpoints, Ephemeral, PipelineError};
+use tandem::models::{DynamicsModel, InActions, ModelInput, PlantModel};
 use tandem_nn::Checkpoint;
 
 /// 600 real steps in epochs of 200, a refit every 100 from step 100 (after 100 random steps),
@@ -62,7 +61,7 @@ fn small() -> P3Config {
 
 fn run(method: Method, cfg: &P3Config, seed: u64, events: &mut Vec<Event>) -> RunRecord {
     let problem = pendulum_problem();
-    p3::run(method, &problem, cfg, seed, &mut Ephemeral, &mut |e| {
+    m_demorl::run(method, &problem, cfg, seed, &mut Ephemeral, &mut |e| {
         events.push(e)
     })
     .unwrap()
@@ -198,7 +197,7 @@ fn m_demorl_with_all_real_minibatches_learns_exactly_as_sac() {
     // Out of range is a settings error.
     cfg.mpc_real_ratio = Some(1.5);
     let problem = pendulum_problem();
-    let e = p3::run(
+    let e = m_demorl::run(
         Method::MDemorl,
         &problem,
         &cfg,
@@ -206,7 +205,7 @@ fn m_demorl_with_all_real_minibatches_learns_exactly_as_sac() {
         &mut Ephemeral,
         &mut |_| {},
     );
-    assert!(matches!(e, Err(PipelineError::Config(m)) if m.contains("mpc_real_ratio")));
+    assert!(matches!(e, Err(AlgoError::Config(m)) if m.contains("mpc_real_ratio")));
 }
 
 #[test]
@@ -230,10 +229,10 @@ struct Memory {
 }
 
 impl Checkpoints for Memory {
-    fn load(&mut self, key: &str) -> tandem::pipelines::Result<Option<Checkpoint>> {
+    fn load(&mut self, key: &str) -> tandem::algos::Result<Option<Checkpoint>> {
         Ok(self.saved.get(key).cloned())
     }
-    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> tandem::pipelines::Result<()> {
+    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> tandem::algos::Result<()> {
         // Through bytes, as the program's files are.
         let bytes = ckpt.to_bytes().unwrap();
         self.saved
@@ -248,11 +247,7 @@ impl Checkpoints for Memory {
 /// `go` for seed 5 run whole, then stopped after 400 real steps and resumed from its last
 /// checkpoint: both records without timings, and the checkpoints.
 fn whole_and_resumed(
-    go: impl Fn(
-        u64,
-        &mut dyn Checkpoints,
-        &mut dyn FnMut(Event),
-    ) -> tandem::pipelines::Result<RunRecord>,
+    go: impl Fn(u64, &mut dyn Checkpoints, &mut dyn FnMut(Event)) -> tandem::algos::Result<RunRecord>,
 ) -> (RunRecord, RunRecord, Memory) {
     let whole = strip(go(5, &mut Ephemeral, &mut |_| {}).unwrap());
     let done = Rc::new(Cell::new(0));
@@ -267,7 +262,7 @@ fn whole_and_resumed(
         }
     };
     let e = go(5, &mut store, &mut count).unwrap_err();
-    assert!(matches!(e, PipelineError::Stopped), "{e}");
+    assert!(matches!(e, AlgoError::Stopped), "{e}");
     store.stop_after = None;
     let resumed = strip(go(5, &mut store, &mut |_| {}).unwrap());
     (whole, resumed, store)
@@ -282,18 +277,20 @@ fn a_stopped_run_resumes_to_the_same_numbers() {
     cfg.base.checkpoint_every = 150;
     let problem = pendulum_problem();
     for method in Method::ALL {
-        let (whole, resumed, mut store) =
-            whole_and_resumed(|seed, store, ev| p3::run(method, &problem, &cfg, seed, store, ev));
+        let (whole, resumed, mut store) = whole_and_resumed(|seed, store, ev| {
+            m_demorl::run(method, &problem, &cfg, seed, store, ev)
+        });
         assert_eq!(resumed, whole, "{method:?}");
         // Another seed's checkpoint is refused.
-        let e = p3::run(method, &problem, &cfg, 6, &mut store, &mut |_| {}).unwrap_err();
+        let e = m_demorl::run(method, &problem, &cfg, 6, &mut store, &mut |_| {}).unwrap_err();
         assert!(e.to_string().contains("seed 5"), "{e}");
     }
     // p1's Dyna-SAC: the incremental model, its standardizations and optimizer come back too.
     let p1_cfg = p1_small(&cfg);
-    let dyna = p1::Method::IncrementalDyna;
-    let (whole, resumed, _) =
-        whole_and_resumed(|seed, store, ev| p1::run(dyna, &problem, &p1_cfg, seed, store, ev));
+    let dyna = incremental_dyna::Method::IncrementalDyna;
+    let (whole, resumed, _) = whole_and_resumed(|seed, store, ev| {
+        incremental_dyna::run(dyna, &problem, &p1_cfg, seed, store, ev)
+    });
     assert_eq!(resumed, whole);
 }
 
@@ -331,8 +328,8 @@ fn incremental_dyna_makes_one_step_rollouts_and_shares_sac_and_mbpo_with_p3() {
     let p1_cfg = p1_small(&cfg);
     let problem = pendulum_problem();
     let mut ev = Vec::new();
-    let d = p1::run(
-        p1::Method::IncrementalDyna,
+    let d = incremental_dyna::run(
+        incremental_dyna::Method::IncrementalDyna,
         &problem,
         &p1_cfg,
         0,
@@ -352,10 +349,11 @@ fn incremental_dyna_makes_one_step_rollouts_and_shares_sac_and_mbpo_with_p3() {
         .all(|l| l.is_finite() && *l >= 0.0));
     // SAC and MBPO are the shared loop's: p1's runs are p3's, number for number.
     for (a, b) in [
-        (p1::Method::Sac, Method::Sac),
-        (p1::Method::Mbpo, Method::Mbpo),
+        (incremental_dyna::Method::Sac, Method::Sac),
+        (incremental_dyna::Method::Mbpo, Method::Mbpo),
     ] {
-        let x = p1::run(a, &problem, &p1_cfg, 2, &mut Ephemeral, &mut |_| {}).unwrap();
+        let x =
+            incremental_dyna::run(a, &problem, &p1_cfg, 2, &mut Ephemeral, &mut |_| {}).unwrap();
         let y = run(b, &cfg, 2, &mut Vec::new());
         assert_eq!(strip(x), strip(y), "{a:?}");
     }
@@ -369,9 +367,9 @@ fn incremental_dyna_makes_one_step_rollouts_and_shares_sac_and_mbpo_with_p3() {
 /// state and the real control applied before it (not zero), with the task's reward.
 #[test]
 fn incremental_rollouts_predict_from_the_real_previous_control() {
+    use tandem::algos::mbpo::{Imagination, Imagine};
     use tandem::envs::{Action, Task};
     use tandem::models::{FitConfig, TransitionsBuilder};
-    use tandem::pipelines::mbpo::{Imagination, Imagine};
 
     let problem = pendulum_problem();
     let task = &problem.task;
@@ -391,7 +389,7 @@ fn incremental_rollouts_predict_from_the_real_previous_control() {
     let mut p1_cfg = p1_small(&small());
     p1_cfg.base.rollouts_per_step = 1;
     p1_cfg.base.model_train_freq = 40;
-    let mut im = p1::IncrementalRollouts::of(&p1_cfg);
+    let mut im = incremental_dyna::IncrementalRollouts::of(&p1_cfg);
     let mut model = im.new_model(&p1_cfg.base, 2, 1, 7).unwrap().unwrap();
     let fit = FitConfig {
         epochs: 5,
@@ -490,7 +488,7 @@ fn out_of_range_settings_are_errors_naming_them() {
         (with(&|c| c.mpc.samples = 0), "samples"),
     ];
     for (c, word) in cases {
-        let e = p3::run(
+        let e = m_demorl::run(
             Method::MDemorl,
             &problem,
             &c,
@@ -577,7 +575,7 @@ fn every_method_runs_on_the_2r_leg() {
     cfg.base.checkpoint_every = 300;
     let problem = leg2r_problem();
     for method in Method::ALL {
-        let r = p3::run(method, &problem, &cfg, 1, &mut Ephemeral, &mut |_| {}).unwrap();
+        let r = m_demorl::run(method, &problem, &cfg, 1, &mut Ephemeral, &mut |_| {}).unwrap();
         assert_eq!(r.real_steps, 300, "{method:?}");
         assert_eq!(r.curve.len(), 2);
         assert!(r.curve.iter().all(|p| p.eval_return.is_finite()));
@@ -605,11 +603,11 @@ fn settings_read_from_toml_with_defaults_for_what_is_left_out() {
 /// the loop fits no model, so such a run's gap to SAC cannot come from model error.
 #[test]
 fn oracle_rollouts_on_the_leg_are_the_real_legs_own_steps() {
+    use tandem::algos::mbpo::{leg2r_problem_with, Imagination, Imagine, OracleRollouts};
     use tandem::dynamics::leg2r::leg2r_plant;
     use tandem::dynamics::Clocked;
     use tandem::envs::{Action, Leg2RConfig, Leg2RModel, Task};
     use tandem::models::TransitionsBuilder;
-    use tandem::pipelines::mbpo::{leg2r_problem_with, Imagination, Imagine, OracleRollouts};
 
     let leg = Leg2RConfig {
         position_scale: 0.02,
@@ -674,7 +672,7 @@ fn oracle_rollouts_on_the_leg_are_the_real_legs_own_steps() {
 /// The oracle run goes through the whole loop: MBPO's counts, no fit, no fit loss.
 #[test]
 fn mbpo_with_the_true_pendulum_counts_as_mbpo_and_fits_nothing() {
-    use tandem::pipelines::mbpo::run_oracle;
+    use tandem::algos::mbpo::run_oracle;
     let cfg = small();
     let problem = pendulum_problem();
     let model = PlantModel::new(GymPendulum::default());

@@ -8,12 +8,12 @@ use tandem::core::{Action, Space};
 use tandem::dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 use tandem::envs::{make, SampleCounter, Task};
 
-use tandem::nn::Checkpoint;
-use tandem::pipelines::p0::{
+use tandem::algos::difference_models::{
     agent_spaces, collect, ddpg_agent, leo_problem, p0_loop, pendulum_problem, run_seed, Method,
     P0Config, RunRecord, LEO_VOLTAGE_LIMIT,
 };
-use tandem::pipelines::{Checkpoints, Ephemeral, PipelineError, Result};
+use tandem::algos::{AlgoError, Checkpoints, Ephemeral, Result};
+use tandem::nn::Checkpoint;
 
 /// `c` with one hidden layer of 16 in every network and a small replay buffer.
 fn tiny_networks(mut c: P0Config) -> P0Config {
@@ -102,7 +102,7 @@ fn a_seed_stopped_anywhere_resumes_from_its_checkpoints_to_the_same_records() {
             ..Memory::default()
         };
         let e = run_with(&cfg, 4, &mut store).unwrap_err();
-        assert!(matches!(e, PipelineError::Stopped), "{e}");
+        assert!(matches!(e, AlgoError::Stopped), "{e}");
         store.stop_at = None;
         let resumed = without_timing(run_with(&cfg, 4, &mut store).unwrap());
         assert_eq!(resumed, reference, "stopped at poll {stop_at}");

@@ -2,9 +2,9 @@
 //! schedule of real and imagined episodes, exact real-sample counts, a stopped run resumed from
 //! its checkpoint, and the F1 experiment's held-out scoring.
 
-use tandem::pipelines::p2::{Ephemeral, Event, Method, PipelineError, RunRecord};
-use tandem::pipelines::p2_maze::{model_quality, run, MazeConfig, QualityConfig};
-use tandem::pipelines::InMemory;
+use tandem::algos::imagined_episodes::{AlgoError, Ephemeral, Event, Method, RunRecord};
+use tandem::algos::imagined_pixels::{model_quality, run, MazeConfig, QualityConfig};
+use tandem::algos::InMemory;
 
 /// A small configuration that never counts as solved: 8 real episodes, the first 3 real only,
 /// then 2 imagined after each real one; a tiny model; learning from the 100th transition.
@@ -91,7 +91,7 @@ fn a_stopped_run_resumes_to_the_same_numbers() {
             }
         };
         let e = run(method, &cfg, 2, &mut store, &mut count).unwrap_err();
-        assert!(matches!(e, PipelineError::Stopped), "{e}");
+        assert!(matches!(e, AlgoError::Stopped), "{e}");
         assert_eq!(store.saves(), 2);
         store.stop_flag().set(false);
         let resumed = run(method, &cfg, 2, &mut store, &mut |_| {}).unwrap();

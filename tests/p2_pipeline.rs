@@ -1,10 +1,10 @@
 //! p2's loop (Fig. 3): the schedule of real and imagined episodes, exact real-sample counts,
 //! determinism, and a stopped run resumed from its checkpoint.
 
-use tandem::pipelines::p2::{
-    cartpole, solved_at, Ephemeral, Event, Method, P2Config, PipelineError, RunRecord,
+use tandem::algos::imagined_episodes::{
+    cartpole, solved_at, AlgoError, Ephemeral, Event, Method, P2Config, RunRecord,
 };
-use tandem::pipelines::InMemory;
+use tandem::algos::InMemory;
 
 /// A small, fast configuration that never counts as solved: 12 real episodes, the first 4 real
 /// only, then 3 imagined after every 2 real.
@@ -101,7 +101,7 @@ fn a_run_stopped_between_episodes_resumes_to_the_same_numbers() {
             }
         };
         let e = cartpole(method, &cfg, 5, &mut store, &mut count).unwrap_err();
-        assert!(matches!(e, PipelineError::Stopped), "{e}");
+        assert!(matches!(e, AlgoError::Stopped), "{e}");
         store.stop_flag().set(false);
         let resumed = cartpole(method, &cfg, 5, &mut store, &mut |_| {}).unwrap();
         assert_eq!(resumed.real_returns, whole.real_returns, "{method:?}");

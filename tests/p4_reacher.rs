@@ -2,9 +2,9 @@
 //! resumed to the same numbers, deterministic per seed, and refusing bad settings.
 #![cfg(feature = "mujoco")]
 
+use tandem::algos::manipulation::{reacher_test_set, train_ddpg_reacher, ReacherDdpg, TestedPoint};
+use tandem::algos::{AlgoError, Checkpoints, Ephemeral, InMemory, Result};
 use tandem::mujoco::p4::ReacherCost;
-use tandem::pipelines::p4::{reacher_test_set, train_ddpg_reacher, ReacherDdpg, TestedPoint};
-use tandem::pipelines::{Checkpoints, Ephemeral, InMemory, PipelineError, Result};
 use tandem_nn::Checkpoint;
 
 /// 300 steps of a small DDPG, measured every 100 on 5 test targets.
@@ -67,14 +67,11 @@ fn ddpg_on_the_reacher_resumes_to_the_same_numbers() {
         inner: InMemory::default(),
         after: 1,
     };
-    assert!(matches!(run(&mut store, 3), Err(PipelineError::Stopped)));
+    assert!(matches!(run(&mut store, 3), Err(AlgoError::Stopped)));
     store.after = usize::MAX;
     assert_eq!(run(&mut store, 3).unwrap(), whole);
     // Another seed refuses that checkpoint.
-    assert!(matches!(
-        run(&mut store, 4),
-        Err(PipelineError::Checkpoint(_))
-    ));
+    assert!(matches!(run(&mut store, 4), Err(AlgoError::Checkpoint(_))));
 }
 
 #[test]
@@ -98,7 +95,7 @@ fn ddpg_on_the_reacher_refuses_bad_settings() {
             &mut Ephemeral,
             &mut |_| {},
         );
-        assert!(matches!(r, Err(PipelineError::Config(_))), "{cfg:?}");
+        assert!(matches!(r, Err(AlgoError::Config(_))), "{cfg:?}");
     }
     let mut bad = small();
     bad.agent.tau = 2.0;

@@ -134,7 +134,7 @@ pub fn reproduce_config(data: &[u8]) {
     };
     for base in [
         cli::reproduce_p0::quick_config(),
-        tandem::pipelines::p0::P0Config::default(),
+        tandem::algos::difference_models::P0Config::default(),
     ] {
         let Ok(cfg) = cli::reproduce_p0::parse_config(base, text, "fuzz config") else {
             continue;

@@ -27,9 +27,9 @@ use clap::Args;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
+use tandem::algos::{AlgoError, Checkpoints, Result as AlgoResult};
+use tandem::core::CurvePoint;
 use tandem::interrupt::{Stop, EXIT_SIGINT};
-use tandem::pipelines::p0::CurvePoint;
-use tandem::pipelines::{Checkpoints, PipelineError, Result as PipelineResult};
 use tandem::report::{ensure_finite, to_json_pretty, Curve, Table};
 use tandem::run::{Existing, Layout, RunDir};
 use tandem_nn::Checkpoint;
@@ -85,10 +85,10 @@ pub enum JobError {
     Failed(String),
 }
 
-impl From<PipelineError> for JobError {
-    fn from(e: PipelineError) -> Self {
+impl From<AlgoError> for JobError {
+    fn from(e: AlgoError) -> Self {
         match e {
-            PipelineError::Stopped => JobError::Stopped,
+            AlgoError::Stopped => JobError::Stopped,
             e => JobError::Failed(e.to_string()),
         }
     }
@@ -360,19 +360,19 @@ impl SeedState {
 }
 
 impl Checkpoints for SeedState {
-    fn load(&mut self, key: &str) -> PipelineResult<Option<Checkpoint>> {
+    fn load(&mut self, key: &str) -> AlgoResult<Option<Checkpoint>> {
         let path = self.path(key);
         if !path.exists() {
             return Ok(None);
         }
         Checkpoint::load(&path)
             .map(Some)
-            .map_err(|e| PipelineError::Checkpoint(format!("{}: {e}", path.display())))
+            .map_err(|e| AlgoError::Checkpoint(format!("{}: {e}", path.display())))
     }
 
-    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> PipelineResult<()> {
+    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> AlgoResult<()> {
         std::fs::create_dir_all(&self.dir)
-            .map_err(|e| PipelineError::Checkpoint(format!("{}: {e}", self.dir.display())))?;
+            .map_err(|e| AlgoError::Checkpoint(format!("{}: {e}", self.dir.display())))?;
         Ok(ckpt.save(self.path(key))?)
     }
 

@@ -1,5 +1,5 @@
 //! `tandem reproduce p0-pendulum` and `tandem reproduce p0-leo`: p0's three methods (cold start,
-//! warm start, difference model) over seeds, through one pipeline ([`tandem::pipelines::p0`])
+//! warm start, difference model) over seeds, through one pipeline ([`tandem::algos::difference_models`])
 //! on either problem. In the output directory:
 //!
 //! - `config.json`: the [`P0Config`] used, seeds, status (`running`, `interrupted`, `complete`)
@@ -39,13 +39,13 @@ use std::path::Path;
 
 use clap::Args;
 use serde::{Deserialize, Serialize};
-use tandem::dynamics::biped::{leo_plant, skeleton};
-use tandem::dynamics::rigid_plant::{Overrides, RigidPlantConfig};
-use tandem::pipelines::p0::{
+use tandem::algos::difference_models::{
     ddpg_agent, leo_problem, pendulum_problem, run_seed, Method, P0Config, PolicyEval, Problem,
     RunRecord, Tick, LEO_MEASURES,
 };
-use tandem::pipelines::Checkpoints;
+use tandem::algos::Checkpoints;
+use tandem::dynamics::biped::{leo_plant, skeleton};
+use tandem::dynamics::rigid_plant::{Overrides, RigidPlantConfig};
 use tandem::report::gait::{filmstrip_svg, GaitRow};
 use tandem::report::{
     mean_stderr, Comparison, Figure, MarkdownText, MethodFigures, Reference, SeedRun, Table,
@@ -659,7 +659,7 @@ impl Study for P0Study {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tandem::pipelines::p0::CurvePoint;
+    use tandem::core::CurvePoint;
 
     fn record(method: Method, seed: u64, curve: &[(u64, f64)]) -> RunRecord {
         RunRecord {

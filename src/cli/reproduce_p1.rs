@@ -17,9 +17,9 @@ use std::path::Path;
 
 use clap::Args;
 use serde::{Deserialize, Serialize};
-use tandem::pipelines::mbpo::{mujoco_problem, RunRecord};
-use tandem::pipelines::p1::{run, Method, P1Config};
-use tandem::pipelines::Checkpoints;
+use tandem::algos::incremental_dyna::{run, Method, P1Config};
+use tandem::algos::mbpo::{mujoco_problem, RunRecord};
+use tandem::algos::Checkpoints;
 use tandem::report::{Figure, MarkdownText};
 use tandem::run::RunDir;
 

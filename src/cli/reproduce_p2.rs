@@ -32,9 +32,9 @@ use std::path::Path;
 
 use clap::Args;
 use serde::{Deserialize, Serialize};
-use tandem::pipelines::p2::{cartpole, Event, Method, P2Config, RunRecord};
-use tandem::pipelines::p2_maze::{self, MazeConfig, Quality, QualityConfig};
-use tandem::pipelines::{Checkpoints, Result as PipelineResult};
+use tandem::algos::imagined_episodes::{cartpole, Event, Method, P2Config, RunRecord};
+use tandem::algos::imagined_pixels::{self, MazeConfig, Quality, QualityConfig};
+use tandem::algos::{Checkpoints, Result as AlgoResult};
 use tandem::report::{ensure_finite, to_json_pretty, Curve, Figure, SamplesToTarget};
 use tandem::run::RunDir;
 use tandem_envs::PixelMazeEnv;
@@ -198,7 +198,7 @@ impl Settings {
         }
     }
 
-    fn validate(&self) -> PipelineResult<()> {
+    fn validate(&self) -> AlgoResult<()> {
         match self {
             Settings::CartPole(c) => c.validate(),
             Settings::Maze { runs, quality } => {
@@ -243,10 +243,12 @@ impl Settings {
         seed: u64,
         store: &mut dyn Checkpoints,
         on_event: &mut dyn FnMut(Event),
-    ) -> PipelineResult<RunRecord> {
+    ) -> AlgoResult<RunRecord> {
         match self {
             Settings::CartPole(c) => cartpole(method, c, seed, store, on_event),
-            Settings::Maze { runs, .. } => p2_maze::run(method, runs, seed, store, on_event),
+            Settings::Maze { runs, .. } => {
+                imagined_pixels::run(method, runs, seed, store, on_event)
+            }
         }
     }
 
@@ -419,7 +421,7 @@ pub fn f1_table(qs: &[Quality]) -> Option<std::collections::BTreeMap<String, F1R
             .iter()
             .enumerate()
             .map(|(i, p)| {
-                let mean = |f: fn(&tandem::pipelines::p2_maze::QualityPoint) -> f64| {
+                let mean = |f: fn(&tandem::algos::imagined_pixels::QualityPoint) -> f64| {
                     qs.iter()
                         .filter_map(|q| q.points.get(i))
                         .map(f)
@@ -777,7 +779,7 @@ impl Study for P2Study {
             let Settings::Maze { runs, quality } = s else {
                 return Err(JobError::Failed(format!("{run} runs on the maze only")));
             };
-            let q = p2_maze::model_quality(runs, quality, seed, &*store, &mut on_event)?;
+            let q = imagined_pixels::model_quality(runs, quality, seed, &*store, &mut on_event)?;
             return Ok(P2Record::Quality(q));
         }
         let method = Method::ALL
@@ -923,10 +925,10 @@ mod tests {
         assert_eq!(v["with_model"]["episodes_to_solve"]["mean"], 400.0);
     }
 
-    fn point(episodes: u64, agent: f64) -> tandem::pipelines::p2_maze::QualityPoint {
+    fn point(episodes: u64, agent: f64) -> tandem::algos::imagined_pixels::QualityPoint {
         let mut truth = vec![0.0f32; 768];
         truth[(3 * 16 + 5) * 3 + 2] = 1.0; // one blue (agent) pixel at row 3, column 5
-        tandem::pipelines::p2_maze::QualityPoint {
+        tandem::algos::imagined_pixels::QualityPoint {
             episodes,
             transitions: 10 * episodes,
             heldout_transitions: 100,

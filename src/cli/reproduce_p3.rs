@@ -17,13 +17,14 @@ use std::path::Path;
 
 use clap::Args;
 use serde::{Deserialize, Serialize};
-use tandem::mujoco::TaskKind;
-use tandem::pipelines::mbpo::{
-    leg2r_problem_with, mujoco_problem, run_oracle, Event, LinearSchedule, MbpoConfig, Problem,
-    RunRecord,
+use tandem::algos::m_demorl::{run, Method, P3Config};
+use tandem::algos::mbpo::{
+    leg2r_problem_with, mujoco_problem, run_oracle, Event, MbpoConfig, Problem, RunRecord,
+    MUJOCO_TASKS,
 };
-use tandem::pipelines::p3::{run, Method, P3Config};
-use tandem::pipelines::Checkpoints;
+use tandem::algos::Checkpoints;
+use tandem::core::LinearSchedule;
+use tandem::mujoco::TaskKind;
 use tandem::report::{Comparison, Figure, MarkdownText, MethodFigures, SeedRun, Table};
 use tandem::run::RunDir;
 use tandem_envs::{Env, EnvError, Leg2RConfig, Leg2REnv, Leg2RModel, Task};
@@ -135,85 +136,25 @@ pub(super) fn quick_loop(b: &mut MbpoConfig) {
 /// The leg's id.
 const LEG: &str = "Leg2R-real-v0";
 
-/// A MuJoCo task's loop: MBPO's settings for it (Janner et al., Appendix C) resized to this
-/// machine, and a return whose reaching is counted where no run's return is the target.
-struct MujocoPreset {
-    id: &'static str,
-    epochs: u64,
-    /// The rollout length `k` by epoch (`None`: 1 throughout).
-    rollout_length: Option<LinearSchedule>,
-    /// MBPO's 400 rollouts per real step, or fewer where long rollouts would cost hours.
-    rollouts_per_step: usize,
-    target_return: f64,
-}
-
-/// SAC updates per real step `G` on the MuJoCo tasks, the same for every method (MBPO: 20, 40 on
-/// HalfCheetah). Ours: SAC's 256×256 update (about 0.67 GFLOP) takes about 12.5 ms on one core
-/// of the 2-core machine this was sized on and about 6.7 ms with its passes split over both, so
-/// at 4 one seed of SAC over 100 epochs (95 000 × 4 updates) takes about 45 minutes with
-/// `--jobs 1`, MBPO and M-DeMoRL about an hour.
-pub const MUJOCO_UPDATES_PER_STEP: usize = 4;
-
-/// The MuJoCo tasks the p1 and p3 studies run (fixed targets: HalfCheetah p3 Fig. 3's 10 000,
-/// the others ours; the studies count real steps to a baseline's final return instead).
-const MUJOCO: [MujocoPreset; 4] = [
-    MujocoPreset {
-        id: "HalfCheetah-v5",
-        epochs: 100,
-        rollout_length: None,
-        rollouts_per_step: 400,
-        target_return: 10_000.0,
-    },
-    MujocoPreset {
-        id: "Hopper-v5",
-        epochs: 100,
-        rollout_length: Some(LinearSchedule {
-            from_epoch: 20,
-            to_epoch: 100,
-            start: 1,
-            end: 15,
-        }),
-        rollouts_per_step: 100,
-        target_return: 3000.0,
-    },
-    MujocoPreset {
-        id: "Walker2d-v5",
-        epochs: 100,
-        rollout_length: None,
-        rollouts_per_step: 400,
-        target_return: 3500.0,
-    },
-    MujocoPreset {
-        id: "InvertedPendulum-v5",
-        epochs: 15,
-        rollout_length: None,
-        rollouts_per_step: 400,
-        target_return: 1000.0,
-    },
+/// The return each MuJoCo task's study counts real steps to, where no run's return is the
+/// target: HalfCheetah p3 Fig. 3's 10 000, the others ours.
+const MUJOCO_TARGETS: [(&str, f64); 4] = [
+    ("HalfCheetah-v5", 10_000.0),
+    ("Hopper-v5", 3000.0),
+    ("Walker2d-v5", 3500.0),
+    ("InvertedPendulum-v5", 1000.0),
 ];
 
-/// The shared loop on the MuJoCo task `env` and its fixed target return; `None` for a task the
-/// studies do not run. MBPO's settings (SAC 256×256 after 5000 random steps, ensembles of 7
-/// members of 4 × 200 SiLU units, 5 elites, real ratio 0.05, rollouts of its length schedule
-/// from real states) with this machine's budget: `epochs` of 1000 real steps,
-/// [`MUJOCO_UPDATES_PER_STEP`] updates per real step, and the model refit once an epoch (MBPO:
-/// every 250 steps) with at most 200 minibatches per member, whole epochs and at least one, the
-/// weights carried over (MBPO: until the held-out loss stops improving).
+/// The shared loop on the MuJoCo task `env` ([`MbpoConfig::mujoco`]) and its fixed target
+/// return; `None` for a task the studies do not run.
 pub(super) fn mujoco_loop(env: &str) -> Option<(MbpoConfig, f64)> {
-    let m = MUJOCO.iter().find(|m| m.id == env)?;
-    let mut b = MbpoConfig::default();
-    b.real_steps = m.epochs * b.epoch_length;
-    b.updates_per_step = MUJOCO_UPDATES_PER_STEP;
-    b.rollout_length = m.rollout_length.unwrap_or(LinearSchedule::constant(1));
-    b.rollouts_per_step = m.rollouts_per_step;
-    b.model_train_freq = b.epoch_length;
-    b.model_max_updates = Some(200);
-    Some((b, m.target_return))
+    let (_, target) = MUJOCO_TARGETS.iter().find(|(id, _)| *id == env)?;
+    Some((MbpoConfig::mujoco(env)?, *target))
 }
 
 /// The ids `p3-mujoco` runs, for messages.
 pub(super) fn mujoco_ids() -> String {
-    MUJOCO.iter().map(|m| m.id).collect::<Vec<_>>().join(", ")
+    MUJOCO_TASKS.join(", ")
 }
 
 impl P3Settings {
@@ -280,7 +221,7 @@ impl P3Settings {
                 if self.oracle {
                     return bad("oracle: the true model is available for the leg only".into());
                 }
-                if !MUJOCO.iter().any(|m| m.id == self.env) {
+                if !MUJOCO_TASKS.contains(&self.env.as_str()) {
                     return bad(format!(
                         "env {}: p3-mujoco runs {} (a leg needs its `leg` settings)",
                         self.env,
@@ -400,7 +341,7 @@ impl Study for P3Study {
         let base = match &self.target {
             Target::Leg => P3Settings::default(),
             Target::Mujoco(env) => {
-                let env = env.as_deref().unwrap_or(MUJOCO[0].id);
+                let env = env.as_deref().unwrap_or(MUJOCO_TASKS[0]);
                 P3Settings::mujoco(env).ok_or_else(|| {
                     CliError::input("--env", format!("{env}: p3-mujoco runs {}", mujoco_ids()))
                 })?

@@ -24,12 +24,12 @@ use std::path::Path;
 use clap::Args;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
+use tandem::algos::gps::{train_local, LocalConfig, LocalMethod, LocalPoint, LocalProblem};
+use tandem::algos::manipulation::{door_problem, pusher_problem};
+use tandem::algos::{Checkpoints, Result as AlgoResult};
 use tandem::mujoco::p4::{
     DoorCost, PusherCost, DOOR_CONDITIONS, DOOR_TARGET, PUSHER_CONDITIONS, PUSHER_HARD,
 };
-use tandem::pipelines::gps::{train_local, LocalConfig, LocalMethod, LocalPoint, LocalProblem};
-use tandem::pipelines::p4::{door_problem, pusher_problem};
-use tandem::pipelines::{Checkpoints, Result as PipelineResult};
 use tandem::report::{mean_stderr, to_json_pretty, Curve, Figure, SamplesToTarget};
 use tandem::run::RunDir;
 
@@ -68,7 +68,7 @@ pub trait P4Task: Sync {
     /// The default settings.
     fn defaults() -> P4Settings<Self::Cost>;
     /// The problem with `cost`.
-    fn problem(cost: Self::Cost) -> PipelineResult<LocalProblem>;
+    fn problem(cost: Self::Cost) -> AlgoResult<LocalProblem>;
     /// The cost's own checks.
     fn validate_cost(cost: &Self::Cost) -> std::result::Result<(), String>;
     /// One label per condition.
@@ -96,7 +96,7 @@ impl P4Task for Pusher {
             target: 0.1,
         }
     }
-    fn problem(cost: PusherCost) -> PipelineResult<LocalProblem> {
+    fn problem(cost: PusherCost) -> AlgoResult<LocalProblem> {
         pusher_problem(cost)
     }
     fn validate_cost(cost: &PusherCost) -> std::result::Result<(), String> {
@@ -140,7 +140,7 @@ impl P4Task for Door {
             target: 0.8 * DOOR_TARGET,
         }
     }
-    fn problem(cost: DoorCost) -> PipelineResult<LocalProblem> {
+    fn problem(cost: DoorCost) -> AlgoResult<LocalProblem> {
         door_problem(cost)
     }
     fn validate_cost(cost: &DoorCost) -> std::result::Result<(), String> {

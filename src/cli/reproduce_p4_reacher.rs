@@ -22,14 +22,14 @@ use std::path::Path;
 
 use clap::Args;
 use serde::{Deserialize, Serialize};
-use tandem::mujoco::p4::{ReacherCost, REACHER_HORIZON};
-use tandem::pipelines::gps::LocalMethod;
-use tandem::pipelines::mdgps::{train_mdgps, MdgpsConfig};
-use tandem::pipelines::p4::{
+use tandem::algos::gps::LocalMethod;
+use tandem::algos::manipulation::{
     reacher_config, reacher_problem, reacher_test_set, train_ddpg_reacher, ReacherDdpg,
     TestedPoint, REACHER_TEST_CONDITIONS, REACHER_TEST_SEED,
 };
-use tandem::pipelines::Checkpoints;
+use tandem::algos::mdgps::{train_mdgps, MdgpsConfig};
+use tandem::algos::Checkpoints;
+use tandem::mujoco::p4::{ReacherCost, REACHER_HORIZON};
 use tandem::report::{to_json_pretty, Curve, Figure, SamplesToTarget};
 use tandem::run::RunDir;
 

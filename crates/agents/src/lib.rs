@@ -13,6 +13,7 @@
 //! | [`Learner`], [`Algo`], [`AlgoConfig`] | "one of the four", chosen by name |
 //! | [`OffPolicyLoop`], [`EpisodeRunner`], [`evaluate`] | the one off-policy loop every pipeline runs: real and model steps, two replay buffers mixed at a set ratio, exact sample counts, stable-baselines3's schedule, evaluation, save/resume |
 //! | [`Trainer`], [`TrainSettings`], [`RunLog`] | `tandem train`'s loop: any of the four agents on one environment, on the shared loop |
+//! | [`Adapted`], [`Feature`] | an adapter in front of any off-policy agent: observation features, reward scale, settable exploration noise |
 //!
 //! Networks are `tandem-nn`'s hand-derived [`tandem_nn::Mlp`]s with in-place Adam; the actor
 //! gradients (DDPG through the critic's input gradient, SAC's reparametrized tanh-Gaussian) are
@@ -38,6 +39,7 @@
 // Index loops over several parallel columns read closer to the equations than zipped iterators.
 #![allow(clippy::needless_range_loop)]
 
+pub mod adapter;
 pub mod agent;
 mod common;
 pub mod config;
@@ -53,6 +55,7 @@ pub mod replay;
 pub mod sac;
 pub mod trainer;
 
+pub use adapter::{feature_dim, features_of, Adapted, Feature};
 pub use agent::{
     Agent, Batch, BatchPolicy, Critic, Episode, EpisodicAgent, Metrics, Mode, OffPolicyAgent,
     Resumable,

@@ -13,7 +13,8 @@
 //!   imagined episode behind the `Env` trait or N branched rollouts from real states at once,
 //!   with reward and termination from the task or from the model ([`Judges`]).
 //! * [`PlantModel`]: any known [`tandem_dynamics::Plant`] as a deterministic model, so "plan on
-//!   the true physics" and "plan on a learned model" are the same call.
+//!   the true physics" and "plan on a learned model" are the same call; [`InActions`]: a model
+//!   seen through a task's actions, so a planner plans in the units the agent acts in.
 //! * The learned models, each with a serde `Config` whose `Default` is its paper's setting:
 //!   [`MlpModel`] (p2 eq. 1: state change, reward, termination), [`ResidualModel`] (p0:
 //!   `f_idl(s, a) + d_θ(s, a)` over any plant), [`IncrementalModel`] (p1 eqs. 4–6:
@@ -104,6 +105,7 @@
 mod data;
 mod ensemble;
 mod gmm;
+mod in_actions;
 mod incremental;
 mod mlp_model;
 mod model;
@@ -119,6 +121,7 @@ mod tvlg;
 pub use data::{holdout_indices, TransitionsBuilder};
 pub use ensemble::{EnsembleConfig, MemberData, ProbabilisticEnsemble, Propagation};
 pub use gmm::Gmm;
+pub use in_actions::InActions;
 pub use incremental::{GainStructure, IncrementalModel, IncrementalModelConfig};
 pub use mlp_model::{MlpModel, MlpModelConfig};
 pub use model::{

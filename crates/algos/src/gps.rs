@@ -30,7 +30,7 @@ use tandem_planners::{
     PilqrConfig, QuadraticCost, SampleConfig, TrajectorySamples, TvlgController,
 };
 
-use super::{Checkpoints, PipelineError, Result};
+use super::{AlgoError, Checkpoints, Result};
 
 /// How a local controller is updated from its samples.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -100,7 +100,7 @@ impl Default for LocalConfig {
 impl LocalConfig {
     /// Checks the settings the loop relies on.
     pub fn validate(&self) -> Result<()> {
-        let bad = |m: String| Err(PipelineError::Config(m));
+        let bad = |m: String| Err(AlgoError::Config(m));
         if self.iterations == 0 || self.samples < 2 {
             return bad(format!(
                 "iterations {} must be >= 1 and samples {} >= 2",
@@ -288,12 +288,12 @@ impl Local {
                 .pilqr
                 .update_anchored(&self.controller, anchor, samples, dynamics, cost)
                 .map(|s| s.controller)
-                .map_err(PipelineError::from),
+                .map_err(AlgoError::from),
             LocalMethod::LqrFlm => lqr
                 .update(anchor, dynamics, cost, kl_step)
                 .map(|s| s.controller)
-                .map_err(PipelineError::from),
-            LocalMethod::Pi2 => Err(PipelineError::Config(
+                .map_err(AlgoError::from),
+            LocalMethod::Pi2 => Err(AlgoError::Config(
                 "PI² takes no anchor: its update reweights its own samples".into(),
             )),
         })?;
@@ -366,7 +366,7 @@ pub(crate) type LocalModel = (TvlgDynamics, Vec<QuadraticCost>);
 fn numerical<T>(r: Result<T>) -> Result<Option<T>> {
     match r {
         Ok(v) => Ok(Some(v)),
-        Err(PipelineError::Planner(_) | PipelineError::Model(_)) => Ok(None),
+        Err(AlgoError::Planner(_) | AlgoError::Model(_)) => Ok(None),
         Err(e) => Err(e),
     }
 }
@@ -391,7 +391,7 @@ pub fn train_local(
     let mut drawn = 0u64;
     for it in 0..cfg.iterations {
         if store.stop_requested() {
-            return Err(PipelineError::Stopped);
+            return Err(AlgoError::Stopped);
         }
         for (c, (cond, local)) in conditions.iter().zip(locals.iter_mut()).enumerate() {
             let samples = local.sample(system, cond, cfg, &mut rng)?;
@@ -434,7 +434,7 @@ pub(crate) fn start_locals(
 pub(crate) fn check_problem(problem: &LocalProblem) -> Result<()> {
     let system = &problem.system;
     if problem.conditions.is_empty() || problem.horizon == 0 {
-        return Err(PipelineError::Config(format!(
+        return Err(AlgoError::Config(format!(
             "{} conditions and a horizon of {}: both must be at least 1",
             problem.conditions.len(),
             problem.horizon
@@ -445,7 +445,7 @@ pub(crate) fn check_problem(problem: &LocalProblem) -> Result<()> {
             || c.objective.state_dim() != system.state_dim()
             || c.objective.action_dim() != system.action_dim()
         {
-            return Err(PipelineError::Config(format!(
+            return Err(AlgoError::Config(format!(
                 "condition {i}: initial state of {} and objective of ({}, {}) do not fit a \
                  system of state {} and action {}",
                 c.x0.len(),
@@ -479,7 +479,7 @@ fn point(samples: &TrajectorySamples, total: usize, measure: impl Fn(&[f64]) -> 
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::pipelines::{Ephemeral, InMemory};
+    use crate::{Ephemeral, InMemory};
     use nalgebra::{dmatrix, DMatrix, DVector};
     use tandem_dynamics::Plant;
     use tandem_models::PlantModel;
@@ -634,7 +634,7 @@ pub(crate) mod tests {
         let mut store = InMemory::default();
         store.stop_flag().set(true);
         let r = train_local(LocalMethod::Pi2, &p, &cfg(3), 0, &mut store, &mut |_| {});
-        assert!(matches!(r, Err(PipelineError::Stopped)));
+        assert!(matches!(r, Err(AlgoError::Stopped)));
         let mut bad = cfg(3);
         bad.samples = 1;
         let e = train_local(LocalMethod::Pi2, &p, &bad, 0, &mut Ephemeral, &mut |_| {});

@@ -24,15 +24,14 @@
 
 use serde::{Deserialize, Serialize};
 use tandem_agents::{OffPolicyLoop, Sac};
-use tandem_core::Rng;
+use tandem_core::{LinearSchedule, Rng};
 use tandem_envs::{Env, EnvError, Task};
 use tandem_models::{
     DynamicsModel, FitConfig, IncrementalModel, IncrementalModelConfig, Judges, Transitions,
 };
 
 use super::mbpo::{
-    fitted, run_with, Event, Imagination, Imagine, LinearSchedule, MbpoConfig, Problem, Rollouts,
-    RunRecord,
+    fitted, run_with, Event, Imagination, Imagine, MbpoConfig, Problem, Rollouts, RunRecord,
 };
 use super::{Checkpoints, Result};
 
@@ -280,13 +279,13 @@ pub fn fine_tune<T: Task + ?Sized>(
         cfg.error_weights.clone()
     };
     if q.len() != s_dim || q.iter().any(|w| !(w.is_finite() && *w >= 0.0)) {
-        return Err(super::PipelineError::Config(format!(
+        return Err(super::AlgoError::Config(format!(
             "error_weights: {s_dim} finite weights >= 0, got {:?}",
             cfg.error_weights
         )));
     }
     if !(cfg.increment_weight.is_finite() && cfg.increment_weight > 0.0) {
-        return Err(super::PipelineError::Config(format!(
+        return Err(super::AlgoError::Config(format!(
             "increment_weight {} must be > 0",
             cfg.increment_weight
         )));
@@ -307,9 +306,9 @@ pub fn fine_tune<T: Task + ?Sized>(
                 let sd = desired(&s);
                 let e: Vec<f64> = s.iter().zip(&sd).map(|(x, d)| x - d).collect();
                 let states = ndarray::Array2::from_shape_vec((1, s_dim), s.clone())
-                    .map_err(|e| super::PipelineError::Config(e.to_string()))?;
+                    .map_err(|e| super::AlgoError::Config(e.to_string()))?;
                 let prevs = ndarray::Array2::from_shape_vec((1, a_dim), prev.clone())
-                    .map_err(|e| super::PipelineError::Config(e.to_string()))?;
+                    .map_err(|e| super::AlgoError::Config(e.to_string()))?;
                 let l = model.gain(states.view(), prevs.view())?.remove(0);
                 if let Some(k) = residual_gain(&l, &q, cfg.increment_weight, cfg.horizon) {
                     let de = k * nalgebra::DVector::from_column_slice(&e);

@@ -29,7 +29,7 @@ use tandem_agents::{
     evaluate, evaluate_episode, Agent, AgentError, Ddpg, DdpgConfig, EpisodeRunner, NoiseConfig,
     OffPolicyAgent, OffPolicyLoop, OffPolicySchedule, Resumable, StepOptions, Store,
 };
-use tandem_core::{Rng, SeedStream, Space};
+use tandem_core::{CurvePoint, Rng, SeedStream, Space};
 use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 use tandem_dynamics::rigid_plant::RigidBodyPlant;
 use tandem_dynamics::Plant;
@@ -44,9 +44,9 @@ use tandem_models::{
 
 use tandem_nn::{Checkpoint, Checkpointable};
 
-use super::adapter::{feature_dim, Adapted, Feature};
+use tandem_agents::adapter::{feature_dim, Adapted, Feature};
 
-pub use super::{Checkpoints, Ephemeral, PipelineError, Result};
+pub use super::{AlgoError, Checkpoints, Ephemeral, Result};
 
 /// One of the three methods of p0's Table II.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -257,7 +257,7 @@ impl P0Config {
 
     /// Checks the ranges the loop relies on.
     pub fn validate(&self) -> Result<()> {
-        let bad = |m: &str| Err(PipelineError::Config(m.to_string()));
+        let bad = |m: &str| Err(AlgoError::Config(m.to_string()));
         if self.real_batch == 0 || self.real_budget < self.real_batch {
             return bad("need 0 < real_batch <= real_budget");
         }
@@ -322,16 +322,6 @@ pub struct PolicyEval {
     pub frames: Vec<Vec<f64>>,
     /// Steps between frames.
     pub frame_every: usize,
-}
-
-/// One point of a learning curve: the deterministic policy's return on the true system after
-/// `true_samples` training samples from it.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct CurvePoint {
-    /// True-system training samples used so far (evaluation episodes excluded).
-    pub true_samples: u64,
-    /// Mean undiscounted return of the deterministic policy on the true system.
-    pub eval_return: f64,
 }
 
 /// What one run of one method reports.
@@ -411,7 +401,7 @@ fn loop_learning_starts(n: usize, cfg: &DdpgConfig) -> usize {
 }
 
 /// `n` steps of the loop on `env` as `opts` says, calling `tick` after each and polling `stop`
-/// before each ([`PipelineError::Stopped`]).
+/// before each ([`AlgoError::Stopped`]).
 fn train_steps<A: OffPolicyAgent>(
     lp: &mut OffPolicyLoop<A>,
     env: &mut dyn Env,
@@ -423,7 +413,7 @@ fn train_steps<A: OffPolicyAgent>(
 ) -> Result<()> {
     for _ in 0..n {
         if stop.stop_requested() {
-            return Err(PipelineError::Stopped);
+            return Err(AlgoError::Stopped);
         }
         lp.step(env, runner, opts)?;
         tick();
@@ -461,7 +451,7 @@ fn collect_or_stop<A: OffPolicyAgent, T: Task>(
     let mut runner = EpisodeRunner::new(seed, "ep");
     for _ in 0..n {
         if stop.stop_requested() {
-            return Err(PipelineError::Stopped);
+            return Err(AlgoError::Stopped);
         }
         let rec = lp.step(env, &mut runner, StepOptions::collect())?;
         let (x, x1) = rec.states.as_ref().expect("collect records states");
@@ -671,7 +661,7 @@ where
     }
     let batch = cfg.batch_of(method);
     if method.is_difference() && batch.is_none() {
-        return Err(PipelineError::Config(format!(
+        return Err(AlgoError::Config(format!(
             "{} runs only with small_batch set",
             method.name()
         )));

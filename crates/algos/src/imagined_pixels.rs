@@ -3,7 +3,7 @@
 //! imagined by the pixel model ([`PixelModel`]: four frames and the action in, the next frame, the
 //! reward and the termination out).
 //!
-//! The loop is Fig. 3's, as [`super::p2::run`] runs it for REINFORCE, here for an off-policy
+//! The loop is Fig. 3's, as [`super::imagined_episodes::run`] runs it for REINFORCE, here for an off-policy
 //! agent through the shared [`OffPolicyLoop`]:
 //!
 //! 1. every real episode is played by the loop (ε-greedy, the schedule's updates after each
@@ -34,8 +34,8 @@ use tandem_envs::{Env, PixelMazeEnv, SampleCounter};
 use tandem_models::{PixelEpisodes, PixelFit, PixelModel, PixelModelConfig, PixelModelEnv};
 use tandem_nn::{Checkpoint, Checkpointable};
 
-use super::p2::{solved_at, Event, Method, RunRecord, Tally};
-use super::{Checkpoints, PipelineError, Result};
+use super::imagined_episodes::{solved_at, Event, Method, RunRecord, Tally};
+use super::{AlgoError, Checkpoints, Result};
 
 /// Settings of a maze run. `Default` follows p2 where it gives a figure and says where a figure
 /// is ours.
@@ -99,7 +99,7 @@ impl Default for MazeConfig {
 
 /// The `dqn_pixelmaze` preset's DQN with a constant learning rate (see [`MazeConfig::dqn`]).
 pub fn maze_dqn() -> DqnConfig {
-    let text = include_str!("../../crates/agents/presets/dqn_pixelmaze.toml");
+    let text = include_str!("../../agents/presets/dqn_pixelmaze.toml");
     #[derive(Deserialize)]
     struct Preset {
         agent: DqnConfig,
@@ -144,8 +144,8 @@ impl MazeConfig {
 
     /// Checks the ranges the loop relies on.
     pub fn validate(&self) -> Result<()> {
-        let bad = |m: &str| Err(PipelineError::Config(m.to_string()));
-        super::p2::check_schedule(
+        let bad = |m: &str| Err(AlgoError::Config(m.to_string()));
+        super::imagined_episodes::check_schedule(
             [self.real_per_cycle, self.fit_every, self.checkpoint_every],
             self.max_real_episodes,
             self.solved_window,
@@ -171,8 +171,8 @@ impl MazeConfig {
 }
 
 /// The error for an `env` that is not one of the pixel mazes.
-fn not_a_maze(env: &str) -> PipelineError {
-    PipelineError::Config(format!(
+fn not_a_maze(env: &str) -> AlgoError {
+    AlgoError::Config(format!(
         "env `{env}` is not a pixel maze: use {} or {}",
         PixelMazeEnv::ID,
         PixelMazeEnv::ID_V1
@@ -343,7 +343,7 @@ fn run_probed(
         && solved(&p.t.real_returns).is_none()
     {
         if store.stop_requested() {
-            return Err(PipelineError::Stopped);
+            return Err(AlgoError::Stopped);
         }
         let k = p.t.real_returns.len() as u64;
         let keep = imagination.is_some();
@@ -466,7 +466,7 @@ impl QualityConfig {
             || self.checkpoints.is_empty()
             || self.checkpoints.contains(&0)
         {
-            return Err(PipelineError::Config(
+            return Err(AlgoError::Config(
                 "quality: heldout_episodes and every checkpoint must be >= 1, and there must be \
                  at least one checkpoint"
                     .into(),
@@ -550,7 +550,7 @@ fn score(p: &Probe) -> Result<QualityPoint> {
 
 /// The pixel model's F1 experiment for `seed`: a with-model run of `cfg` that ignores "solved"
 /// and `max_real_episodes`, playing until the last checkpoint's held-out episodes are in. It
-/// polls `stop` (and returns [`PipelineError::Stopped`]) but keeps no checkpoints: the copies
+/// polls `stop` (and returns [`AlgoError::Stopped`]) but keeps no checkpoints: the copies
 /// of the model are not in them, so a stopped experiment starts again. `on_event` hears of every
 /// finished episode. [`QualityConfig::seeds`] is not consulted: `seed` is the one to run.
 pub fn model_quality(

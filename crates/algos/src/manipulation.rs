@@ -20,7 +20,7 @@ use tandem_planners::{Objective, QuadCost, QuadTerminal};
 
 use super::gps::{Condition, LocalProblem};
 use super::mdgps::TestSet;
-use super::{PipelineError, Result};
+use super::{AlgoError, Result};
 
 /// The expansion of a cost whose state part is `(c, cx, cxx)` plus `w_u ‖u‖²` (no cross term).
 fn with_action_cost(c: f64, cx: DVector<f64>, cxx: DMatrix<f64>, u: &[f64], w_u: f64) -> QuadCost {
@@ -56,7 +56,7 @@ pub fn pusher_objective(cond: PusherCondition, cost: PusherCost, horizon: usize)
 /// The gripper pusher's four conditions on MuJoCo, with `cost`. Needs the feature `mujoco`;
 /// without it, an error saying so.
 pub fn pusher_problem(cost: PusherCost) -> Result<LocalProblem> {
-    cost.validate().map_err(PipelineError::Config)?;
+    cost.validate().map_err(AlgoError::Config)?;
     let conditions = PUSHER_CONDITIONS
         .iter()
         .map(|c| Condition {
@@ -75,14 +75,13 @@ pub fn pusher_problem(cost: PusherCost) -> Result<LocalProblem> {
 
 #[cfg(feature = "mujoco")]
 fn pusher_system() -> Result<Box<dyn tandem_models::DynamicsModel + Send + Sync>> {
-    let plant =
-        tandem_mujoco::p4::pusher_plant().map_err(|e| PipelineError::Config(e.to_string()))?;
+    let plant = tandem_mujoco::p4::pusher_plant().map_err(|e| AlgoError::Config(e.to_string()))?;
     Ok(Box::new(tandem_models::PlantModel::new(plant)))
 }
 
 #[cfg(not(feature = "mujoco"))]
 fn pusher_system() -> Result<Box<dyn tandem_models::DynamicsModel + Send + Sync>> {
-    Err(PipelineError::Config(
+    Err(AlgoError::Config(
         "p4's pusher needs a build with `--features mujoco` after scripts/setup-mujoco.sh".into(),
     ))
 }
@@ -107,9 +106,9 @@ pub fn reacher_objective(cost: ReacherCost) -> Objective {
 /// The reacher with `conditions` training starts drawn from `Reacher-v5`'s reset distribution by
 /// `seed`'s generator, and `cost`. Needs the feature `mujoco`; without it, an error saying so.
 pub fn reacher_problem(cost: ReacherCost, conditions: usize, seed: u64) -> Result<LocalProblem> {
-    cost.validate().map_err(PipelineError::Config)?;
+    cost.validate().map_err(AlgoError::Config)?;
     if conditions == 0 {
-        return Err(PipelineError::Config(
+        return Err(AlgoError::Config(
             "the reacher needs at least one condition".into(),
         ));
     }
@@ -181,7 +180,7 @@ pub fn reacher_plant() -> Result<tandem_mujoco::MujocoPlant> {
     let kind = tandem_mujoco::TaskKind::Reacher;
     let path = tandem_mujoco::assets_dir().join(kind.spec().xml);
     tandem_mujoco::MujocoPlant::from_xml(&path, kind.spec().frame_skip).map_err(|e| {
-        PipelineError::Config(format!(
+        AlgoError::Config(format!(
             "{e} (gymnasium's assets: run scripts/setup-mujoco.sh)"
         ))
     })
@@ -194,7 +193,7 @@ fn reacher_system() -> Result<Box<dyn tandem_models::DynamicsModel + Send + Sync
 
 #[cfg(not(feature = "mujoco"))]
 fn reacher_system() -> Result<Box<dyn tandem_models::DynamicsModel + Send + Sync>> {
-    Err(PipelineError::Config(
+    Err(AlgoError::Config(
         "p4's reacher needs a build with `--features mujoco` after scripts/setup-mujoco.sh".into(),
     ))
 }
@@ -202,7 +201,7 @@ fn reacher_system() -> Result<Box<dyn tandem_models::DynamicsModel + Send + Sync
 /// The door's four conditions on MuJoCo, with `cost`. Needs the feature `mujoco`; without it, an
 /// error saying so.
 pub fn door_problem(cost: DoorCost) -> Result<LocalProblem> {
-    cost.validate().map_err(PipelineError::Config)?;
+    cost.validate().map_err(AlgoError::Config)?;
     door::problem(cost)
 }
 
@@ -216,7 +215,7 @@ mod door {
     use tandem_planners::{Objective, QuadTerminal};
 
     use super::super::gps::{Condition, LocalProblem};
-    use super::super::{PipelineError, Result};
+    use super::super::{AlgoError, Result};
 
     /// Value, gradient and Gauss–Newton Hessian in the state of the state terms of the cost.
     fn expansion(
@@ -254,7 +253,7 @@ mod door {
     }
 
     pub(super) fn problem(cost: DoorCost) -> Result<LocalProblem> {
-        let bad = |e: tandem_mujoco::MujocoError| PipelineError::Config(e.to_string());
+        let bad = |e: tandem_mujoco::MujocoError| AlgoError::Config(e.to_string());
         let plant = door_plant().map_err(bad)?;
         let kin = DoorKinematics::new(plant.scene().clone()).map_err(bad)?;
         let conditions = (0..DOOR_CONDITIONS.len())
@@ -290,10 +289,10 @@ mod door {
 #[cfg(not(feature = "mujoco"))]
 mod door {
     use super::super::gps::LocalProblem;
-    use super::super::{PipelineError, Result};
+    use super::super::{AlgoError, Result};
 
     pub(super) fn problem(_cost: tandem_mujoco::p4::DoorCost) -> Result<LocalProblem> {
-        Err(PipelineError::Config(
+        Err(AlgoError::Config(
             "p4's door needs a build with `--features mujoco` after scripts/setup-mujoco.sh".into(),
         ))
     }
@@ -354,7 +353,7 @@ impl ReacherDdpg {
     /// positive.
     pub fn validate(&self) -> Result<()> {
         if self.eval_every == 0 || self.steps == 0 {
-            return Err(PipelineError::Config(format!(
+            return Err(AlgoError::Config(format!(
                 "ddpg steps {} and eval_every {} must be positive",
                 self.steps, self.eval_every
             )));
@@ -392,7 +391,7 @@ mod ddpg {
     };
 
     use super::super::mdgps::TestSet;
-    use super::super::{ensure_same_run, Checkpoints, PipelineError, Result};
+    use super::super::{ensure_same_run, AlgoError, Checkpoints, Result};
     use super::{reacher_plant, ReacherDdpg, TestedPoint};
 
     const KEY: &str = "ddpg";
@@ -438,7 +437,7 @@ mod ddpg {
         store: &mut dyn Checkpoints,
         progress: &mut dyn FnMut(u64),
     ) -> Result<Vec<TestedPoint>> {
-        let task = ReacherTask::new(cost).map_err(PipelineError::Config)?;
+        let task = ReacherTask::new(cost).map_err(AlgoError::Config)?;
         // The scene is read once: the training environment, the trainer's (unused) evaluation
         // environment and the test rollouts step copies of one plant.
         let plant = reacher_plant()?;
@@ -482,7 +481,7 @@ mod ddpg {
                 })?
             };
             match pause {
-                Pause::Stopped => return Err(PipelineError::Stopped),
+                Pause::Stopped => return Err(AlgoError::Stopped),
                 Pause::Checkpoint | Pause::Finished => {
                     if curve.last().map(|p| p.samples) != Some(trainer.steps()) {
                         curve.push(measure(&mut trainer, &system, test, seed)?);
@@ -505,7 +504,7 @@ mod ddpg {
     use tandem_mujoco::p4::ReacherCost;
 
     use super::super::mdgps::TestSet;
-    use super::super::{Checkpoints, PipelineError, Result};
+    use super::super::{AlgoError, Checkpoints, Result};
     use super::{ReacherDdpg, TestedPoint};
 
     pub(super) fn train(
@@ -516,7 +515,7 @@ mod ddpg {
         _store: &mut dyn Checkpoints,
         _progress: &mut dyn FnMut(u64),
     ) -> Result<Vec<TestedPoint>> {
-        Err(PipelineError::Config(
+        Err(AlgoError::Config(
             "p4's reacher needs a build with `--features mujoco` after scripts/setup-mujoco.sh"
                 .into(),
         ))

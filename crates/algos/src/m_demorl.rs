@@ -22,7 +22,7 @@
 //!   to the first terminal one, the task says which) join `D_MPC`;
 //! - lines 16–18: `G` SAC updates on minibatches of `D_ENV ∪ D_MPC` (MBPO's real ratio).
 //!
-//! The planner plans in the agent's action space ([`InActions`] turns actions into plant
+//! The planner plans in the agent's action space ([`tandem_models::InActions`] turns actions into plant
 //! inputs with the task), so SAC's proposals, the MPC's bounds and the `D_MPC` actions are all
 //! in the units SAC acts in.
 //!
@@ -34,20 +34,17 @@ use std::sync::Arc;
 use ndarray::{Array1, Array2, ArrayView2};
 use serde::{Deserialize, Serialize};
 use tandem_agents::{BatchPolicy, Critic, Mode, OffPolicyLoop, Sac, Store};
-use tandem_core::{seeding::rng_from_seed, Action, Rng};
+use tandem_core::{seeding::rng_from_seed, LinearSchedule, Rng};
 use tandem_envs::{Env, EnvError, Task};
-use tandem_models::{
-    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, ProbabilisticEnsemble,
-    Propagation, Transitions,
-};
+use tandem_models::{DynamicsModel, InActions, ProbabilisticEnsemble, Propagation, Transitions};
 use tandem_planners::{Bounds, DmdMpc, DmdMpcConfig, Noise, Objective};
 
 use super::dyna::sample_states;
 use super::mbpo::{
-    ensemble_of, fitted, observations, run_with, Event, Imagination, Imagine, LinearSchedule,
-    MbpoConfig, Problem, Rollouts, RunRecord,
+    ensemble_of, fitted, observations, run_with, Event, Imagination, Imagine, MbpoConfig, Problem,
+    Rollouts, RunRecord,
 };
-use super::{Checkpoints, PipelineError, Result};
+use super::{AlgoError, Checkpoints, Result};
 
 /// One of the three methods p3 compares.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -185,23 +182,26 @@ impl P3Config {
     /// Checks the ranges the loops rely on.
     pub fn validate(&self) -> Result<()> {
         self.base.validate()?;
-        self.horizon.validate("horizon")?;
+        self.horizon
+            .validate("horizon")
+            .map_err(AlgoError::Config)?;
         self.transitions_per_epoch
-            .validate("transitions_per_epoch")?;
+            .validate("transitions_per_epoch")
+            .map_err(AlgoError::Config)?;
         if let Some(r) = self.mpc_real_ratio {
             if !(0.0..=1.0).contains(&r) {
-                return Err(PipelineError::Config(format!(
+                return Err(AlgoError::Config(format!(
                     "mpc_real_ratio must lie in [0, 1], got {r}"
                 )));
             }
         }
         if self.keep_iterations == 0 || self.plans_per_batch == 0 {
-            return Err(PipelineError::Config(
+            return Err(AlgoError::Config(
                 "keep_iterations and plans_per_batch must be >= 1".into(),
             ));
         }
         if !(self.noise_fraction > 0.0 && self.noise_fraction.is_finite()) {
-            return Err(PipelineError::Config(format!(
+            return Err(AlgoError::Config(format!(
                 "noise_fraction must be positive and finite, got {}",
                 self.noise_fraction
             )));
@@ -372,7 +372,7 @@ fn value_objective<T: Task + Clone + Send + Sync + 'static>(
         .with_model_reward()
         .with_terminal_value(value)
         .with_discount(agent.config().gamma)
-        .map_err(|e| PipelineError::Config(e.to_string()))?;
+        .map_err(|e| AlgoError::Config(e.to_string()))?;
     Ok(obj)
 }
 
@@ -413,7 +413,7 @@ impl PlanRows {
         let n = self.rewards.len();
         let (o, a) = self.widths;
         let shape = |v: Vec<f64>, w: usize| {
-            Array2::from_shape_vec((n, w), v).map_err(|e| PipelineError::Config(e.to_string()))
+            Array2::from_shape_vec((n, w), v).map_err(|e| AlgoError::Config(e.to_string()))
         };
         lp.push_rows(
             Store::Secondary,
@@ -424,77 +424,5 @@ impl PlanRows {
             &self.terminated,
         )?;
         Ok(n)
-    }
-}
-
-/// A model of plant inputs seen through a task's actions: `predict` takes the agent's actions,
-/// turns each row into the plant input ([`Task::control`]) and the states into canonical ones
-/// ([`Task::canonicalize`]), and asks the model. So a planner plans in the units the agent acts
-/// in. Not fittable.
-pub struct InActions<'a, M: ?Sized, T: ?Sized> {
-    model: &'a M,
-    task: &'a T,
-    action_dim: usize,
-}
-
-impl<'a, M: DynamicsModel + ?Sized, T: Task + ?Sized> InActions<'a, M, T> {
-    /// `model` under `task`'s actions.
-    pub fn new(model: &'a M, task: &'a T) -> Self {
-        Self {
-            model,
-            task,
-            action_dim: task.action_space().flat_dim(),
-        }
-    }
-}
-
-impl<M: DynamicsModel + ?Sized, T: Task + ?Sized> DynamicsModel for InActions<'_, M, T> {
-    fn state_dim(&self) -> usize {
-        self.model.state_dim()
-    }
-
-    fn action_dim(&self) -> usize {
-        self.action_dim
-    }
-
-    fn predict(
-        &self,
-        input: &ModelInput<'_>,
-        rng: &mut Rng,
-    ) -> std::result::Result<Prediction, ModelError> {
-        let b = input.states.nrows();
-        if input.actions.dim() != (b, self.action_dim) {
-            return Err(ModelError::Dim {
-                what: "actions (rows x columns)".into(),
-                expected: b * self.action_dim,
-                got: input.actions.len(),
-            });
-        }
-        let mut states = input.states.to_owned();
-        for mut r in states.rows_mut() {
-            if let Some(s) = r.as_slice_mut() {
-                self.task.canonicalize(s);
-            }
-        }
-        let m = tandem_envs::control_dim(self.task);
-        let mut controls = Array2::zeros((b, m));
-        for (i, a) in input.actions.rows().into_iter().enumerate() {
-            let u = self.task.control(&Action::Continuous(a.to_vec()));
-            controls
-                .row_mut(i)
-                .assign(&ndarray::ArrayView1::from(&u[..]));
-        }
-        self.model
-            .predict(&ModelInput::new(states.view(), controls.view()), rng)
-    }
-
-    fn fit(
-        &mut self,
-        _data: &Transitions,
-        _cfg: &FitConfig,
-    ) -> std::result::Result<FitReport, ModelError> {
-        Err(ModelError::Other(
-            "InActions is a view for planning; fit the model it wraps".into(),
-        ))
     }
 }

@@ -38,7 +38,7 @@ use tandem_models::{
 };
 use tandem_nn::{Checkpoint, Checkpointable};
 
-pub use super::{Checkpoints, Ephemeral, PipelineError, Result};
+pub use super::{AlgoError, Checkpoints, Ephemeral, Result};
 
 /// The two methods of p2's comparison (Fig. 6, the table of Sec. 4.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -132,7 +132,7 @@ impl Default for P2Config {
 impl P2Config {
     /// Checks the ranges the loop relies on.
     pub fn validate(&self) -> Result<()> {
-        let bad = |m: &str| Err(PipelineError::Config(m.to_string()));
+        let bad = |m: &str| Err(AlgoError::Config(m.to_string()));
         check_schedule(
             [self.real_per_cycle, self.fit_every, self.checkpoint_every],
             self.max_real_episodes,
@@ -161,7 +161,7 @@ pub(super) fn check_schedule(
     solved_window: usize,
     solved_return: f64,
 ) -> Result<()> {
-    let bad = |m: &str| Err(PipelineError::Config(m.to_string()));
+    let bad = |m: &str| Err(AlgoError::Config(m.to_string()));
     if periods.contains(&0) {
         return bad("real_per_cycle, fit_every and checkpoint_every must be >= 1");
     }
@@ -415,7 +415,7 @@ where
         && solved(&p.t.real_returns).is_none()
     {
         if store.stop_requested() {
-            return Err(PipelineError::Stopped);
+            return Err(AlgoError::Stopped);
         }
         // One real episode.
         let k = p.t.real_returns.len() as u64;

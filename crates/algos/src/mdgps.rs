@@ -38,7 +38,7 @@ use tandem_planners::{adjust_step_mult, laplace_cost, TrajectorySamples, TvlgCon
 use super::gps::{
     start_locals, Local, LocalConfig, LocalMethod, LocalModel, LocalProblem, PolicyInput,
 };
-use super::{Checkpoints, PipelineError, Result};
+use super::{AlgoError, Checkpoints, Result};
 
 /// How the global policy is fitted each iteration.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -147,13 +147,13 @@ impl MdgpsConfig {
         self.local.validate()?;
         let p = &self.policy;
         if p.epochs == 0 || p.batch_size == 0 || p.hidden.contains(&0) {
-            return Err(PipelineError::Config(format!(
+            return Err(AlgoError::Config(format!(
                 "policy epochs {}, batch_size {} and hidden widths {:?} must be positive",
                 p.epochs, p.batch_size, p.hidden
             )));
         }
         if !(p.learning_rate.is_finite() && p.learning_rate > 0.0) {
-            return Err(PipelineError::Config(format!(
+            return Err(AlgoError::Config(format!(
                 "policy learning_rate {} must be finite and > 0",
                 p.learning_rate
             )));
@@ -161,7 +161,7 @@ impl MdgpsConfig {
         let st = &self.step;
         let contains_one = (0.0..=1.0).contains(&st.min_mult) && st.min_mult > 0.0;
         if !(contains_one && st.max_mult.is_finite() && st.max_mult >= 1.0) {
-            return Err(PipelineError::Config(format!(
+            return Err(AlgoError::Config(format!(
                 "step multipliers [{}, {}] must be finite, positive and contain 1",
                 st.min_mult, st.max_mult
             )));
@@ -253,7 +253,7 @@ impl GlobalPolicy {
     pub fn mean(&self, states: &[f64], ws: &mut MlpWorkspace) -> Result<Vec<f64>> {
         let n = self.state_dim;
         if n == 0 || !states.len().is_multiple_of(n) {
-            return Err(PipelineError::Config(format!(
+            return Err(AlgoError::Config(format!(
                 "{} state values are not rows of {n}",
                 states.len()
             )));
@@ -357,7 +357,7 @@ impl GlobalPolicy {
                     Some(w) => match weighted_mse(&pred, &by, chunk, w, m, &mut d) {
                         l if l.is_finite() => l,
                         _ => {
-                            return Err(PipelineError::Model(ModelError::Diverged {
+                            return Err(AlgoError::Model(ModelError::Diverged {
                                 epoch,
                                 step: batches,
                             }))
@@ -450,7 +450,7 @@ pub fn train_mdgps(
         .any(|x| x.len() != problem.system.state_dim())
         || test.starts.is_empty()
     {
-        return Err(PipelineError::Config(
+        return Err(AlgoError::Config(
             "the test set needs at least one start of the system's state dimension".into(),
         ));
     }
@@ -480,7 +480,7 @@ pub fn train_mdgps(
     let mut prev: Vec<Option<(TvlgController, LocalModel)>> = (0..k).map(|_| None).collect();
     for it in 0..local.iterations {
         if store.stop_requested() {
-            return Err(PipelineError::Stopped);
+            return Err(AlgoError::Stopped);
         }
         let mut batches = Vec::with_capacity(k);
         let mut local_sum = 0.0;
@@ -677,10 +677,10 @@ impl TestSet {
     ) -> Result<f64> {
         let (b, n) = (self.starts.len(), system.state_dim());
         let mut x = Array2::from_shape_vec((b, n), self.starts.concat())
-            .map_err(|e| PipelineError::Config(e.to_string()))?;
+            .map_err(|e| AlgoError::Config(e.to_string()))?;
         for _ in 0..horizon {
             let u = Array2::from_shape_vec((b, system.action_dim()), act(&x)?)
-                .map_err(|e| PipelineError::Config(e.to_string()))?;
+                .map_err(|e| AlgoError::Config(e.to_string()))?;
             x = system
                 .predict(&ModelInput::new(x.view(), u.view()), rng)?
                 .next_states;
@@ -696,8 +696,8 @@ impl TestSet {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipelines::gps::tests::{a, b, cfg, problem, riccati_cost, T};
-    use crate::pipelines::Ephemeral;
+    use crate::gps::tests::{a, b, cfg, problem, riccati_cost, T};
+    use crate::Ephemeral;
     use tandem_planners::{sample_trajectories, SampleConfig};
 
     /// The cost of the global policy's mean actions from `x0` on the exact double integrator.

@@ -1,31 +1,39 @@
-//! The papers' loops, generic over the traits: each composes a plant or environment, a model, a
-//! planner and an agent.
+//! The model-based algorithms of tandem, each generic over the parts it composes (a plant or
+//! environment, a learned model, a planner, an agent), with its settings type and the papers'
+//! settings as named presets.
 //!
-//! | module | paper | loop |
+//! | module | algorithm | loop |
 //! |---|---|---|
-//! | [`p0`] | Rastogi et al., difference models | pre-train on the idealized plant; collect true samples, fit a residual model, retrain on plant + residual |
-//! | [`p1`] | Cong Li, deep incremental model | the MBPO loop with one-step rollouts through the incremental model `s + L_θ(s, a_prev) Δa`, the task's reward |
-//! | [`p2`] | Manglik and Tripathi, model-augmented REINFORCE | N real episodes, then real episodes alternated with episodes imagined by a learned `(s', r, done)` model |
-//! | [`p2_maze`] | the same, DQN from pixels | the same loop for an off-policy agent on p2's maze, with the pixel model; the pixel model's F1 experiment |
-//! | [`dyna`] | (shared) | MBPO-style Dyna: branched rollouts of a learned model from real states, acted by the agent's own batched policy, into the loop's second buffer |
-//! | [`gps`] | Chebotar et al., PILQR (and GPS) | one TVLG controller per condition, improved from its own samples by LQR-FLM, PI² or PILQR |
+//! | [`mbpo`] | Janner et al., MBPO | SAC on the real system; every 250 steps an ensemble refit and branched rollouts of length `k` into `D_model`; `G` updates per step at real ratio 0.05; the SAC baseline on the same loop |
+//! | [`dyna`] | MBPO-style Dyna (shared) | branched rollouts of a learned model from real states, acted by the agent's own batched policy, into the loop's second buffer |
+//! | [`m_demorl`] | Mishra et al., M-DeMoRL (p3) | the MBPO loop with `D_MPC` filled by DMD-MPC plans (CEM elites, SAC's policy as shift, `−V` terminal cost) through the ensemble's elites |
+//! | [`incremental_dyna`] | Cong Li, deep incremental model (p1) | the MBPO loop with one-step rollouts through the incremental model `s + L_θ(s, a_prev) Δa`, the task's reward |
+//! | [`difference_models`] | Rastogi et al., difference models (p0) | pre-train on the idealized plant; collect true samples, fit a residual model, retrain on plant + residual |
+//! | [`imagined_episodes`] | Manglik and Tripathi, model-augmented REINFORCE (p2) | N real episodes, then real episodes alternated with episodes imagined by a learned `(s', r, done)` model |
+//! | [`imagined_pixels`] | the same, DQN from pixels (p2) | the same loop for an off-policy agent on p2's maze, with the pixel model; the pixel model's F1 experiment |
+//! | [`gps`] | Chebotar et al., PILQR (and GPS; p4) | one TVLG controller per condition, improved from its own samples by LQR-FLM, PI² or PILQR |
 //! | [`mdgps`] | Montgomery and Levine, MDGPS (p4 §IV) | a neural global policy regressed onto the local controllers, each updated under a KL bound to the linearized global policy |
-//! | [`mbpo`] | Janner et al., MBPO (shared) | SAC on the real system; every 250 steps an ensemble refit and branched rollouts of length `k` into `D_model`; `G` updates per step at real ratio 0.05; the SAC baseline on the same loop |
-//! | [`p3`] | Mishra et al., M-DeMoRL | the MBPO loop with `D_MPC` filled by DMD-MPC plans (CEM elites, SAC's policy as shift, `−V` terminal cost) through the ensemble's elites |
-//! | [`p4`] | Chebotar et al., PILQR | the gripper pusher's, the door's and the reacher's conditions and costs on MuJoCo for [`gps`] and [`mdgps`]; DDPG on the reacher, measured on the same test targets |
-//! | [`adapter`] | (shared) | observation features, reward scale and settable exploration noise in front of any off-policy agent |
+//! | [`manipulation`] | p4's tasks | the gripper pusher's, the door's and the reacher's conditions and costs on MuJoCo for [`gps`] and [`mdgps`]; DDPG on the reacher, measured on the same test targets |
+//!
+//! A long run saves itself in a [`Checkpoints`] store and polls it for stop requests: the
+//! `tandem` program keeps checkpoints as files, [`InMemory`] keeps them in memory, [`Ephemeral`]
+//! keeps none. A resumed run gives exactly the numbers of an uninterrupted one.
+//!
+//! Dependencies: the workspace crates it composes; `nalgebra` and `ndarray` (the controllers'
+//! matrices and batched states), `rand` (seeded sampling), `serde` (settings, records and
+//! checkpoint payloads), `thiserror` (the error type), `toml` (p2's maze reads the DQN preset it
+//! shares with `tandem train`).
 
-pub mod adapter;
+pub mod difference_models;
 pub mod dyna;
 pub mod gps;
+pub mod imagined_episodes;
+pub mod imagined_pixels;
+pub mod incremental_dyna;
+pub mod m_demorl;
+pub mod manipulation;
 pub mod mbpo;
 pub mod mdgps;
-pub mod p0;
-pub mod p1;
-pub mod p2;
-pub mod p2_maze;
-pub mod p3;
-pub mod p4;
 
 use tandem_agents::AgentError;
 use tandem_envs::EnvError;
@@ -33,9 +41,9 @@ use tandem_models::ModelError;
 use tandem_nn::{Checkpoint, NnError};
 use tandem_planners::PlanError;
 
-/// Why a pipeline stopped.
+/// Why an algorithm stopped.
 #[derive(Debug, thiserror::Error)]
-pub enum PipelineError {
+pub enum AlgoError {
     /// The agent failed (bad configuration, non-finite loss, ...).
     #[error("agent: {0}")]
     Agent(#[from] AgentError),
@@ -67,7 +75,7 @@ pub enum PipelineError {
 pub fn box_bounds(space: &tandem_core::Space, needs: &str) -> Result<(Vec<f64>, Vec<f64>)> {
     match space {
         tandem_core::Space::Box { low, high, .. } => Ok((low.clone(), high.clone())),
-        tandem_core::Space::Discrete { .. } => Err(PipelineError::Config(format!(
+        tandem_core::Space::Discrete { .. } => Err(AlgoError::Config(format!(
             "{needs} a continuous (box) action space"
         ))),
     }
@@ -75,24 +83,24 @@ pub fn box_bounds(space: &tandem_core::Space, needs: &str) -> Result<(Vec<f64>, 
 
 /// What a checkpoint read can fail with (unreadable, a tensor missing, a tensor of the wrong
 /// shape or type) is a checkpoint error; what only computing can fail with (non-finite numbers, a
-/// bad setting, candle) is [`PipelineError::Network`].
-impl From<NnError> for PipelineError {
+/// bad setting, candle) is [`AlgoError::Network`].
+impl From<NnError> for AlgoError {
     fn from(e: NnError) -> Self {
         match e {
-            NnError::Checkpoint(what) => PipelineError::Checkpoint(what),
+            NnError::Checkpoint(what) => AlgoError::Checkpoint(what),
             NnError::MissingTensor(_) | NnError::ShapeMismatch { .. } => {
-                PipelineError::Checkpoint(e.to_string())
+                AlgoError::Checkpoint(e.to_string())
             }
             NnError::NonFinite { .. }
             | NnError::InvalidConfig(_)
             | NnError::NoTape(_)
-            | NnError::Candle(_) => PipelineError::Network(e),
+            | NnError::Candle(_) => AlgoError::Network(e),
         }
     }
 }
 
-/// Result of the pipelines.
-pub type Result<T> = std::result::Result<T, PipelineError>;
+/// Result of the algorithms.
+pub type Result<T> = std::result::Result<T, AlgoError>;
 
 /// Where a long pipeline keeps its checkpoints, and how it learns that it should stop: the
 /// `tandem` program keeps them as files in the run directory and stops on SIGINT/SIGTERM;
@@ -105,7 +113,7 @@ pub trait Checkpoints {
     fn load(&mut self, key: &str) -> Result<Option<Checkpoint>>;
     /// Saves `ckpt` under `key`, replacing the previous one only once it is complete.
     fn save(&mut self, key: &str, ckpt: &Checkpoint) -> Result<()>;
-    /// Whether to stop now; the pipeline then returns [`PipelineError::Stopped`].
+    /// Whether to stop now; the pipeline then returns [`AlgoError::Stopped`].
     fn stop_requested(&self) -> bool {
         false
     }
@@ -116,7 +124,7 @@ pub fn ensure_same_run(saved: (&str, u64), this: (&str, u64)) -> Result<()> {
     if saved == this {
         return Ok(());
     }
-    Err(PipelineError::Checkpoint(format!(
+    Err(AlgoError::Checkpoint(format!(
         "the checkpoint is {} seed {}'s, not {} seed {}'s",
         saved.0, saved.1, this.0, this.1
     )))
@@ -128,7 +136,7 @@ pub fn ensure_same_run(saved: (&str, u64), this: (&str, u64)) -> Result<()> {
 /// the flag from the run's event callback) and resumes it from the same store.
 ///
 /// ```
-/// use tandem::pipelines::{Checkpoints, InMemory};
+/// use tandem_algos::{Checkpoints, InMemory};
 /// use tandem_nn::Checkpoint;
 ///
 /// let mut store = InMemory::default();
@@ -203,21 +211,21 @@ mod tests {
             .files
             .insert("run".into(), b"not safetensors".to_vec());
         let e = store.load("run").unwrap_err();
-        assert!(matches!(e, PipelineError::Checkpoint(_)), "{e}");
-        let missing = PipelineError::from(NnError::MissingTensor("actor.w0".into()));
-        assert!(matches!(missing, PipelineError::Checkpoint(_)), "{missing}");
-        let shape = PipelineError::from(NnError::ShapeMismatch {
+        assert!(matches!(e, AlgoError::Checkpoint(_)), "{e}");
+        let missing = AlgoError::from(NnError::MissingTensor("actor.w0".into()));
+        assert!(matches!(missing, AlgoError::Checkpoint(_)), "{missing}");
+        let shape = AlgoError::from(NnError::ShapeMismatch {
             what: "actor.w0".into(),
             expected: "[256, 17]".into(),
             got: "[256, 11]".into(),
         });
-        assert!(matches!(shape, PipelineError::Checkpoint(_)), "{shape}");
+        assert!(matches!(shape, AlgoError::Checkpoint(_)), "{shape}");
 
-        let e = PipelineError::from(NnError::NonFinite {
+        let e = AlgoError::from(NnError::NonFinite {
             what: "critic loss".into(),
             index: 0,
         });
-        assert!(matches!(e, PipelineError::Network(_)), "{e}");
+        assert!(matches!(e, AlgoError::Network(_)), "{e}");
         assert_eq!(
             e.to_string(),
             "network: non-finite value in critic loss (first at flat index 0)"

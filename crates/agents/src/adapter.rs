@@ -4,10 +4,10 @@
 //! more noise for learning from scratch than for fine-tuning). The environment, the replay buffer
 //! and every reported return stay in the task's units.
 
-use serde::{Deserialize, Serialize};
-use tandem_agents::{
+use crate::{
     Agent, AgentError, Batch, Metrics, Mode, Noise, NoiseConfig, OffPolicyAgent, Result, Resumable,
 };
+use serde::{Deserialize, Serialize};
 use tandem_core::{Action, Rng, Space};
 use tandem_nn::Checkpoint;
 
