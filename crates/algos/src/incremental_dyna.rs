@@ -23,7 +23,7 @@
 //! Algorithm 1.
 
 use serde::{Deserialize, Serialize};
-use tandem_agents::{OffPolicyLoop, Sac};
+use tandem_agents::{BatchPolicy, OffPolicyAgent, OffPolicyLoop};
 use tandem_core::{LinearSchedule, Rng};
 use tandem_envs::{Env, EnvError, Task};
 use tandem_models::{
@@ -135,10 +135,10 @@ impl Imagination for IncrementalRollouts {
     }
 }
 
-impl<T: Task> Imagine<T> for IncrementalRollouts {
+impl<T: Task, A: OffPolicyAgent + BatchPolicy> Imagine<T, A> for IncrementalRollouts {
     fn imagine(
         &mut self,
-        lp: &mut OffPolicyLoop<Sac>,
+        lp: &mut OffPolicyLoop<A>,
         model: Option<&mut IncrementalModel>,
         task: &T,
         data: &Transitions,

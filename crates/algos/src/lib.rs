@@ -25,6 +25,7 @@
 //! shares with `tandem train`).
 
 pub mod difference_models;
+pub mod driver;
 pub mod dyna;
 pub mod gps;
 pub mod imagined_episodes;

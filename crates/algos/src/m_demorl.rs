@@ -294,7 +294,7 @@ impl Imagination for MpcPlans {
     }
 }
 
-impl<T: Task + Clone + Send + Sync + 'static> Imagine<T> for MpcPlans {
+impl<T: Task + Clone + Send + Sync + 'static> Imagine<T, Sac> for MpcPlans {
     fn imagine(
         &mut self,
         lp: &mut OffPolicyLoop<Sac>,

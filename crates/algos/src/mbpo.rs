@@ -30,15 +30,16 @@
 //!
 //! `examples/mbpo.rs` runs it on Pendulum-v1 ([`MbpoConfig::pendulum`]).
 
-use std::time::Instant;
-
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
-use tandem_agents::{evaluate, EpisodeRunner, OffPolicyLoop, Sac, SacConfig, StepOptions};
-use tandem_core::{CurvePoint, LinearSchedule, Rng, SeedStream};
+use tandem_agents::{
+    evaluate, BatchPolicy, EpisodeRunner, OffPolicyAgent, OffPolicyLoop, Resumable, Sac, SacConfig,
+    StepOptions,
+};
+use tandem_core::{CurvePoint, LinearSchedule, Rng, SeedStream, Space};
 use tandem_dynamics::classic::GymPendulumParams;
 use tandem_envs::{
-    Env, EnvError, Leg2REnv, Leg2RModel, Leg2RTask, PendulumTask, SampleCounter, Task,
+    Env, EnvError, Leg2REnv, Leg2RModel, Leg2RTask, PendulumTask, SampleCount, SampleCounter, Task,
 };
 use tandem_models::{
     DynamicsModel, EnsembleConfig, FitConfig, Judge, Judges, ProbabilisticEnsemble, Propagation,
@@ -46,6 +47,7 @@ use tandem_models::{
 };
 use tandem_nn::{Checkpoint, Checkpointable};
 
+use super::driver::{drive, timed, Algorithm};
 use super::dyna::{imagine, sample_starts};
 use super::{AlgoError, Checkpoints, Result};
 
@@ -516,15 +518,15 @@ pub(crate) fn fitted<'a, M>(model: Option<&'a mut M>, method: &str) -> Result<&'
     model.ok_or_else(|| AlgoError::Config(format!("{method}: the loop passed no fitted model")))
 }
 
-/// Fills the loop's secondary buffer for a task `T`.
-pub trait Imagine<T: Task>: Imagination {
+/// Fills the loop's secondary buffer for a task `T` and an agent `A`.
+pub trait Imagine<T: Task, A>: Imagination {
     /// Fills the secondary buffer after a refit during `epoch`; returns how many transitions
     /// it stored. `model` is the one [`Imagination::new_model`] made, just refitted; `data` are
     /// all real transitions (canonical states); `seed` is this refit's.
     #[allow(clippy::too_many_arguments)]
     fn imagine(
         &mut self,
-        lp: &mut OffPolicyLoop<Sac>,
+        lp: &mut OffPolicyLoop<A>,
         model: Option<&mut Self::Model>,
         task: &T,
         data: &Transitions,
@@ -594,10 +596,10 @@ impl Imagination for Rollouts {
     }
 }
 
-impl<T: Task> Imagine<T> for Rollouts {
+impl<T: Task, A: OffPolicyAgent + BatchPolicy> Imagine<T, A> for Rollouts {
     fn imagine(
         &mut self,
-        lp: &mut OffPolicyLoop<Sac>,
+        lp: &mut OffPolicyLoop<A>,
         model: Option<&mut ProbabilisticEnsemble>,
         task: &T,
         data: &Transitions,
@@ -615,11 +617,11 @@ impl Rollouts {
     /// `M × per_refit` rollouts of the epoch's length `k` through `model` from real states drawn
     /// uniformly from `data`, acted by SAC, stored in the loop's secondary buffer.
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn through<T: Task, M: DynamicsModel + ?Sized>(
+    pub(crate) fn through<T: Task, M: DynamicsModel + ?Sized, A: OffPolicyAgent + BatchPolicy>(
         &self,
         model: &M,
         judges: &Judges,
-        lp: &mut OffPolicyLoop<Sac>,
+        lp: &mut OffPolicyLoop<A>,
         task: &T,
         data: &Transitions,
         epoch: u64,
@@ -674,10 +676,12 @@ impl<M> Imagination for OracleRollouts<M> {
     }
 }
 
-impl<T: Task, M: DynamicsModel> Imagine<T> for OracleRollouts<M> {
+impl<T: Task, A: OffPolicyAgent + BatchPolicy, M: DynamicsModel> Imagine<T, A>
+    for OracleRollouts<M>
+{
     fn imagine(
         &mut self,
-        lp: &mut OffPolicyLoop<Sac>,
+        lp: &mut OffPolicyLoop<A>,
         _model: Option<&mut NoModel>,
         task: &T,
         data: &Transitions,
@@ -738,11 +742,53 @@ where
     run_with::<T, F, Rollouts>(problem, cfg, seed, None, store, on_event)
 }
 
-/// Where a run stands at a checkpoint, besides the agent, its loop, the model and its data.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-struct Progress {
-    method: String,
+/// [`Mbpo`] with SAC as `cfg.sac` sets it, driven to its end by [`drive`]: the loop every method
+/// of this module, [`super::m_demorl`] and [`super::incremental_dyna`] runs.
+pub fn run_with<T: Task, F, I: Imagine<T, Sac>>(
+    problem: &Problem<T, F>,
+    cfg: &MbpoConfig,
     seed: u64,
+    imagination: Option<&mut I>,
+    store: &mut dyn Checkpoints,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<RunRecord>
+where
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    cfg.validate()?;
+    let algo = Mbpo::new(problem, cfg, imagination, seed, |obs, act| {
+        let seeds = SeedStream::new(seed);
+        Ok(Sac::new(cfg.sac.clone(), obs, act, seeds.derive("agent"))?)
+    })?;
+    drive(algo, store, on_event)
+}
+
+/// One run of MBPO's loop (Janner et al., Algorithm 2) as one checkpointable value, stepped one
+/// real step at a time by [`drive`]: the agent and its two replay buffers (`D_env`, and `D_model`
+/// where an imagination fills it), the model, the real transitions in the task's canonical
+/// states, the generators, the counters and the episode in progress. With no imagination it is
+/// the model-free baseline on the same loop.
+pub struct Mbpo<'a, T, F, A, I: Imagination> {
+    problem: &'a Problem<T, F>,
+    cfg: &'a MbpoConfig,
+    imagination: Option<&'a mut I>,
+    seeds: SeedStream,
+    seed: u64,
+    lp: OffPolicyLoop<A>,
+    model: Option<I::Model>,
+    env: SampleCounter<Box<dyn Env>>,
+    count: SampleCount,
+    eval_env: Box<dyn Env>,
+    /// `D_env` in the task's canonical states, for the model: `stored` up to the last refit or
+    /// checkpoint, `pending` since.
+    stored: Transitions,
+    pending: TransitionsBuilder,
+    s: State,
+}
+
+/// Where a run stands, besides the agent, its loop, the model and the real transitions.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct State {
     real_steps: u64,
     curve: Vec<CurvePoint>,
     horizons: Vec<usize>,
@@ -753,242 +799,299 @@ struct Progress {
     runner: EpisodeRunner,
     env_state: Option<Vec<f64>>,
     rng: Rng,
-    /// Time spent up to this checkpoint, so a resumed run reports its whole cost.
-    #[serde(default)]
     seconds: Seconds,
 }
 
-/// Seconds a run spent, in total and in its parts.
+/// Seconds a run spent in its parts.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 struct Seconds {
-    wall: f64,
     updates: f64,
     fit: f64,
     imagine: f64,
 }
 
-const PROGRESS: &str = "mbpo.progress";
+const STATE: &str = "mbpo.state";
 const LOOP: &str = "mbpo.loop";
 const MODEL: &str = "mbpo.model";
 const DATA: &str = "mbpo.data";
 
-/// The loop every method of this module and [`super::m_demorl`] runs: SAC on the real system, with
-/// `imagination` (none: SAC alone) filling the secondary buffer after each refit of the
-/// ensemble. See the module docs.
-pub fn run_with<T: Task, F, I: Imagine<T>>(
-    problem: &Problem<T, F>,
-    cfg: &MbpoConfig,
-    seed: u64,
-    mut imagination: Option<&mut I>,
-    store: &mut dyn Checkpoints,
-    on_event: &mut dyn FnMut(Event),
-) -> Result<RunRecord>
+impl<'a, T, F, A, I> Mbpo<'a, T, F, A, I>
 where
+    T: Task,
     F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+    A: OffPolicyAgent + BatchPolicy + Resumable,
+    I: Imagine<T, A>,
 {
-    cfg.validate()?;
-    let t0 = Instant::now();
-    let task = &problem.task;
-    let name = imagination.as_ref().map_or("sac", |i| i.name());
-    let seeds = SeedStream::new(seed);
-    let mut eval_env = (problem.env)()?;
-    let (obs_space, act_space) = (
-        task.observation_space().clone(),
-        task.action_space().clone(),
-    );
-    for (what, task_space, env_space) in [
-        ("observation", &obs_space, eval_env.observation_space()),
-        ("action", &act_space, eval_env.action_space()),
-    ] {
-        if task_space.flat_dim() != env_space.flat_dim() {
-            return Err(AlgoError::Config(format!(
-                "the task's {what} space has {} components, the real system's {}",
-                task_space.flat_dim(),
-                env_space.flat_dim()
-            )));
-        }
-    }
-    let agent = Sac::new(
-        cfg.sac.clone(),
-        &obs_space,
-        &act_space,
-        seeds.derive("agent"),
-    )?;
-    let schedule = cfg.sac.schedule();
-    let mut lp = OffPolicyLoop::new(
-        agent,
-        schedule,
-        &obs_space,
-        &act_space,
-        seeds.rng("minibatches"),
-    )?;
-    let capacity0 = imagination.as_ref().map_or(0, |i| i.capacity(cfg, 0));
-    if imagination.is_some() {
-        lp = lp.with_secondary(capacity0, cfg.real_ratio)?;
-    }
-    let (s_dim, u_dim) = (task.state_dim(), tandem_envs::control_dim(task));
-    let mut model = match imagination.as_deref() {
-        Some(i) => i.new_model(cfg, s_dim, u_dim, seeds.derive("model"))?,
-        None => None,
-    };
-    let mut all = Transitions::default();
-    let eval = |agent: &mut Sac, env: &mut dyn Env| -> Result<f64> {
-        let r = evaluate(agent, env, cfg.eval_episodes, &seeds, None)?;
-        Ok(r.iter().sum::<f64>() / r.len() as f64)
-    };
-    let mut p = match store.load(name)? {
-        Some(ckpt) => {
-            let p: Progress = ckpt.get_json(PROGRESS)?;
-            super::ensure_same_run((&p.method, p.seed), (name, seed))?;
-            lp.agent.load(&ckpt)?;
-            if imagination.is_some() {
-                lp.resize_secondary(p.capacity)?;
+    /// A fresh run for `seed` on `problem` with the agent `agent(observation space, action
+    /// space)` and `imagination` filling `D_model` (none: the agent alone on real data).
+    pub fn new(
+        problem: &'a Problem<T, F>,
+        cfg: &'a MbpoConfig,
+        imagination: Option<&'a mut I>,
+        seed: u64,
+        agent: impl FnOnce(&Space, &Space) -> Result<A>,
+    ) -> Result<Self> {
+        cfg.validate()?;
+        let task = &problem.task;
+        let seeds = SeedStream::new(seed);
+        let eval_env = (problem.env)()?;
+        let (obs_space, act_space) = (task.observation_space(), task.action_space());
+        for (what, task_space, env_space) in [
+            ("observation", obs_space, eval_env.observation_space()),
+            ("action", act_space, eval_env.action_space()),
+        ] {
+            if task_space.flat_dim() != env_space.flat_dim() {
+                return Err(AlgoError::Config(format!(
+                    "the task's {what} space has {} components, the real system's {}",
+                    task_space.flat_dim(),
+                    env_space.flat_dim()
+                )));
             }
-            lp.load(LOOP, &ckpt)?;
-            if let Some(m) = model.as_mut() {
-                m.load_from(MODEL, &ckpt)?;
-            }
-            all.load_from(DATA, &ckpt)?;
-            p
         }
-        None => Progress {
-            method: name.to_string(),
+        let agent = agent(obs_space, act_space)?;
+        let mut lp = OffPolicyLoop::new(
+            agent,
+            cfg.sac.schedule(),
+            obs_space,
+            act_space,
+            seeds.rng("minibatches"),
+        )?;
+        let capacity = imagination.as_ref().map_or(0, |i| i.capacity(cfg, 0));
+        if imagination.is_some() {
+            lp = lp.with_secondary(capacity, cfg.real_ratio)?;
+        }
+        let (s_dim, u_dim) = (task.state_dim(), tandem_envs::control_dim(task));
+        let model = match imagination.as_deref() {
+            Some(i) => i.new_model(cfg, s_dim, u_dim, seeds.derive("model"))?,
+            None => None,
+        };
+        let (env, count) = SampleCounter::new((problem.env)()?);
+        Ok(Self {
+            problem,
+            cfg,
+            imagination,
+            seeds,
             seed,
-            real_steps: 0,
-            curve: vec![CurvePoint {
-                true_samples: 0,
-                eval_return: eval(&mut lp.agent, eval_env.as_mut())?,
-            }],
-            horizons: Vec::new(),
-            fit_losses: Vec::new(),
-            imagined: 0,
-            refits: 0,
-            capacity: capacity0,
-            runner: EpisodeRunner::new(seeds.derive("episodes"), "episode-"),
-            env_state: None,
-            rng: seeds.rng("imagination"),
-            seconds: Seconds::default(),
-        },
-    };
-    let (mut env, count) = SampleCounter::starting_at((problem.env)()?, p.real_steps);
-    if let Some(state) = &p.env_state {
-        env.set_state(state)?;
+            lp,
+            model,
+            env,
+            count,
+            eval_env,
+            stored: Transitions::default(),
+            pending: TransitionsBuilder::new(s_dim, u_dim),
+            s: State {
+                real_steps: 0,
+                curve: Vec::new(),
+                horizons: Vec::new(),
+                fit_losses: Vec::new(),
+                imagined: 0,
+                refits: 0,
+                capacity,
+                runner: EpisodeRunner::new(seeds.derive("episodes"), "episode-"),
+                env_state: None,
+                rng: seeds.rng("imagination"),
+                seconds: Seconds::default(),
+            },
+        })
     }
-    let mut pending = TransitionsBuilder::new(s_dim, u_dim);
-    // Time before this process: what the checkpoint recorded.
-    let before = p.seconds;
-    let opts = StepOptions::real().recording_states().without_updates();
-    while count.get() < cfg.real_steps {
-        if store.stop_requested() {
-            return Err(AlgoError::Stopped);
-        }
-        let rec = lp.step(&mut env, &mut p.runner, opts)?;
-        let t = count.get();
-        on_event(Event::Step { real_steps: t });
-        if let Some(imagination) = imagination.as_deref_mut() {
-            let (x, x1) = rec.states.as_ref().expect("recorded");
-            let u = task.control(&rec.action);
-            pending.push_canonical(task, x, &u, x1, rec.reward, rec.terminated, rec.done())?;
-            if t % cfg.model_train_freq == 0 && t >= cfg.sac.learning_starts as u64 {
-                flush(&mut all, &mut pending, (s_dim, u_dim))?;
-                let epoch = cfg.epoch_of(t);
-                let mut loss = None;
-                if let Some(model) = model.as_mut() {
-                    let fit = cfg.fit_for(all.len(), seeds.derive(&format!("fit-{}", p.refits)));
-                    let f0 = Instant::now();
-                    let report = model.fit(&all, &fit)?;
-                    p.seconds.fit += f0.elapsed().as_secs_f64();
-                    loss = Some(report.holdout_loss.last().copied().unwrap_or(f64::NAN));
-                }
-                let capacity = imagination.capacity(cfg, epoch);
-                if capacity != p.capacity {
-                    lp.resize_secondary(capacity)?;
-                    p.capacity = capacity;
-                }
-                let plan_seed = seeds.derive(&format!("imagine-{}", p.refits));
-                let i0 = Instant::now();
-                let n = imagination.imagine(
-                    &mut lp,
-                    model.as_mut(),
-                    task,
-                    &all,
-                    epoch,
-                    plan_seed,
-                    &mut p.rng,
-                )?;
-                p.seconds.imagine += i0.elapsed().as_secs_f64();
-                p.refits += 1;
-                p.imagined += n as u64;
-                p.fit_losses.extend(loss);
-                p.horizons.push(imagination.horizon(epoch));
-                on_event(Event::Fit {
-                    real_steps: t,
-                    holdout_loss: loss.unwrap_or(f64::NAN),
-                    imagined: n as u64,
-                });
-            }
-        }
-        if lp.primary().len() > cfg.sac.learning_starts {
-            let u0 = Instant::now();
-            lp.update(cfg.updates_per_step)?;
-            p.seconds.updates += u0.elapsed().as_secs_f64();
-        }
-        if t % cfg.eval_every == 0 {
-            let point = CurvePoint {
-                true_samples: t,
-                eval_return: eval(&mut lp.agent, eval_env.as_mut())?,
-            };
-            p.curve.push(point);
-            on_event(Event::Eval(point));
-        }
-        if t % cfg.checkpoint_every == 0 {
-            flush(&mut all, &mut pending, (s_dim, u_dim))?;
-            p.real_steps = t;
-            p.seconds.wall = before.wall + t0.elapsed().as_secs_f64();
-            p.env_state = p.runner.in_episode().then(|| env.state());
-            let mut ckpt = Checkpoint::new();
-            lp.agent.save(&mut ckpt)?;
-            lp.save(LOOP, &mut ckpt)?;
-            if let Some(m) = model.as_ref() {
-                m.save_to(MODEL, &mut ckpt)?;
-            }
-            all.save_to(DATA, &mut ckpt)?;
-            ckpt.put_json(PROGRESS, &p)?;
-            store.save(name, &ckpt)?;
-        }
+
+    /// The deterministic policy's mean return over `eval_episodes` on the evaluation copy.
+    fn evaluate(&mut self) -> Result<f64> {
+        let r = evaluate(
+            &mut self.lp.agent,
+            self.eval_env.as_mut(),
+            self.cfg.eval_episodes,
+            &self.seeds,
+            None,
+        )?;
+        Ok(r.iter().sum::<f64>() / r.len() as f64)
     }
-    Ok(RunRecord {
-        method: name.to_string(),
-        seed,
-        curve: p.curve,
-        real_steps: count.get(),
-        imagined: p.imagined,
-        horizons: p.horizons,
-        fit_holdout_loss: p.fit_losses,
-        updates: lp.counts().updates,
-        update_seconds: p.seconds.updates,
-        fit_seconds: p.seconds.fit,
-        imagine_seconds: p.seconds.imagine,
-        wall_seconds: before.wall + t0.elapsed().as_secs_f64(),
-    })
+
+    /// Moves the real transitions gathered since the last call into `stored`.
+    fn flush(&mut self) -> Result<()> {
+        if self.pending.is_empty() {
+            return Ok(());
+        }
+        let (s, u) = self.stored_dims();
+        let new = std::mem::replace(&mut self.pending, TransitionsBuilder::new(s, u)).build();
+        if self.stored.is_empty() {
+            self.stored = new;
+        } else {
+            self.stored.extend(&new)?;
+        }
+        Ok(())
+    }
+
+    fn stored_dims(&self) -> (usize, usize) {
+        let task = &self.problem.task;
+        (task.state_dim(), tandem_envs::control_dim(task))
+    }
+
+    /// Trains the model on `D_env`, then lets the imagination fill `D_model` (MBPO: `M`
+    /// branched rollouts per real step, `k` steps each, from real states).
+    fn refit_and_imagine(&mut self, t: u64, on_event: &mut dyn FnMut(Event)) -> Result<()> {
+        self.flush()?;
+        let Some(imagination) = self.imagination.as_deref_mut() else {
+            return Ok(());
+        };
+        let (cfg, s) = (self.cfg, &mut self.s);
+        let epoch = cfg.epoch_of(t);
+        let mut loss = None;
+        if let Some(model) = self.model.as_mut() {
+            let fit = cfg.fit_for(
+                self.stored.len(),
+                self.seeds.derive(&format!("fit-{}", s.refits)),
+            );
+            let report = timed(&mut s.seconds.fit, || model.fit(&self.stored, &fit))?;
+            loss = Some(report.holdout_loss.last().copied().unwrap_or(f64::NAN));
+        }
+        let capacity = imagination.capacity(cfg, epoch);
+        if capacity != s.capacity {
+            self.lp.resize_secondary(capacity)?;
+            s.capacity = capacity;
+        }
+        let seed = self.seeds.derive(&format!("imagine-{}", s.refits));
+        let n = timed(&mut s.seconds.imagine, || {
+            imagination.imagine(
+                &mut self.lp,
+                self.model.as_mut(),
+                &self.problem.task,
+                &self.stored,
+                epoch,
+                seed,
+                &mut s.rng,
+            )
+        })?;
+        s.refits += 1;
+        s.imagined += n as u64;
+        s.fit_losses.extend(loss);
+        s.horizons.push(imagination.horizon(epoch));
+        on_event(Event::Fit {
+            real_steps: t,
+            holdout_loss: loss.unwrap_or(f64::NAN),
+            imagined: n as u64,
+        });
+        Ok(())
+    }
 }
 
-/// Moves the transitions gathered since the last flush into `all`.
-fn flush(
-    all: &mut Transitions,
-    pending: &mut TransitionsBuilder,
-    dims: (usize, usize),
-) -> Result<()> {
-    if pending.is_empty() {
-        return Ok(());
+impl<T, F, A, I> Algorithm for Mbpo<'_, T, F, A, I>
+where
+    T: Task,
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+    A: OffPolicyAgent + BatchPolicy + Resumable,
+    I: Imagine<T, A>,
+{
+    type Event = Event;
+    type Record = RunRecord;
+
+    fn id(&self) -> (&str, u64) {
+        let name = self.imagination.as_ref().map_or("sac", |i| i.name());
+        (name, self.seed)
     }
-    let new = std::mem::replace(pending, TransitionsBuilder::new(dims.0, dims.1)).build();
-    if all.is_empty() {
-        *all = new;
-    } else {
-        all.extend(&new)?;
+
+    fn start(&mut self, _on_event: &mut dyn FnMut(Event)) -> Result<()> {
+        let eval_return = self.evaluate()?;
+        self.s.curve.push(CurvePoint {
+            true_samples: 0,
+            eval_return,
+        });
+        Ok(())
     }
-    Ok(())
+
+    fn done(&self) -> bool {
+        self.count.get() >= self.cfg.real_steps
+    }
+
+    fn step(&mut self, on_event: &mut dyn FnMut(Event)) -> Result<bool> {
+        let (cfg, task) = (self.cfg, &self.problem.task);
+        // Act in the real system with the exploring policy; the transition goes into D_env.
+        let opts = StepOptions::real().recording_states().without_updates();
+        let rec = self.lp.step(&mut self.env, &mut self.s.runner, opts)?;
+        let t = self.count.get();
+        on_event(Event::Step { real_steps: t });
+        if self.imagination.is_some() {
+            let (x, x1) = rec.states.as_ref().expect("recorded");
+            let u = task.control(&rec.action);
+            let done = rec.done();
+            self.pending
+                .push_canonical(task, x, &u, x1, rec.reward, rec.terminated, done)?;
+            if t.is_multiple_of(cfg.model_train_freq) && t >= cfg.sac.learning_starts as u64 {
+                self.refit_and_imagine(t, on_event)?;
+            }
+        }
+        // G updates on minibatches mixing D_env and D_model.
+        if self.lp.primary().len() > cfg.sac.learning_starts {
+            let lp = &mut self.lp;
+            timed(&mut self.s.seconds.updates, || {
+                lp.update(cfg.updates_per_step)
+            })?;
+        }
+        if t.is_multiple_of(cfg.eval_every) {
+            let point = CurvePoint {
+                true_samples: t,
+                eval_return: self.evaluate()?,
+            };
+            self.s.curve.push(point);
+            on_event(Event::Eval(point));
+        }
+        let checkpoint = t.is_multiple_of(cfg.checkpoint_every);
+        if checkpoint {
+            self.flush()?;
+            self.s.real_steps = t;
+            self.s.env_state = self.s.runner.in_episode().then(|| self.env.state());
+        }
+        Ok(checkpoint)
+    }
+
+    fn save(&self, ckpt: &mut Checkpoint) -> Result<()> {
+        self.lp.agent.save(ckpt)?;
+        self.lp.save(LOOP, ckpt)?;
+        if let Some(m) = self.model.as_ref() {
+            m.save_to(MODEL, ckpt)?;
+        }
+        self.stored.save_to(DATA, ckpt)?;
+        ckpt.put_json(STATE, &self.s)?;
+        Ok(())
+    }
+
+    fn load(&mut self, ckpt: &Checkpoint) -> Result<()> {
+        self.s = ckpt.get_json(STATE)?;
+        self.lp.agent.load(ckpt)?;
+        if self.imagination.is_some() {
+            self.lp.resize_secondary(self.s.capacity)?;
+        }
+        self.lp.load(LOOP, ckpt)?;
+        if let Some(m) = self.model.as_mut() {
+            m.load_from(MODEL, ckpt)?;
+        }
+        self.stored.load_from(DATA, ckpt)?;
+        (self.env, self.count) =
+            SampleCounter::starting_at((self.problem.env)()?, self.s.real_steps);
+        if let Some(state) = &self.s.env_state {
+            self.env.set_state(state)?;
+        }
+        Ok(())
+    }
+
+    fn finish(self, wall_seconds: f64) -> Result<RunRecord> {
+        let (method, seed) = self.id();
+        let method = method.to_string();
+        Ok(RunRecord {
+            method,
+            seed,
+            real_steps: self.count.get(),
+            updates: self.lp.counts().updates,
+            curve: self.s.curve,
+            imagined: self.s.imagined,
+            horizons: self.s.horizons,
+            fit_holdout_loss: self.s.fit_losses,
+            update_seconds: self.s.seconds.updates,
+            fit_seconds: self.s.seconds.fit,
+            imagine_seconds: self.s.seconds.imagine,
+            wall_seconds,
+        })
+    }
 }
 
 /// Observations of the rows of `states` under `task` (`B x O`).

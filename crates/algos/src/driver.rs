@@ -1,0 +1,113 @@
+//! The one resumable driver: every algorithm of this crate is a value holding its whole state
+//! (agent, model, buffers, generators, counters, the episode in progress) that [`drive`] steps
+//! until it is done. The driver owns the bookkeeping the algorithms share: restoring a saved
+//! run (refusing another run's checkpoint), stop requests, checkpoints when the algorithm says
+//! one is due, and the wall time summed over every process that ran it.
+//!
+//! An algorithm's [`Algorithm::step`] is then its paper's loop body and nothing else. Equal
+//! runs save equal bytes, and a resumed run gives exactly the numbers of an uninterrupted one:
+//! an algorithm saves everything its later steps read.
+
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+use tandem_nn::Checkpoint;
+
+use crate::{AlgoError, Checkpoints, Result};
+
+/// A run of an algorithm as one checkpointable value.
+pub trait Algorithm {
+    /// What it reports as it goes.
+    type Event;
+    /// What a finished run returns.
+    type Record;
+
+    /// The method's name (the checkpoint's key) and the run's seed.
+    fn id(&self) -> (&str, u64);
+
+    /// Work done before the first step of a fresh run (e.g. evaluating the initial policy);
+    /// skipped when the run resumes from a checkpoint.
+    fn start(&mut self, _on_event: &mut dyn FnMut(Self::Event)) -> Result<()> {
+        Ok(())
+    }
+
+    /// Whether the run is done.
+    fn done(&self) -> bool;
+
+    /// One unit of work (a real step, an episode, an iteration); `Ok(true)` when a checkpoint
+    /// is due after it.
+    fn step(&mut self, on_event: &mut dyn FnMut(Self::Event)) -> Result<bool>;
+
+    /// Writes the whole state into `ckpt`.
+    fn save(&self, ckpt: &mut Checkpoint) -> Result<()>;
+
+    /// Restores what [`Algorithm::save`] wrote.
+    fn load(&mut self, ckpt: &Checkpoint) -> Result<()>;
+
+    /// The record of the finished run; `wall_seconds` is its wall time over every process that
+    /// ran it.
+    fn finish(self, wall_seconds: f64) -> Result<Self::Record>;
+}
+
+/// The run's identity and time, saved beside the algorithm's state.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Header {
+    method: String,
+    seed: u64,
+    /// Wall seconds up to this checkpoint, so a resumed run reports its whole cost.
+    wall_seconds: f64,
+}
+
+const HEADER: &str = "run";
+
+/// Runs `algo` to its end: from the checkpoint `store` holds under its name, if any, saving
+/// whenever a step says a checkpoint is due, and returning [`AlgoError::Stopped`] at the first
+/// step boundary after `store` asks to stop (the last checkpoint resumes the run).
+pub fn drive<A: Algorithm>(
+    mut algo: A,
+    store: &mut dyn Checkpoints,
+    on_event: &mut dyn FnMut(A::Event),
+) -> Result<A::Record> {
+    let t0 = Instant::now();
+    let (name, seed) = {
+        let (name, seed) = algo.id();
+        (name.to_string(), seed)
+    };
+    let before = match store.load(&name)? {
+        Some(ckpt) => {
+            let h: Header = ckpt.get_json(HEADER)?;
+            crate::ensure_same_run((&h.method, h.seed), (&name, seed))?;
+            algo.load(&ckpt)?;
+            h.wall_seconds
+        }
+        None => {
+            algo.start(on_event)?;
+            0.0
+        }
+    };
+    while !algo.done() {
+        if store.stop_requested() {
+            return Err(AlgoError::Stopped);
+        }
+        if algo.step(on_event)? {
+            let mut ckpt = Checkpoint::new();
+            algo.save(&mut ckpt)?;
+            let header = Header {
+                method: name.clone(),
+                seed,
+                wall_seconds: before + t0.elapsed().as_secs_f64(),
+            };
+            ckpt.put_json(HEADER, &header)?;
+            store.save(&name, &ckpt)?;
+        }
+    }
+    algo.finish(before + t0.elapsed().as_secs_f64())
+}
+
+/// Adds the seconds `f` takes to `total`.
+pub fn timed<R>(total: &mut f64, f: impl FnOnce() -> R) -> R {
+    let t0 = Instant::now();
+    let r = f();
+    *total += t0.elapsed().as_secs_f64();
+    r
+}
