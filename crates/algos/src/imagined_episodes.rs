@@ -25,13 +25,11 @@
 //! [`P2Config::checkpoint_every`] real episodes (between episodes) and resumes from there with
 //! exactly the numbers of an uninterrupted run.
 
-use std::time::Instant;
-
 use rand::Rng as _;
 use serde::{Deserialize, Serialize};
 use tandem_agents::{Agent, Episode, EpisodicAgent, Mode, Reinforce, ReinforceConfig, Resumable};
 use tandem_core::SeedStream;
-use tandem_envs::{Env, EnvError, SampleCounter, Task};
+use tandem_envs::{Env, EnvError, SampleCount, SampleCounter, Task};
 use tandem_models::{
     DynamicsModel, FitConfig, Judges, MlpModel, MlpModelConfig, ModelEnv, Transitions,
     TransitionsBuilder,
@@ -39,6 +37,7 @@ use tandem_models::{
 use tandem_nn::{Checkpoint, Checkpointable};
 
 pub use super::{AlgoError, Checkpoints, Ephemeral, Result};
+use crate::driver::{drive, Algorithm};
 
 /// The two methods of p2's comparison (Fig. 6, the table of Sec. 4.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -328,26 +327,6 @@ const PROGRESS: &str = "p2.progress";
 const MODEL: &str = "p2.model";
 const REAL: &str = "p2.real_transitions";
 
-/// Stores the whole state of a run under `method`'s name.
-fn save<A: Resumable>(
-    store: &mut dyn Checkpoints,
-    p: &Progress,
-    agent: &A,
-    model: Option<&MlpModel>,
-    real: Option<&Transitions>,
-) -> Result<()> {
-    let mut ckpt = Checkpoint::new();
-    agent.save(&mut ckpt)?;
-    ckpt.put_json(PROGRESS, p)?;
-    if let Some(m) = model {
-        m.save_to(MODEL, &mut ckpt)?;
-    }
-    if let Some(t) = real {
-        t.save_to(REAL, &mut ckpt)?;
-    }
-    store.save(p.t.method.name(), &ckpt)
-}
-
 /// Runs `method` for `seed` from a fresh `agent` (or from the checkpoint `store` holds under the
 /// method's name) and returns its record. `real_env` builds the real system (with its episode
 /// limit); `on_event` hears of every finished episode.
@@ -357,7 +336,7 @@ pub fn run<A, T, F>(
     cfg: &P2Config,
     task: &T,
     real_env: F,
-    mut agent: A,
+    agent: A,
     seed: u64,
     store: &mut dyn Checkpoints,
     on_event: &mut dyn FnMut(Event),
@@ -367,126 +346,223 @@ where
     T: Task + Clone,
     F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
 {
-    cfg.validate()?;
-    let t0 = Instant::now();
-    let seeds = SeedStream::new(seed);
-    let action_dim = task.control(&probe_action(task)).len();
-    let mut model_env = match method {
-        Method::WithModel => {
-            let model = MlpModel::new(task.state_dim(), action_dim, cfg.model.clone())?;
-            Some(ModelEnv::with_judges(model, task.clone(), cfg.judges)?)
-        }
-        Method::ModelFree => None,
-    };
-    let mut real: Option<Transitions> = None;
-    let mut p = match store.load(method.name())? {
-        Some(ckpt) => {
-            let p: Progress = ckpt.get_json(PROGRESS)?;
-            super::ensure_same_run((p.t.method.name(), p.t.seed), (method.name(), seed))?;
-            agent.load(&ckpt)?;
-            if let Some(m) = model_env.as_mut() {
-                m.model_mut().load_from(MODEL, &ckpt)?;
-                if ckpt.contains(&format!("{REAL}.rewards")) {
-                    let mut t = Transitions::default();
-                    t.load_from(REAL, &ckpt)?;
-                    real = Some(t);
-                }
+    let run = ImaginedEpisodes::new(method, cfg, task, real_env, agent, seed)?;
+    drive(run, store, on_event)
+}
+
+/// One run of p2's loop (Fig. 3) as one checkpointable value, stepped one real episode at a time
+/// by [`drive`]: the agent, the model environment and the real transitions it is fitted on, the
+/// start states, the episodes waiting for an update and the counts.
+pub struct ImaginedEpisodes<'a, A, T, F> {
+    method: Method,
+    cfg: &'a P2Config,
+    task: &'a T,
+    real_env: F,
+    agent: A,
+    seeds: SeedStream,
+    model_env: Option<ModelEnv<MlpModel, T>>,
+    real: Option<Transitions>,
+    p: Progress,
+    env: SampleCounter<Box<dyn Env>>,
+    count: SampleCount,
+}
+
+impl<'a, A, T, F> ImaginedEpisodes<'a, A, T, F>
+where
+    A: EpisodicAgent + Resumable,
+    T: Task + Clone,
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    /// A fresh run of `method` for `seed` from `agent`; `real_env` builds the real system (with
+    /// its episode limit).
+    pub fn new(
+        method: Method,
+        cfg: &'a P2Config,
+        task: &'a T,
+        real_env: F,
+        agent: A,
+        seed: u64,
+    ) -> Result<Self> {
+        cfg.validate()?;
+        let action_dim = task.control(&probe_action(task)).len();
+        let model_env = match method {
+            Method::WithModel => {
+                let model = MlpModel::new(task.state_dim(), action_dim, cfg.model.clone())?;
+                Some(ModelEnv::with_judges(model, task.clone(), cfg.judges)?)
             }
-            p
-        }
-        None => Progress {
-            t: Tally::new(method, seed),
-            starts: Vec::new(),
-            pending: Vec::new(),
-        },
-    };
-    let (mut env, count) = SampleCounter::starting_at(real_env()?, p.t.real_samples);
-    let per_update = cfg.reinforce.episodes_per_update;
-    let learn = |agent: &mut A, pending: &mut Vec<Episode>, ep: Episode| -> Result<()> {
-        pending.push(ep);
-        if pending.len() >= per_update {
-            agent.update(pending)?;
-            pending.clear();
+            Method::ModelFree => None,
+        };
+        let (env, count) = SampleCounter::new(real_env()?);
+        Ok(Self {
+            method,
+            cfg,
+            task,
+            real_env,
+            agent,
+            seeds: SeedStream::new(seed),
+            model_env,
+            real: None,
+            p: Progress {
+                t: Tally::new(method, seed),
+                starts: Vec::new(),
+                pending: Vec::new(),
+            },
+            env,
+            count,
+        })
+    }
+
+    /// Adds `ep` to the episodes waiting for an update, and updates once there are enough.
+    fn learn(&mut self, ep: Episode) -> Result<()> {
+        self.p.pending.push(ep);
+        if self.p.pending.len() >= self.cfg.reinforce.episodes_per_update {
+            self.agent.update(&self.p.pending)?;
+            self.p.pending.clear();
         }
         Ok(())
-    };
-    let solved = |r: &[f64]| solved_at(r, cfg.solved_window, cfg.solved_return);
-    while (p.t.real_returns.len() as u64) < cfg.max_real_episodes
-        && solved(&p.t.real_returns).is_none()
-    {
-        if store.stop_requested() {
-            return Err(AlgoError::Stopped);
-        }
-        // One real episode.
-        let k = p.t.real_returns.len() as u64;
-        let obs = env.reset(Some(seeds.derive(&format!("real-episode-{k}"))));
-        p.starts.push(env.state());
+    }
+
+    fn solved_at(&self) -> Option<u64> {
+        let cfg = self.cfg;
+        solved_at(&self.p.t.real_returns, cfg.solved_window, cfg.solved_return)
+    }
+
+    /// Fit `j` of the model, on (a draw of) all real transitions so far.
+    fn fit(&mut self, j: u64) -> Result<()> {
+        let (Some(menv), Some(all)) = (self.model_env.as_mut(), self.real.as_ref()) else {
+            return Ok(());
+        };
+        let cfg = self.cfg;
+        let mut rng = self.seeds.rng(&format!("fit-{j}"));
+        let data = if cfg.fit_rows > 0 && all.len() > cfg.fit_rows {
+            let idx: Vec<usize> = (0..cfg.fit_rows)
+                .map(|_| rng.random_range(0..all.len()))
+                .collect();
+            all.select(&idx)
+        } else {
+            all.clone()
+        };
+        let fit = FitConfig {
+            seed: self.seeds.derive(&format!("fit-{j}")),
+            ..cfg.fit.clone()
+        };
+        let report = menv.model_mut().fit(&data, &fit)?;
+        let loss = report.train_loss.last().copied().unwrap_or(f64::NAN);
+        self.p.t.fit_losses.push(loss);
+        Ok(())
+    }
+
+    /// One imagined episode from a real start state, learned from like a real one.
+    fn imagined_episode(&mut self, on_event: &mut dyn FnMut(Event)) -> Result<()> {
+        let Some(menv) = self.model_env.as_mut() else {
+            return Ok(());
+        };
+        let i = self.p.t.imagined_episodes;
+        let mut rng = self.seeds.rng(&format!("imagined-{i}"));
+        let start = &self.p.starts[rng.random_range(0..self.p.starts.len())];
+        let obs = menv.set_state(start)?;
+        let ep = play::<T>(menv, &mut self.agent, obs, None)?;
+        self.p.t.imagined_episodes += 1;
+        self.p.t.imagined_steps += ep.len() as u64;
+        on_event(Event::Imagined {
+            episode: i,
+            steps: ep.len() as u64,
+            ret: ep.total_reward(),
+        });
+        self.learn(ep)
+    }
+}
+
+impl<A, T, F> Algorithm for ImaginedEpisodes<'_, A, T, F>
+where
+    A: EpisodicAgent + Resumable,
+    T: Task + Clone,
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    type Event = Event;
+    type Record = RunRecord;
+
+    fn id(&self) -> (&str, u64) {
+        (self.method.name(), self.p.t.seed)
+    }
+
+    fn done(&self) -> bool {
+        self.p.t.real_returns.len() as u64 >= self.cfg.max_real_episodes
+            || self.solved_at().is_some()
+    }
+
+    fn step(&mut self, on_event: &mut dyn FnMut(Event)) -> Result<bool> {
+        let (cfg, task) = (self.cfg, self.task);
+        // One real episode; with a model, its transitions join the model's data.
+        let k = self.p.t.real_returns.len() as u64;
+        let seed = self.seeds.derive(&format!("real-episode-{k}"));
+        let obs = self.env.reset(Some(seed));
+        self.p.starts.push(self.env.state());
+        let action_dim = task.control(&probe_action(task)).len();
         let mut b = TransitionsBuilder::new(task.state_dim(), action_dim);
-        let rec = model_env.is_some().then_some((task, &mut b));
-        let ep = play(&mut env, &mut agent, obs, rec)?;
-        p.t.real_returns.push(ep.total_reward());
-        p.t.real_samples = count.get();
+        let rec = self.model_env.is_some().then_some((task, &mut b));
+        let ep = play(&mut self.env, &mut self.agent, obs, rec)?;
+        self.p.t.real_returns.push(ep.total_reward());
+        self.p.t.real_samples = self.count.get();
         on_event(Event::Real {
             episode: k,
             ret: ep.total_reward(),
-            real_samples: count.get(),
+            real_samples: self.count.get(),
         });
-        learn(&mut agent, &mut p.pending, ep)?;
+        self.learn(ep)?;
         let done_real = k + 1;
-        if let Some(menv) = model_env.as_mut() {
+        if self.model_env.is_some() {
             let new = b.build();
-            match real.as_mut() {
+            match self.real.as_mut() {
                 Some(all) => all.extend(&new)?,
-                None => real = Some(new),
+                None => self.real = Some(new),
             }
-            // The model on (a draw of) all real transitions so far.
             if done_real.is_multiple_of(cfg.fit_every) {
-                let all = real.as_ref().expect("just extended");
-                let j = done_real / cfg.fit_every;
-                let mut rng = seeds.rng(&format!("fit-{j}"));
-                let data = if cfg.fit_rows > 0 && all.len() > cfg.fit_rows {
-                    let idx: Vec<usize> = (0..cfg.fit_rows)
-                        .map(|_| rng.random_range(0..all.len()))
-                        .collect();
-                    all.select(&idx)
-                } else {
-                    all.clone()
-                };
-                let fit = FitConfig {
-                    seed: seeds.derive(&format!("fit-{j}")),
-                    ..cfg.fit.clone()
-                };
-                let report = menv.model_mut().fit(&data, &fit)?;
-                p.t.fit_losses
-                    .push(report.train_loss.last().copied().unwrap_or(f64::NAN));
+                self.fit(done_real / cfg.fit_every)?;
             }
             // Imagined episodes, once the first N real ones are done, after each cycle.
             let after_n = done_real.checked_sub(cfg.real_only_episodes);
             if after_n.is_some_and(|n| n > 0 && n % cfg.real_per_cycle == 0) {
                 for _ in 0..cfg.imagined_per_cycle {
-                    let i = p.t.imagined_episodes;
-                    let mut rng = seeds.rng(&format!("imagined-{i}"));
-                    let start = &p.starts[rng.random_range(0..p.starts.len())];
-                    let obs = menv.set_state(start)?;
-                    let ep = play::<T>(menv, &mut agent, obs, None)?;
-                    p.t.imagined_episodes += 1;
-                    p.t.imagined_steps += ep.len() as u64;
-                    on_event(Event::Imagined {
-                        episode: i,
-                        steps: ep.len() as u64,
-                        ret: ep.total_reward(),
-                    });
-                    learn(&mut agent, &mut p.pending, ep)?;
+                    self.imagined_episode(on_event)?;
                 }
             }
         }
-        if done_real.is_multiple_of(cfg.checkpoint_every) {
-            let model = model_env.as_ref().map(|m| m.model());
-            save(store, &p, &agent, model, real.as_ref())?;
-        }
+        Ok(done_real.is_multiple_of(cfg.checkpoint_every))
     }
-    let solved_at = solved(&p.t.real_returns);
-    Ok(p.t.record(solved_at, t0.elapsed().as_secs_f64()))
+
+    fn save(&self, ckpt: &mut Checkpoint) -> Result<()> {
+        self.agent.save(ckpt)?;
+        ckpt.put_json(PROGRESS, &self.p)?;
+        if let Some(m) = self.model_env.as_ref() {
+            m.model().save_to(MODEL, ckpt)?;
+        }
+        if let Some(t) = self.real.as_ref() {
+            t.save_to(REAL, ckpt)?;
+        }
+        Ok(())
+    }
+
+    fn load(&mut self, ckpt: &Checkpoint) -> Result<()> {
+        self.p = ckpt.get_json(PROGRESS)?;
+        self.agent.load(ckpt)?;
+        if let Some(m) = self.model_env.as_mut() {
+            m.model_mut().load_from(MODEL, ckpt)?;
+            if ckpt.contains(&format!("{REAL}.rewards")) {
+                let mut t = Transitions::default();
+                t.load_from(REAL, ckpt)?;
+                self.real = Some(t);
+            }
+        }
+        (self.env, self.count) =
+            SampleCounter::starting_at((self.real_env)()?, self.p.t.real_samples);
+        Ok(())
+    }
+
+    fn finish(self, wall_seconds: f64) -> Result<RunRecord> {
+        let solved_at = self.solved_at();
+        Ok(self.p.t.record(solved_at, wall_seconds))
+    }
 }
 
 /// An action of `task`'s action space (to learn the width of its plant input).

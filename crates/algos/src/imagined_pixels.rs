@@ -30,10 +30,11 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use tandem_agents::{Dqn, DqnConfig, EpisodeRunner, OffPolicyLoop, StepOptions, StepRecord};
 use tandem_core::SeedStream;
-use tandem_envs::{Env, PixelMazeEnv, SampleCounter};
+use tandem_envs::{Env, PixelMazeEnv, SampleCount, SampleCounter};
 use tandem_models::{PixelEpisodes, PixelFit, PixelModel, PixelModelConfig, PixelModelEnv};
 use tandem_nn::{Checkpoint, Checkpointable};
 
+use super::driver::{drive, Algorithm};
 use super::imagined_episodes::{solved_at, Event, Method, RunRecord, Tally};
 use super::{AlgoError, Checkpoints, Result};
 
@@ -279,118 +280,155 @@ fn run_probed(
     on_event: &mut dyn FnMut(Event),
     probe: Option<&QualityConfig>,
 ) -> Result<(RunRecord, Vec<QualityPoint>)> {
-    cfg.validate()?;
-    let mut probes: Vec<Probe> = Vec::new();
-    let mut points = Vec::new();
-    let t0 = Instant::now();
-    let seeds = SeedStream::new(seed);
-    let real0 = maze(cfg)?;
-    let (obs_space, act_space) = (
-        real0.observation_space().clone(),
-        real0.action_space().clone(),
-    );
-    let agent = Dqn::new(
-        cfg.dqn.clone(),
-        &obs_space,
-        &act_space,
-        seeds.derive("agent"),
-    )?;
-    let mut lp = OffPolicyLoop::new(
-        agent,
-        cfg.dqn.schedule(),
-        &obs_space,
-        &act_space,
-        seeds.rng("minibatches"),
-    )?;
-    let mut imagination = match method {
-        Method::WithModel => {
-            let model = PixelModel::new(PixelModelConfig {
-                seed: seeds.derive("model"),
-                ..cfg.model.clone()
-            })?;
-            Some((
-                PixelModelEnv::new(model, vec![], real0.max_episode_steps())?,
-                PixelEpisodes::new(cfg.model.frame_len()),
-            ))
-        }
-        Method::ModelFree => None,
-    };
-    let mut p = match store.load(method.name())? {
-        Some(ckpt) => {
-            let p: Progress = ckpt.get_json(PROGRESS)?;
-            super::ensure_same_run((p.t.method.name(), p.t.seed), (method.name(), seed))?;
-            lp.agent.load(&ckpt)?;
-            lp.load(LOOP, &ckpt)?;
-            if let Some((menv, data)) = imagination.as_mut() {
-                menv.model_mut().load_from(MODEL, &ckpt)?;
-                data.load_from(DATA, &ckpt)?;
-                // The imagined episodes' start pool: every real episode's first frame.
-                for f in data.first_frames() {
-                    menv.add_start(f)?;
-                }
+    drive(PixelDqn::new(method, cfg, seed, probe)?, store, on_event)
+}
+
+/// One run of p2's loop with DQN from pixels as one checkpointable value, stepped one real
+/// episode at a time by [`drive`]: DQN's loop and replay, the pixel model environment and its
+/// episodes, the episode runners and counts, and (for the F1 experiment, never checkpointed)
+/// the copies of the model being scored.
+pub struct PixelDqn<'a> {
+    method: Method,
+    cfg: &'a MazeConfig,
+    seeds: SeedStream,
+    lp: OffPolicyLoop<Dqn>,
+    imagination: Option<(PixelModelEnv, PixelEpisodes)>,
+    p: Progress,
+    env: SampleCounter<Box<dyn Env>>,
+    count: SampleCount,
+    probe: Option<&'a QualityConfig>,
+    probes: Vec<Probe>,
+    points: Vec<QualityPoint>,
+}
+
+impl<'a> PixelDqn<'a> {
+    /// A fresh run of `method` for `seed`; with `probe`, the F1 experiment's copies of the
+    /// model are taken and scored as it goes.
+    pub fn new(
+        method: Method,
+        cfg: &'a MazeConfig,
+        seed: u64,
+        probe: Option<&'a QualityConfig>,
+    ) -> Result<Self> {
+        cfg.validate()?;
+        let seeds = SeedStream::new(seed);
+        let real0 = maze(cfg)?;
+        let (obs_space, act_space) = (real0.observation_space(), real0.action_space());
+        let agent = Dqn::new(cfg.dqn.clone(), obs_space, act_space, seeds.derive("agent"))?;
+        let lp = OffPolicyLoop::new(
+            agent,
+            cfg.dqn.schedule(),
+            obs_space,
+            act_space,
+            seeds.rng("minibatches"),
+        )?;
+        let imagination = match method {
+            Method::WithModel => {
+                let model = PixelModel::new(PixelModelConfig {
+                    seed: seeds.derive("model"),
+                    ..cfg.model.clone()
+                })?;
+                Some((
+                    PixelModelEnv::new(model, vec![], real0.max_episode_steps())?,
+                    PixelEpisodes::new(cfg.model.frame_len()),
+                ))
             }
-            p
+            Method::ModelFree => None,
+        };
+        let (env, count) = SampleCounter::new(maze(cfg)?);
+        Ok(Self {
+            method,
+            cfg,
+            seeds,
+            lp,
+            imagination,
+            p: Progress {
+                t: Tally::new(method, seed),
+                real_runner: EpisodeRunner::new(seeds.derive("real"), "real-episode-"),
+                imagined_runner: EpisodeRunner::new(seeds.derive("imagined"), "imagined-episode-"),
+            },
+            env,
+            count,
+            probe,
+            probes: Vec::new(),
+            points: Vec::new(),
+        })
+    }
+
+    fn solved_at(&self) -> Option<u64> {
+        let cfg = self.cfg;
+        solved_at(&self.p.t.real_returns, cfg.solved_window, cfg.solved_return)
+    }
+
+    /// The F1 experiment: a real episode is held out for the copies taken before it; a copy is
+    /// scored once it has all its held-out episodes.
+    fn hold_out(&mut self, frames: &EpisodeFrames, terminated: bool) -> Result<()> {
+        for pr in &mut self.probes {
+            pr.heldout.push_episode(
+                &frames.frames,
+                &frames.actions,
+                &frames.rewards,
+                terminated,
+            )?;
+            pr.left -= 1;
+            if pr.left == 0 {
+                self.points.push(score(pr)?);
+            }
         }
-        None => Progress {
-            t: Tally::new(method, seed),
-            real_runner: EpisodeRunner::new(seeds.derive("real"), "real-episode-"),
-            imagined_runner: EpisodeRunner::new(seeds.derive("imagined"), "imagined-episode-"),
-        },
-    };
-    let (mut env, count) = SampleCounter::starting_at(maze(cfg)?, p.t.real_samples);
-    let solved = |r: &[f64]| solved_at(r, cfg.solved_window, cfg.solved_return);
-    while (p.t.real_returns.len() as u64) < cfg.max_real_episodes
-        && solved(&p.t.real_returns).is_none()
-    {
-        if store.stop_requested() {
-            return Err(AlgoError::Stopped);
-        }
-        let k = p.t.real_returns.len() as u64;
-        let keep = imagination.is_some();
+        self.probes.retain(|pr| pr.left > 0);
+        Ok(())
+    }
+}
+
+impl Algorithm for PixelDqn<'_> {
+    type Event = Event;
+    type Record = (RunRecord, Vec<QualityPoint>);
+
+    fn id(&self) -> (&str, u64) {
+        (self.method.name(), self.p.t.seed)
+    }
+
+    fn done(&self) -> bool {
+        self.p.t.real_returns.len() as u64 >= self.cfg.max_real_episodes
+            || self.solved_at().is_some()
+    }
+
+    fn step(&mut self, on_event: &mut dyn FnMut(Event)) -> Result<bool> {
+        let cfg = self.cfg;
+        let k = self.p.t.real_returns.len() as u64;
+        let keep = self.imagination.is_some();
         let (ret, _, terminated, frames) = episode(
-            &mut lp,
-            &mut env,
-            &mut p.real_runner,
+            &mut self.lp,
+            &mut self.env,
+            &mut self.p.real_runner,
             StepOptions::real(),
             keep,
         )?;
-        p.t.real_returns.push(ret);
-        p.t.real_samples = count.get();
+        self.p.t.real_returns.push(ret);
+        self.p.t.real_samples = self.count.get();
         on_event(Event::Real {
             episode: k,
             ret,
-            real_samples: count.get(),
+            real_samples: self.count.get(),
         });
         let done_real = k + 1;
-        if let Some((menv, data)) = imagination.as_mut() {
-            // The F1 experiment: this episode is held out for the copies taken before it.
-            for pr in &mut probes {
-                pr.heldout.push_episode(
-                    &frames.frames,
-                    &frames.actions,
-                    &frames.rewards,
-                    terminated,
-                )?;
-                pr.left -= 1;
-                if pr.left == 0 {
-                    points.push(score(pr)?);
-                }
-            }
-            probes.retain(|pr| pr.left > 0);
+        if self.imagination.is_some() {
+            self.hold_out(&frames, terminated)?;
+        }
+        if let Some((menv, data)) = self.imagination.as_mut() {
             data.push_episode(&frames.frames, &frames.actions, &frames.rewards, terminated)?;
             menv.add_start(frames.frames[0].clone())?;
             if done_real.is_multiple_of(cfg.fit_every) {
                 let fit = PixelFit {
-                    seed: seeds.derive(&format!("fit-{}", done_real / cfg.fit_every)),
+                    seed: self
+                        .seeds
+                        .derive(&format!("fit-{}", done_real / cfg.fit_every)),
                     ..cfg.fit.clone()
                 };
-                p.t.fit_losses.push(menv.model_mut().fit(data, &fit)?);
+                self.p.t.fit_losses.push(menv.model_mut().fit(data, &fit)?);
             }
-            if let Some(q) = probe
-                .as_ref()
-                .filter(|q| q.checkpoints.contains(&done_real))
-            {
-                probes.push(Probe {
+            if let Some(q) = self.probe.filter(|q| q.checkpoints.contains(&done_real)) {
+                self.probes.push(Probe {
                     episodes: done_real,
                     transitions: data.len() as u64,
                     model: menv.model().clone(),
@@ -401,16 +439,16 @@ fn run_probed(
             let after_n = done_real.checked_sub(cfg.real_only_episodes);
             if after_n.is_some_and(|n| n > 0 && n % cfg.real_per_cycle == 0) {
                 for _ in 0..cfg.imagined_per_cycle {
-                    let i = p.t.imagined_episodes;
+                    let i = self.p.t.imagined_episodes;
                     let (ret, steps, _, _) = episode(
-                        &mut lp,
+                        &mut self.lp,
                         menv,
-                        &mut p.imagined_runner,
+                        &mut self.p.imagined_runner,
                         StepOptions::model(),
                         false,
                     )?;
-                    p.t.imagined_episodes += 1;
-                    p.t.imagined_steps += steps;
+                    self.p.t.imagined_episodes += 1;
+                    self.p.t.imagined_steps += steps;
                     on_event(Event::Imagined {
                         episode: i,
                         steps,
@@ -419,20 +457,40 @@ fn run_probed(
                 }
             }
         }
-        if done_real.is_multiple_of(cfg.checkpoint_every) {
-            let mut ckpt = Checkpoint::new();
-            lp.agent.save(&mut ckpt)?;
-            lp.save(LOOP, &mut ckpt)?;
-            ckpt.put_json(PROGRESS, &p)?;
-            if let Some((menv, data)) = imagination.as_ref() {
-                menv.model().save_to(MODEL, &mut ckpt)?;
-                data.save_to(DATA, &mut ckpt)?;
-            }
-            store.save(method.name(), &ckpt)?;
-        }
+        Ok(done_real.is_multiple_of(cfg.checkpoint_every))
     }
-    let solved_at = solved(&p.t.real_returns);
-    Ok((p.t.record(solved_at, t0.elapsed().as_secs_f64()), points))
+
+    fn save(&self, ckpt: &mut Checkpoint) -> Result<()> {
+        self.lp.agent.save(ckpt)?;
+        self.lp.save(LOOP, ckpt)?;
+        ckpt.put_json(PROGRESS, &self.p)?;
+        if let Some((menv, data)) = self.imagination.as_ref() {
+            menv.model().save_to(MODEL, ckpt)?;
+            data.save_to(DATA, ckpt)?;
+        }
+        Ok(())
+    }
+
+    fn load(&mut self, ckpt: &Checkpoint) -> Result<()> {
+        self.p = ckpt.get_json(PROGRESS)?;
+        self.lp.agent.load(ckpt)?;
+        self.lp.load(LOOP, ckpt)?;
+        if let Some((menv, data)) = self.imagination.as_mut() {
+            menv.model_mut().load_from(MODEL, ckpt)?;
+            data.load_from(DATA, ckpt)?;
+            // The imagined episodes' start pool: every real episode's first frame.
+            for f in data.first_frames() {
+                menv.add_start(f)?;
+            }
+        }
+        (self.env, self.count) = SampleCounter::starting_at(maze(self.cfg)?, self.p.t.real_samples);
+        Ok(())
+    }
+
+    fn finish(self, wall_seconds: f64) -> Result<(RunRecord, Vec<QualityPoint>)> {
+        let solved_at = self.solved_at();
+        Ok((self.p.t.record(solved_at, wall_seconds), self.points))
+    }
 }
 
 /// Settings of [`model_quality`].
