@@ -22,7 +22,6 @@
 //! the return on the true system against the true samples used for learning).
 
 use std::collections::BTreeMap;
-use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 use tandem_agents::{
@@ -35,7 +34,7 @@ use tandem_dynamics::rigid_plant::RigidBodyPlant;
 use tandem_dynamics::Plant;
 use tandem_envs::{
     leo_parts, DcMotorPendulumEnv, DcMotorPendulumTask, Env, EnvError, LeoModel, LeoStart,
-    LeoWalkTask, LeoWork, PlantEnv, SampleCounter, Task, TimeLimit, LEO_STEPS,
+    LeoWalkTask, LeoWork, PlantEnv, SampleCount, SampleCounter, Task, TimeLimit, LEO_STEPS,
 };
 use tandem_models::{
     DynamicsModel, FitConfig, FitReport, ModelEnv, PlantModel, ResidualModel, ResidualModelConfig,
@@ -47,6 +46,7 @@ use tandem_nn::{Checkpoint, Checkpointable};
 use tandem_agents::adapter::{feature_dim, Adapted, Feature};
 
 pub use super::{AlgoError, Checkpoints, Ephemeral, Result};
+use crate::driver::{drive, Algorithm};
 
 /// One of the three methods of p0's Table II.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -548,8 +548,8 @@ fn append(all: &mut Option<Transitions>, new: Transitions) -> Result<()> {
     Ok(())
 }
 
-/// Where one method's run stands at a checkpoint, besides the agent, its loop, the difference
-/// model and the true samples (stored beside it).
+/// Where one method's run stands, besides the agent, its loop, the difference model and the
+/// true samples.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct MethodProgress {
     method: Method,
@@ -571,62 +571,6 @@ struct MethodProgress {
     start: Option<PolicyEval>,
 }
 
-/// Saves the agent, its loop, the progress and (difference method) the model and the true
-/// samples under `key`.
-fn save_method<A, M>(
-    store: &mut dyn Checkpoints,
-    key: &str,
-    lp: &OffPolicyLoop<A>,
-    p: &MethodProgress,
-    model: Option<&M>,
-    all: Option<&Transitions>,
-) -> Result<()>
-where
-    A: OffPolicyAgent + Resumable,
-    M: Checkpointable,
-{
-    let mut ckpt = Checkpoint::new();
-    lp.agent.save(&mut ckpt)?;
-    lp.save("loop", &mut ckpt)?;
-    ckpt.put_json("p0.progress", p)?;
-    if let Some(m) = model {
-        m.save_to("p0.model", &mut ckpt)?;
-    }
-    if let Some(t) = all {
-        t.save_to("p0.true_samples", &mut ckpt)?;
-    }
-    store.save(key, &ckpt)
-}
-
-/// Restores what [`save_method`] saved into `lp`, `model` and `all`, checking that it is this
-/// method's and seed's.
-fn load_method<A, M>(
-    ckpt: &Checkpoint,
-    method: Method,
-    seed: u64,
-    lp: &mut OffPolicyLoop<A>,
-    model: Option<&mut M>,
-    all: &mut Option<Transitions>,
-) -> Result<MethodProgress>
-where
-    A: OffPolicyAgent + Resumable,
-    M: Checkpointable,
-{
-    let p: MethodProgress = ckpt.get_json("p0.progress")?;
-    super::ensure_same_run((p.method.name(), p.seed), (method.name(), seed))?;
-    lp.agent.load(ckpt)?;
-    lp.load("loop", ckpt)?;
-    if let Some(m) = model {
-        m.load_from("p0.model", ckpt)?;
-    }
-    if ckpt.contains("p0.true_samples.rewards") {
-        let mut t = Transitions::default();
-        t.load_from("p0.true_samples", ckpt)?;
-        *all = Some(t);
-    }
-    Ok(p)
-}
-
 /// Runs one method from `start` (a fresh agent for [`Method::Cold`], the pre-trained one
 /// otherwise) and returns its record. `tick(true_samples)` is called after every true-system
 /// step, for progress bars. The run saves itself in `store` under the method's name after every
@@ -636,7 +580,7 @@ pub fn run_method<A, P, T, F>(
     method: Method,
     problem: &Problem<P, T, F>,
     cfg: &P0Config,
-    mut start: OffPolicyLoop<A>,
+    start: OffPolicyLoop<A>,
     seed: u64,
     store: &mut dyn Checkpoints,
     tick: &mut dyn FnMut(u64),
@@ -647,179 +591,305 @@ where
     T: Task + Clone,
     F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
 {
-    cfg.validate()?;
-    let t0 = Instant::now();
-    let key = method.name();
-    let seeds = SeedStream::new(seed);
-    let mut eval_env = (problem.true_env)()?;
-    // Warm start and the difference method fine-tune the pre-trained agent.
-    match cfg.fine_tune_learning_starts {
-        Some(n) if method != Method::Cold => {
-            start.set_learning_starts(loop_learning_starts(n, &cfg.ddpg));
+    let run = DifferenceModels::new(method, problem, cfg, start, seed)?;
+    drive(run, store, tick)
+}
+
+/// One method's run of p0 as one checkpointable value for [`drive`]: the agent and its loop,
+/// the difference model environment (difference methods) and the true samples it is fitted on,
+/// the counts and the episode in progress. A baseline (cold or warm start) steps one evaluation
+/// interval of true samples at a time; the difference method one iteration of Fig. 2 (collect
+/// a batch of true samples, fit the difference model on all of them, train on the idealized
+/// plant plus the model). Its events are the true samples so far, after every true step.
+pub struct DifferenceModels<'a, A, P: Plant, T, F> {
+    method: Method,
+    problem: &'a Problem<P, T, F>,
+    cfg: &'a P0Config,
+    lp: OffPolicyLoop<A>,
+    seeds: SeedStream,
+    batch: Option<u64>,
+    model_env: Option<ModelEnv<ResidualModel<P>, T>>,
+    all: Option<Transitions>,
+    env: SampleCounter<Box<dyn Env>>,
+    count: SampleCount,
+    eval_env: Box<dyn Env>,
+    p: MethodProgress,
+    /// A warm start that reached the target within the budget stops early (never saved: no
+    /// checkpoint follows it).
+    stopped_early: bool,
+}
+
+impl<'a, A, P, T, F> DifferenceModels<'a, A, P, T, F>
+where
+    A: OffPolicyAgent + Resumable,
+    P: Plant + Clone,
+    T: Task + Clone,
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    /// A fresh run of `method` for `seed` from `start` (a fresh agent for [`Method::Cold`], the
+    /// pre-trained one otherwise).
+    pub fn new(
+        method: Method,
+        problem: &'a Problem<P, T, F>,
+        cfg: &'a P0Config,
+        mut start: OffPolicyLoop<A>,
+        seed: u64,
+    ) -> Result<Self> {
+        cfg.validate()?;
+        let seeds = SeedStream::new(seed);
+        let eval_env = (problem.true_env)()?;
+        // Warm start and the difference method fine-tune the pre-trained agent.
+        match cfg.fine_tune_learning_starts {
+            Some(n) if method != Method::Cold => {
+                start.set_learning_starts(loop_learning_starts(n, &cfg.ddpg));
+            }
+            _ => {}
         }
-        _ => {}
+        let batch = cfg.batch_of(method);
+        if method.is_difference() && batch.is_none() {
+            return Err(AlgoError::Config(format!(
+                "{} runs only with small_batch set",
+                method.name()
+            )));
+        }
+        let model_env = match batch {
+            Some(_) => Some(ModelEnv::new(
+                ResidualModel::new(problem.idealized.clone(), cfg.residual.clone())?,
+                problem.task.clone(),
+            )?),
+            None => None,
+        };
+        let (env, count) = SampleCounter::new((problem.true_env)()?);
+        let episodes = if batch.is_some() {
+            "model-episodes"
+        } else {
+            "true-episodes"
+        };
+        let p = MethodProgress {
+            method,
+            seed,
+            true_samples: 0,
+            curve: Vec::new(),
+            fit_losses: Vec::new(),
+            simulated: 0,
+            updates0: start.counts().updates,
+            iterations: 0,
+            reached: false,
+            runner: EpisodeRunner::new(seeds.derive(episodes), "ep"),
+            env_state: None,
+            start: None,
+        };
+        Ok(Self {
+            method,
+            problem,
+            cfg,
+            lp: start,
+            seeds,
+            batch,
+            model_env,
+            all: None,
+            env,
+            count,
+            eval_env,
+            p,
+            stopped_early: false,
+        })
     }
-    let batch = cfg.batch_of(method);
-    if method.is_difference() && batch.is_none() {
-        return Err(AlgoError::Config(format!(
-            "{} runs only with small_batch set",
-            method.name()
-        )));
+
+    fn mean_return(&mut self) -> Result<f64> {
+        mean_return(
+            &mut self.lp.agent,
+            self.eval_env.as_mut(),
+            self.cfg.eval_episodes,
+        )
     }
-    let mut model_env = match batch {
-        Some(_) => Some(ModelEnv::new(
-            ResidualModel::new(problem.idealized.clone(), cfg.residual.clone())?,
-            problem.task.clone(),
-        )?),
-        None => None,
-    };
-    let measure = |agent: &mut A, env: &mut Box<dyn Env>| -> Result<Option<PolicyEval>> {
-        match &problem.measures {
-            Some(m) => Ok(Some(measured_episode(
-                agent,
-                env.as_mut(),
-                &problem.task,
-                m,
-            )?)),
-            None => Ok(None),
+
+    /// The problem's measures of one deterministic episode, where it has them.
+    fn measure(&mut self) -> Result<Option<PolicyEval>> {
+        let Some(m) = &self.problem.measures else {
+            return Ok(None);
+        };
+        let (agent, env) = (&mut self.lp.agent, self.eval_env.as_mut());
+        Ok(Some(measured_episode(agent, env, &self.problem.task, m)?))
+    }
+
+    /// Cold or warm start: an evaluation interval of true samples, then an evaluation.
+    fn baseline_step(&mut self, tick: &mut dyn FnMut(u64), stop: &dyn Checkpoints) -> Result<bool> {
+        let cfg = self.cfg;
+        let n = cfg
+            .eval_interval
+            .min(cfg.baseline_max_samples - self.count.get());
+        let c = self.count.clone();
+        let real = StepOptions::real();
+        let mut t = || tick(c.get());
+        let (lp, env, runner) = (&mut self.lp, &mut self.env, &mut self.p.runner);
+        train_steps(lp, env, runner, n, real, stop, &mut t)?;
+        let r = self.mean_return()?;
+        self.p.curve.push(CurvePoint {
+            true_samples: self.count.get(),
+            eval_return: r,
+        });
+        self.p.reached |= r >= cfg.target_return;
+        let stop_early = cfg.baseline_stop_early && self.method == Method::Warm;
+        if stop_early && self.p.reached && self.count.get() >= cfg.real_budget {
+            self.stopped_early = true;
+            return Ok(false);
         }
-    };
-    let mut all: Option<Transitions> = None;
-    let saved = store.load(key)?;
-    let (mut env, count) = match &saved {
-        Some(ckpt) => {
-            let model = model_env.as_mut().map(|m| m.model_mut());
-            let p = load_method(ckpt, method, seed, &mut start, model, &mut all)?;
-            SampleCounter::starting_at((problem.true_env)()?, p.true_samples)
+        let state = self.env.state();
+        self.at_checkpoint(state);
+        Ok(true)
+    }
+
+    /// The difference method: one iteration of Fig. 2.
+    fn difference_step(
+        &mut self,
+        real_batch: u64,
+        tick: &mut dyn FnMut(u64),
+        stop: &dyn Checkpoints,
+    ) -> Result<bool> {
+        let (cfg, k) = (self.cfg, self.p.iterations);
+        // 1. True samples with the previous policy plus exploration noise.
+        let c = self.count.clone();
+        let batch = collect_or_stop(
+            &mut self.lp,
+            &mut self.env,
+            &self.problem.task,
+            real_batch,
+            self.seeds.derive(&format!("collect-{k}")),
+            stop,
+            &mut || tick(c.get()),
+        )?;
+        append(&mut self.all, batch)?;
+        // 2. The difference model on all true samples so far.
+        let fit = FitConfig {
+            seed: self.seeds.derive(&format!("fit-{k}")),
+            ..cfg.fit.clone()
+        };
+        let model_env = self
+            .model_env
+            .as_mut()
+            .expect("built for the difference method");
+        let data = self.all.as_ref().expect("appended");
+        let report: FitReport = model_env.model_mut().fit(data, &fit)?;
+        let loss = report.holdout_loss.last().copied().unwrap_or(f64::NAN);
+        self.p.fit_losses.push(loss);
+        // 3. DDPG on the idealized plant plus the difference model, bootstrapped.
+        let sim = StepOptions::model();
+        let (n, runner) = (cfg.model_steps, &mut self.p.runner);
+        train_steps(&mut self.lp, model_env, runner, n, sim, stop, &mut || {})?;
+        self.p.simulated += cfg.model_steps;
+        let state = model_env.state();
+        let eval_return = self.mean_return()?;
+        self.p.curve.push(CurvePoint {
+            true_samples: self.count.get(),
+            eval_return,
+        });
+        self.p.iterations += 1;
+        self.at_checkpoint(state);
+        Ok(true)
+    }
+
+    /// Records what a checkpoint needs besides the networks and data: the true samples, and the
+    /// training environment's state `state` if an episode is in progress.
+    fn at_checkpoint(&mut self, state: Vec<f64>) {
+        self.p.true_samples = self.count.get();
+        self.p.env_state = self.p.runner.in_episode().then_some(state);
+    }
+}
+
+impl<A, P, T, F> Algorithm for DifferenceModels<'_, A, P, T, F>
+where
+    A: OffPolicyAgent + Resumable,
+    P: Plant + Clone,
+    T: Task + Clone,
+    F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
+{
+    type Event = u64;
+    type Record = RunRecord;
+
+    fn id(&self) -> (&str, u64) {
+        (self.method.name(), self.p.seed)
+    }
+
+    fn start(&mut self, _tick: &mut dyn FnMut(u64)) -> Result<()> {
+        let eval_return = self.mean_return()?;
+        self.p.curve.push(CurvePoint {
+            true_samples: 0,
+            eval_return,
+        });
+        self.p.start = self.measure()?;
+        self.lp.clear(Store::Primary)?;
+        self.p.updates0 = self.lp.counts().updates;
+        Ok(())
+    }
+
+    fn done(&self) -> bool {
+        let (cfg, n) = (self.cfg, self.count.get());
+        match self.batch {
+            None => self.stopped_early || n >= cfg.baseline_max_samples,
+            Some(real_batch) => n + real_batch > cfg.real_budget,
         }
-        None => SampleCounter::new((problem.true_env)()?),
-    };
-    let mut p = match saved {
-        Some(ckpt) => ckpt.get_json::<MethodProgress>("p0.progress")?,
-        None => {
-            let curve = vec![CurvePoint {
-                true_samples: 0,
-                eval_return: mean_return(&mut start.agent, &mut eval_env, cfg.eval_episodes)?,
-            }];
-            let start_eval = measure(&mut start.agent, &mut eval_env)?;
-            start.clear(Store::Primary)?;
-            let episodes = if batch.is_some() {
-                "model-episodes"
-            } else {
-                "true-episodes"
+    }
+
+    fn step(&mut self, tick: &mut dyn FnMut(u64), stop: &dyn Checkpoints) -> Result<bool> {
+        match self.batch {
+            None => self.baseline_step(tick, stop),
+            Some(real_batch) => self.difference_step(real_batch, tick, stop),
+        }
+    }
+
+    fn save(&self, ckpt: &mut Checkpoint) -> Result<()> {
+        self.lp.agent.save(ckpt)?;
+        self.lp.save("loop", ckpt)?;
+        ckpt.put_json("p0.progress", &self.p)?;
+        if let Some(m) = self.model_env.as_ref() {
+            m.model().save_to("p0.model", ckpt)?;
+        }
+        if let Some(t) = self.all.as_ref() {
+            t.save_to("p0.true_samples", ckpt)?;
+        }
+        Ok(())
+    }
+
+    fn load(&mut self, ckpt: &Checkpoint) -> Result<()> {
+        self.p = ckpt.get_json("p0.progress")?;
+        self.lp.agent.load(ckpt)?;
+        self.lp.load("loop", ckpt)?;
+        if let Some(m) = self.model_env.as_mut() {
+            m.model_mut().load_from("p0.model", ckpt)?;
+        }
+        if ckpt.contains("p0.true_samples.rewards") {
+            let mut t = Transitions::default();
+            t.load_from("p0.true_samples", ckpt)?;
+            self.all = Some(t);
+        }
+        (self.env, self.count) =
+            SampleCounter::starting_at((self.problem.true_env)()?, self.p.true_samples);
+        // The environment the training episodes run on, put back into a saved episode.
+        if let Some(state) = &self.p.env_state {
+            match self.model_env.as_mut() {
+                Some(m) => m.set_state(state)?,
+                None => self.env.set_state(state)?,
             };
-            MethodProgress {
-                method,
-                seed,
-                true_samples: 0,
-                curve,
-                fit_losses: Vec::new(),
-                simulated: 0,
-                updates0: start.counts().updates,
-                iterations: 0,
-                reached: false,
-                runner: EpisodeRunner::new(seeds.derive(episodes), "ep"),
-                env_state: None,
-                start: start_eval,
-            }
         }
-    };
-    // The environment the training episodes run on, put back into a saved episode.
-    let runner_env: &mut dyn Env = match &mut model_env {
-        Some(m) => m,
-        None => &mut env,
-    };
-    if let Some(state) = &p.env_state {
-        runner_env.set_state(state)?;
+        Ok(())
     }
-    let checkpoint = |store: &mut dyn Checkpoints,
-                      p: &mut MethodProgress,
-                      start: &OffPolicyLoop<A>,
-                      env_state: Option<Vec<f64>>,
-                      model: Option<&ResidualModel<P>>,
-                      all: Option<&Transitions>| {
-        p.true_samples = count.get();
-        p.env_state = p.runner.in_episode().then_some(env_state).flatten();
-        save_method(store, key, start, p, model, all)
-    };
-    match batch {
-        None => {
-            while count.get() < cfg.baseline_max_samples {
-                let n = cfg
-                    .eval_interval
-                    .min(cfg.baseline_max_samples - count.get());
-                let c = count.clone();
-                let real = StepOptions::real();
-                let mut t = || tick(c.get());
-                train_steps(&mut start, &mut env, &mut p.runner, n, real, store, &mut t)?;
-                let r = mean_return(&mut start.agent, &mut eval_env, cfg.eval_episodes)?;
-                p.curve.push(CurvePoint {
-                    true_samples: count.get(),
-                    eval_return: r,
-                });
-                p.reached |= r >= cfg.target_return;
-                let stop_early = cfg.baseline_stop_early && method == Method::Warm;
-                if stop_early && p.reached && count.get() >= cfg.real_budget {
-                    break;
-                }
-                let state = Some(env.state());
-                checkpoint(store, &mut p, &start, state, None, None)?;
-            }
-        }
-        Some(real_batch) => {
-            let model_env = model_env.as_mut().expect("built for the difference method");
-            while count.get() + real_batch <= cfg.real_budget {
-                let k = p.iterations;
-                // 1. True samples with the previous policy plus exploration noise.
-                let c = count.clone();
-                let batch = collect_or_stop(
-                    &mut start,
-                    &mut env,
-                    &problem.task,
-                    real_batch,
-                    seeds.derive(&format!("collect-{k}")),
-                    store,
-                    &mut || tick(c.get()),
-                )?;
-                append(&mut all, batch)?;
-                // 2. The difference model on all true samples so far.
-                let fit = FitConfig {
-                    seed: seeds.derive(&format!("fit-{k}")),
-                    ..cfg.fit.clone()
-                };
-                let data = all.as_ref().expect("appended");
-                let report: FitReport = model_env.model_mut().fit(data, &fit)?;
-                p.fit_losses
-                    .push(report.holdout_loss.last().copied().unwrap_or(f64::NAN));
-                // 3. DDPG on the idealized plant plus the difference model, bootstrapped.
-                let sim = StepOptions::model();
-                let (n, runner) = (cfg.model_steps, &mut p.runner);
-                train_steps(&mut start, model_env, runner, n, sim, store, &mut || {})?;
-                p.simulated += cfg.model_steps;
-                p.curve.push(CurvePoint {
-                    true_samples: count.get(),
-                    eval_return: mean_return(&mut start.agent, &mut eval_env, cfg.eval_episodes)?,
-                });
-                p.iterations += 1;
-                let state = Some(model_env.state());
-                let model = Some(model_env.model());
-                checkpoint(store, &mut p, &start, state, model, all.as_ref())?;
-            }
-        }
+
+    fn finish(mut self, wall_seconds: f64) -> Result<RunRecord> {
+        let last = self.measure()?;
+        Ok(RunRecord {
+            method: self.method,
+            seed: self.p.seed,
+            start: self.p.start,
+            last,
+            curve: self.p.curve,
+            true_samples: self.count.get(),
+            simulated_steps: self.p.simulated,
+            updates: self.lp.counts().updates - self.p.updates0,
+            fit_holdout_loss: self.p.fit_losses,
+            wall_seconds,
+        })
     }
-    let last = measure(&mut start.agent, &mut eval_env)?;
-    Ok(RunRecord {
-        method,
-        seed,
-        start: p.start,
-        last,
-        curve: p.curve,
-        true_samples: count.get(),
-        simulated_steps: p.simulated,
-        updates: start.counts().updates - p.updates0,
-        fit_holdout_loss: p.fit_losses,
-        wall_seconds: t0.elapsed().as_secs_f64(),
-    })
 }
 
 /// Observation and action spaces of the task: what the replay buffer stores.

@@ -1,8 +1,12 @@
-//! The one resumable driver: every algorithm of this crate is a value holding its whole state
-//! (agent, model, buffers, generators, counters, the episode in progress) that [`drive`] steps
-//! until it is done. The driver owns the bookkeeping the algorithms share: restoring a saved
+//! The one resumable driver: an algorithm is a value holding its whole state (agent, model,
+//! buffers, generators, counters, the episode in progress) that [`drive`] steps until it is done.
+//! MBPO's loop ([`crate::mbpo::Mbpo`], also M-DeMoRL's and p1's), p2's
+//! ([`crate::imagined_episodes::ImaginedEpisodes`], [`crate::imagined_pixels::PixelDqn`]) and
+//! p0's ([`crate::difference_models::DifferenceModels`]) run on it; GPS and MDGPS, whose runs take
+//! minutes and restart when stopped, keep their own loops. The driver owns the bookkeeping the algorithms share: restoring a saved
 //! run (refusing another run's checkpoint), stop requests, checkpoints when the algorithm says
-//! one is due, and the wall time summed over every process that ran it.
+//! one is due, and the wall time (summed over every process that ran it, for the algorithms
+//! that ask).
 //!
 //! An algorithm's [`Algorithm::step`] is then its paper's loop body and nothing else. Equal
 //! runs save equal bytes, and a resumed run gives exactly the numbers of an uninterrupted one:
@@ -21,6 +25,10 @@ pub trait Algorithm {
     type Event;
     /// What a finished run returns.
     type Record;
+    /// Whether checkpoints carry the wall time, so that a resumed run's is summed over every
+    /// process that ran it. Without it equal runs save equal bytes, and [`Algorithm::finish`]
+    /// gets the last process's time.
+    const SUMS_WALL_TIME: bool = false;
 
     /// The method's name (the checkpoint's key) and the run's seed.
     fn id(&self) -> (&str, u64);
@@ -35,8 +43,13 @@ pub trait Algorithm {
     fn done(&self) -> bool;
 
     /// One unit of work (a real step, an episode, an iteration); `Ok(true)` when a checkpoint
-    /// is due after it.
-    fn step(&mut self, on_event: &mut dyn FnMut(Self::Event)) -> Result<bool>;
+    /// is due after it. A step long enough to need it may poll `stop` itself and return
+    /// [`AlgoError::Stopped`] (losing the work since the last checkpoint).
+    fn step(
+        &mut self,
+        on_event: &mut dyn FnMut(Self::Event),
+        stop: &dyn Checkpoints,
+    ) -> Result<bool>;
 
     /// Writes the whole state into `ckpt`.
     fn save(&self, ckpt: &mut Checkpoint) -> Result<()>;
@@ -44,8 +57,7 @@ pub trait Algorithm {
     /// Restores what [`Algorithm::save`] wrote.
     fn load(&mut self, ckpt: &Checkpoint) -> Result<()>;
 
-    /// The record of the finished run; `wall_seconds` is its wall time over every process that
-    /// ran it.
+    /// The record of the finished run after `wall_seconds` (see [`Algorithm::SUMS_WALL_TIME`]).
     fn finish(self, wall_seconds: f64) -> Result<Self::Record>;
 }
 
@@ -54,8 +66,9 @@ pub trait Algorithm {
 struct Header {
     method: String,
     seed: u64,
-    /// Wall seconds up to this checkpoint, so a resumed run reports its whole cost.
-    wall_seconds: f64,
+    /// Wall seconds up to this checkpoint, where the algorithm sums them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    wall_seconds: Option<f64>,
 }
 
 const HEADER: &str = "run";
@@ -78,7 +91,7 @@ pub fn drive<A: Algorithm>(
             let h: Header = ckpt.get_json(HEADER)?;
             crate::ensure_same_run((&h.method, h.seed), (&name, seed))?;
             algo.load(&ckpt)?;
-            h.wall_seconds
+            h.wall_seconds.unwrap_or(0.0)
         }
         None => {
             algo.start(on_event)?;
@@ -89,13 +102,13 @@ pub fn drive<A: Algorithm>(
         if store.stop_requested() {
             return Err(AlgoError::Stopped);
         }
-        if algo.step(on_event)? {
+        if algo.step(on_event, &*store)? {
             let mut ckpt = Checkpoint::new();
             algo.save(&mut ckpt)?;
             let header = Header {
                 method: name.clone(),
                 seed,
-                wall_seconds: before + t0.elapsed().as_secs_f64(),
+                wall_seconds: A::SUMS_WALL_TIME.then(|| before + t0.elapsed().as_secs_f64()),
             };
             ckpt.put_json(HEADER, &header)?;
             store.save(&name, &ckpt)?;

@@ -491,7 +491,7 @@ where
             || self.solved_at().is_some()
     }
 
-    fn step(&mut self, on_event: &mut dyn FnMut(Event)) -> Result<bool> {
+    fn step(&mut self, on_event: &mut dyn FnMut(Event), _stop: &dyn Checkpoints) -> Result<bool> {
         let (cfg, task) = (self.cfg, self.task);
         // One real episode; with a model, its transitions join the model's data.
         let k = self.p.t.real_returns.len() as u64;

@@ -393,7 +393,7 @@ impl Algorithm for PixelDqn<'_> {
             || self.solved_at().is_some()
     }
 
-    fn step(&mut self, on_event: &mut dyn FnMut(Event)) -> Result<bool> {
+    fn step(&mut self, on_event: &mut dyn FnMut(Event), _stop: &dyn Checkpoints) -> Result<bool> {
         let cfg = self.cfg;
         let k = self.p.t.real_returns.len() as u64;
         let keep = self.imagination.is_some();

@@ -386,7 +386,8 @@ pub enum Event {
 /// What one run reports.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RunRecord {
-    /// `"sac"`, `"mbpo"` or `"m_demorl"`.
+    /// The method's name: `"sac"`, or its [`Imagination::name`] (`"mbpo"`, `"mbpo_oracle"`,
+    /// `"m_demorl"`, `"incremental_dyna"`).
     pub method: String,
     /// The seed.
     pub seed: u64,
@@ -984,6 +985,7 @@ where
 {
     type Event = Event;
     type Record = RunRecord;
+    const SUMS_WALL_TIME: bool = true;
 
     fn id(&self) -> (&str, u64) {
         let name = self.imagination.as_ref().map_or("sac", |i| i.name());
@@ -1003,7 +1005,7 @@ where
         self.count.get() >= self.cfg.real_steps
     }
 
-    fn step(&mut self, on_event: &mut dyn FnMut(Event)) -> Result<bool> {
+    fn step(&mut self, on_event: &mut dyn FnMut(Event), _stop: &dyn Checkpoints) -> Result<bool> {
         let (cfg, task) = (self.cfg, &self.problem.task);
         // Act in the real system with the exploring policy; the transition goes into D_env.
         let opts = StepOptions::real().recording_states().without_updates();
