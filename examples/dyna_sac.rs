@@ -1,77 +1,105 @@
-//! SAC with a learned model in MBPO-style Dyna on Pendulum-v1 (p1's Algorithm 1 in shape):
-//! every real step goes to D_env; every `FIT_EVERY` steps an MLP of the state change is refitted
-//! on all real transitions and branched rollouts from real states fill D_model; SAC takes `G`
-//! updates per real step on minibatches of 10% D_env, 90% D_model.
+//! SAC with a learned model in MBPO-style Dyna on Pendulum-v1 (p1's Algorithm 1 in shape), as a
+//! composition: MBPO's loop (`Mbpo`) with an imagination of our own, `MlpRollouts`, which fits an
+//! MLP of the state change (not MBPO's ensemble) and fills `D_model` with branched rollouts from
+//! real states. Every real step goes to `D_env`; every `FIT_EVERY` steps the MLP is refitted on all
+//! real transitions and `ROLLOUTS` rollouts of `HORIZON` steps follow; SAC takes `G` updates per
+//! real step on minibatches of 10% `D_env`, 90% `D_model`.
 //!
 //! `cargo run --release --example dyna_sac [seed] [real_steps] [G]` (defaults 0, 5000, 10).
-use tandem::agents::{evaluate, EpisodeRunner, OffPolicyLoop, Sac, SacConfig, StepOptions};
+use tandem::agents::{BatchPolicy, OffPolicyAgent, OffPolicyLoop, Sac, SacConfig};
+use tandem::algos::driver::drive;
 use tandem::algos::dyna::{imagine, sample_starts};
-use tandem::core::SeedStream;
-use tandem::dynamics::classic::GymPendulumParams;
-use tandem::envs::{make, PendulumTask, Task};
-use tandem::models::{DynamicsModel, FitConfig, Judges, MlpModel, MlpModelConfig};
-use tandem::models::{OptimizerConfig, TransitionsBuilder};
+use tandem::algos::mbpo::{pendulum_problem, Event, Imagination, Imagine, Mbpo, MbpoConfig};
+use tandem::algos::{AlgoError, Ephemeral, Result};
+use tandem::core::{Rng, SeedStream};
+use tandem::envs::Task;
+use tandem::models::{FitConfig, Judges, MlpModel, MlpModelConfig, OptimizerConfig, Transitions};
 
 const FIT_EVERY: u64 = 250; // real steps between model fits and rollout batches
 const ROLLOUTS: usize = 2000; // branched rollouts per batch, from random real states
 const HORIZON: usize = 3; // their length (MBPO's k)
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// Branched rollouts through an MLP of the state change; reward and termination from the task.
+struct MlpRollouts;
+
+impl Imagination for MlpRollouts {
+    type Model = MlpModel;
+
+    fn name(&self) -> &'static str {
+        "dyna_sac"
+    }
+
+    /// Four batches of rollouts.
+    fn capacity(&self, _cfg: &MbpoConfig, _epoch: u64) -> usize {
+        4 * ROLLOUTS * HORIZON
+    }
+
+    fn horizon(&self, _epoch: u64) -> usize {
+        HORIZON
+    }
+
+    fn new_model(&self, _: &MbpoConfig, s: usize, u: usize, seed: u64) -> Result<Option<MlpModel>> {
+        let cfg = MlpModelConfig {
+            hidden: vec![200, 200],
+            optimizer: OptimizerConfig::adam(1e-3),
+            seed,
+            ..MlpModelConfig::state_only()
+        };
+        Ok(Some(MlpModel::new(s, u, cfg)?))
+    }
+}
+
+impl<T: Task, A: OffPolicyAgent + BatchPolicy> Imagine<T, A> for MlpRollouts {
+    fn imagine(
+        &mut self,
+        lp: &mut OffPolicyLoop<A>,
+        model: Option<&mut MlpModel>,
+        task: &T,
+        data: &Transitions,
+        _epoch: u64,
+        _seed: u64,
+        rng: &mut Rng,
+    ) -> Result<usize> {
+        let model = model.ok_or_else(|| AlgoError::Config("no model to roll out".into()))?;
+        let starts = sample_starts(data, ROLLOUTS, rng)?;
+        imagine(lp, &*model, task, &Judges::default(), &starts, HORIZON, rng)
+    }
+}
+
+fn main() -> std::result::Result<(), Box<dyn std::error::Error>> {
     let arg = |i: usize| std::env::args().nth(i).and_then(|s| s.parse::<u64>().ok());
     let (seed, real_steps) = (arg(1).unwrap_or(0), arg(2).unwrap_or(5000));
-    let g = arg(3).unwrap_or(10) as usize;
-    let (mut env, mut eval_env) = (make("Pendulum-v1")?, make("Pendulum-v1")?);
-    let task = PendulumTask::new(&GymPendulumParams::default()); // Pendulum-v1's own rules
-    let seeds = SeedStream::new(seed);
-    let (obs, act) = (env.observation_space().clone(), env.action_space().clone());
-    let cfg = SacConfig {
-        learning_rate: 1e-3,
-        learning_starts: 250,
-        ..SacConfig::default()
+    let cfg = MbpoConfig {
+        sac: SacConfig {
+            learning_rate: 1e-3,
+            learning_starts: 250,
+            ..SacConfig::default()
+        },
+        model_fit: FitConfig {
+            epochs: 20,
+            ..FitConfig::default()
+        },
+        model_min_updates: 0,
+        real_steps,
+        model_train_freq: FIT_EVERY,
+        real_ratio: 0.1,
+        updates_per_step: arg(3).unwrap_or(10) as usize,
+        eval_episodes: 10,
+        ..MbpoConfig::default()
     };
-    let sac = Sac::new(cfg.clone(), &obs, &act, seeds.derive("agent"))?;
-    let mut lp = OffPolicyLoop::new(sac, cfg.schedule(), &obs, &act, seeds.rng("minibatches"))?
-        .with_secondary(4 * ROLLOUTS * HORIZON, 0.1)?;
-    let mcfg = MlpModelConfig {
-        hidden: vec![200, 200],
-        optimizer: OptimizerConfig::adam(1e-3),
-        ..MlpModelConfig::state_only()
-    };
-    let fit = FitConfig {
-        epochs: 20,
-        ..FitConfig::default()
-    };
-    let mut model = MlpModel::new(2, 1, mcfg)?; // (θ, θ̇) and the torque
-    let mut data = TransitionsBuilder::new(2, 1);
-    let mut episodes = EpisodeRunner::new(seeds.derive("episodes"), "ep");
-    let (mut rng, judges) = (seeds.rng("rollouts"), Judges::default()); // reward from the task
-    for t in 1..=real_steps {
-        // One real step (random during SAC's warm-up); its states go to the model's data.
-        let opts = StepOptions::real().recording_states().without_updates();
-        let rec = lp.step(&mut env, &mut episodes, opts)?;
-        let (x, x1) = rec.states.as_ref().expect("recorded");
-        let u = task.control(&rec.action);
-        data.push_canonical(&task, x, &u, x1, rec.reward, rec.terminated, rec.done())?;
-        if t % FIT_EVERY == 0 {
-            let all = data.clone().build();
-            model.fit(
-                &all,
-                &FitConfig {
-                    seed: t,
-                    ..fit.clone()
-                },
-            )?;
-            let starts = sample_starts(&all, ROLLOUTS, &mut rng)?;
-            imagine(&mut lp, &model, &task, &judges, &starts, HORIZON, &mut rng)?;
+    let problem = pendulum_problem(); // Pendulum-v1 with its own rules as the model's task
+    let mut rollouts = MlpRollouts;
+    let dyna = Mbpo::new(&problem, &cfg, Some(&mut rollouts), seed, |obs, act| {
+        let agent_seed = SeedStream::new(seed).derive("agent");
+        Ok(Sac::new(cfg.sac.clone(), obs, act, agent_seed)?)
+    })?;
+    drive(dyna, &mut Ephemeral, &mut |event| {
+        if let Event::Eval(p) = event {
+            println!(
+                "{} real steps: eval return {:.1}",
+                p.true_samples, p.eval_return
+            );
         }
-        if lp.primary().len() > cfg.learning_starts {
-            lp.update(g)?;
-        }
-        if t % 1000 == 0 {
-            let r = evaluate(&mut lp.agent, eval_env.as_mut(), 10, &seeds, None)?;
-            let mean = r.iter().sum::<f64>() / 10.0;
-            println!("{t} real steps: eval return {mean:.1}");
-        }
-    }
+    })?;
     Ok(())
 }

@@ -1,7 +1,7 @@
 //! `tandem reproduce`: whole-paper reproductions, one module each (`reproduce_p0`,
 //! `reproduce_p1`, ...), and `tandem reproduce merge`, which combines studies of disjoint seeds.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::{Args, Subcommand};
 
@@ -93,72 +93,45 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
             let Some(first) = args.dirs.first() else {
                 return Err(CliError::input("merge", "no directories given"));
             };
-            match harness::study_of(first)?.as_str() {
-                "p0-pendulum" => harness::merge(
-                    &P0Study(P0Task::Pendulum),
-                    &args.dirs,
-                    args.out.as_deref(),
-                    args.overwrite,
-                ),
-                "p0-leo" => harness::merge(
-                    &P0Study(P0Task::Leo),
-                    &args.dirs,
-                    args.out.as_deref(),
-                    args.overwrite,
-                ),
-                "p1" => harness::merge(
-                    &P1Study::new(None),
-                    &args.dirs,
-                    args.out.as_deref(),
-                    args.overwrite,
-                ),
-                "p2-cartpole" => harness::merge(
-                    &P2Study::new(Experiment::CartPole, None),
-                    &args.dirs,
-                    args.out.as_deref(),
-                    args.overwrite,
-                ),
-                "p2-maze" => harness::merge(
-                    &P2Study::new(Experiment::Maze, None),
-                    &args.dirs,
-                    args.out.as_deref(),
-                    args.overwrite,
-                ),
-                "p3-leg" => harness::merge(
-                    &P3Study::leg(false, false),
-                    &args.dirs,
-                    args.out.as_deref(),
-                    args.overwrite,
-                ),
-                "p3-mujoco" => harness::merge(
-                    &P3Study::mujoco(None, false, false),
-                    &args.dirs,
-                    args.out.as_deref(),
-                    args.overwrite,
-                ),
-                "p4-pusher" => harness::merge(
-                    &P4Study::<Pusher>::new(),
-                    &args.dirs,
-                    args.out.as_deref(),
-                    args.overwrite,
-                ),
-                "p4-door" => harness::merge(
-                    &P4Study::<Door>::new(),
-                    &args.dirs,
-                    args.out.as_deref(),
-                    args.overwrite,
-                ),
-                "p4-reacher" => harness::merge(
-                    &ReacherStudy,
-                    &args.dirs,
-                    args.out.as_deref(),
-                    args.overwrite,
-                ),
-                other => Err(CliError::input(
+            let name = harness::study_of(first)?;
+            let Some(study) = registry().into_iter().find(|s| s.name() == name) else {
+                return Err(CliError::input(
                     first.display().to_string(),
-                    format!("`tandem reproduce merge` does not merge {other} studies"),
-                )),
-            }
+                    format!("`tandem reproduce merge` does not merge {name} studies"),
+                ));
+            };
+            study.merge(&args.dirs, args.out.as_deref(), args.overwrite)
         }
     }
+}
+
+/// A study as `merge` finds it by its name; the settings come from the directories.
+trait Registered {
+    fn name(&self) -> &str;
+    fn merge(&self, dirs: &[PathBuf], out: Option<&Path>, overwrite: bool) -> Result<()>;
+}
+
+impl<S: harness::Study> Registered for S {
+    fn name(&self) -> &str {
+        harness::Study::name(self)
+    }
+    fn merge(&self, dirs: &[PathBuf], out: Option<&Path>, overwrite: bool) -> Result<()> {
+        harness::merge(self, dirs, out, overwrite)
+    }
+}
+
+/// Every study of `tandem reproduce`.
+fn registry() -> Vec<Box<dyn Registered>> {
+    vec![
+        Box::new(P0Study(P0Task::Pendulum)),
+        Box::new(P0Study(P0Task::Leo)),
+        Box::new(P1Study::new(None)),
+        Box::new(P2Study::new(Experiment::CartPole, None)),
+        Box::new(P2Study::new(Experiment::Maze, None)),
+        Box::new(P3Study::leg(false, false)),
+        Box::new(P3Study::mujoco(None, false, false)),
+        Box::new(P4Study::<Pusher>::new()),
+        Box::new(P4Study::<Door>::new()),
+        Box::new(ReacherStudy),
+    ]
 }

@@ -241,6 +241,21 @@ impl Tally {
         }
     }
 
+    /// The method's name and the seed: the run's identity for [`drive`].
+    pub(super) fn id(&self) -> (&str, u64) {
+        (self.method.name(), self.seed)
+    }
+
+    /// The real episode at which the run was solved ([`solved_at`]), if it was.
+    pub(super) fn solved_at(&self, window: usize, target: f64) -> Option<u64> {
+        solved_at(&self.real_returns, window, target)
+    }
+
+    /// Whether the run is over: solved, or `max_episodes` real episodes played.
+    pub(super) fn over(&self, max_episodes: u64, window: usize, target: f64) -> bool {
+        self.real_returns.len() as u64 >= max_episodes || self.solved_at(window, target).is_some()
+    }
+
     /// The record of a run that ended here, solved as `solved_at` says, after `wall_seconds`.
     pub(super) fn record(self, solved_at: Option<u64>, wall_seconds: f64) -> RunRecord {
         RunRecord {
@@ -354,7 +369,6 @@ where
 /// by [`drive`]: the agent, the model environment and the real transitions it is fitted on, the
 /// start states, the episodes waiting for an update and the counts.
 pub struct ImaginedEpisodes<'a, A, T, F> {
-    method: Method,
     cfg: &'a P2Config,
     task: &'a T,
     real_env: F,
@@ -394,7 +408,6 @@ where
         };
         let (env, count) = SampleCounter::new(real_env()?);
         Ok(Self {
-            method,
             cfg,
             task,
             real_env,
@@ -420,11 +433,6 @@ where
             self.p.pending.clear();
         }
         Ok(())
-    }
-
-    fn solved_at(&self) -> Option<u64> {
-        let cfg = self.cfg;
-        solved_at(&self.p.t.real_returns, cfg.solved_window, cfg.solved_return)
     }
 
     /// Fit `j` of the model, on (a draw of) all real transitions so far.
@@ -483,12 +491,13 @@ where
     type Record = RunRecord;
 
     fn id(&self) -> (&str, u64) {
-        (self.method.name(), self.p.t.seed)
+        self.p.t.id()
     }
 
     fn done(&self) -> bool {
-        self.p.t.real_returns.len() as u64 >= self.cfg.max_real_episodes
-            || self.solved_at().is_some()
+        let cfg = self.cfg;
+        let (max, window) = (cfg.max_real_episodes, cfg.solved_window);
+        self.p.t.over(max, window, cfg.solved_return)
     }
 
     fn step(&mut self, on_event: &mut dyn FnMut(Event), _stop: &dyn Checkpoints) -> Result<bool> {
@@ -560,7 +569,10 @@ where
     }
 
     fn finish(self, wall_seconds: f64) -> Result<RunRecord> {
-        let solved_at = self.solved_at();
+        let solved_at = self
+            .p
+            .t
+            .solved_at(self.cfg.solved_window, self.cfg.solved_return);
         Ok(self.p.t.record(solved_at, wall_seconds))
     }
 }

@@ -35,7 +35,7 @@ use tandem_models::{PixelEpisodes, PixelFit, PixelModel, PixelModelConfig, Pixel
 use tandem_nn::{Checkpoint, Checkpointable};
 
 use super::driver::{drive, Algorithm};
-use super::imagined_episodes::{solved_at, Event, Method, RunRecord, Tally};
+use super::imagined_episodes::{Event, Method, RunRecord, Tally};
 use super::{AlgoError, Checkpoints, Result};
 
 /// Settings of a maze run. `Default` follows p2 where it gives a figure and says where a figure
@@ -288,7 +288,6 @@ fn run_probed(
 /// episodes, the episode runners and counts, and (for the F1 experiment, never checkpointed)
 /// the copies of the model being scored.
 pub struct PixelDqn<'a> {
-    method: Method,
     cfg: &'a MazeConfig,
     seeds: SeedStream,
     lp: OffPolicyLoop<Dqn>,
@@ -337,7 +336,6 @@ impl<'a> PixelDqn<'a> {
         };
         let (env, count) = SampleCounter::new(maze(cfg)?);
         Ok(Self {
-            method,
             cfg,
             seeds,
             lp,
@@ -353,11 +351,6 @@ impl<'a> PixelDqn<'a> {
             probes: Vec::new(),
             points: Vec::new(),
         })
-    }
-
-    fn solved_at(&self) -> Option<u64> {
-        let cfg = self.cfg;
-        solved_at(&self.p.t.real_returns, cfg.solved_window, cfg.solved_return)
     }
 
     /// The F1 experiment: a real episode is held out for the copies taken before it; a copy is
@@ -385,12 +378,13 @@ impl Algorithm for PixelDqn<'_> {
     type Record = (RunRecord, Vec<QualityPoint>);
 
     fn id(&self) -> (&str, u64) {
-        (self.method.name(), self.p.t.seed)
+        self.p.t.id()
     }
 
     fn done(&self) -> bool {
-        self.p.t.real_returns.len() as u64 >= self.cfg.max_real_episodes
-            || self.solved_at().is_some()
+        let cfg = self.cfg;
+        let (max, window) = (cfg.max_real_episodes, cfg.solved_window);
+        self.p.t.over(max, window, cfg.solved_return)
     }
 
     fn step(&mut self, on_event: &mut dyn FnMut(Event), _stop: &dyn Checkpoints) -> Result<bool> {
@@ -488,7 +482,10 @@ impl Algorithm for PixelDqn<'_> {
     }
 
     fn finish(self, wall_seconds: f64) -> Result<(RunRecord, Vec<QualityPoint>)> {
-        let solved_at = self.solved_at();
+        let solved_at = self
+            .p
+            .t
+            .solved_at(self.cfg.solved_window, self.cfg.solved_return);
         Ok((self.p.t.record(solved_at, wall_seconds), self.points))
     }
 }
