@@ -45,7 +45,7 @@ use tandem_nn::{Checkpoint, Checkpointable};
 
 use tandem_agents::adapter::{feature_dim, Adapted, Feature};
 
-pub use super::{AlgoError, Checkpoints, Ephemeral, Result};
+pub use super::{AlgoError, Checkpoints, Ephemeral, MakeEnv, Result};
 use crate::driver::{drive, Algorithm};
 
 /// One of the three methods of p0's Table II.
@@ -991,9 +991,6 @@ where
     store.save("pretrained", &ckpt)?;
     Ok(t)
 }
-
-/// A constructor of the true system.
-pub type MakeEnv = fn() -> std::result::Result<Box<dyn Env>, EnvError>;
 
 /// Progress of [`run_seed`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

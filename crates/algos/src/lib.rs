@@ -100,6 +100,13 @@ impl From<NnError> for AlgoError {
     }
 }
 
+/// A constructor of a real (or true) system, with its episode limit.
+pub type MakeEnv = fn() -> std::result::Result<Box<dyn tandem_envs::Env>, EnvError>;
+
+/// A constructor of a real system that carries its settings.
+pub type MakeEnvWith =
+    Box<dyn Fn() -> std::result::Result<Box<dyn tandem_envs::Env>, EnvError> + Send + Sync>;
+
 /// Result of the algorithms.
 pub type Result<T> = std::result::Result<T, AlgoError>;
 

@@ -49,7 +49,7 @@ use tandem_nn::{Checkpoint, Checkpointable};
 
 use super::driver::{drive, timed, Algorithm};
 use super::dyna::{imagine, sample_starts};
-use super::{AlgoError, Checkpoints, Result};
+use super::{AlgoError, Checkpoints, MakeEnv, MakeEnvWith, Result};
 
 /// The gymnasium MuJoCo tasks [`MbpoConfig::mujoco`] has settings for.
 pub const MUJOCO_TASKS: [&str; 4] = [
@@ -296,9 +296,6 @@ pub struct Problem<T, F> {
     pub env: F,
 }
 
-/// A constructor of the real system.
-pub type MakeEnv = fn() -> std::result::Result<Box<dyn Env>, EnvError>;
-
 /// Pendulum-v1 with its own rules as the task.
 pub fn pendulum_problem() -> Problem<PendulumTask, MakeEnv> {
     Problem {
@@ -316,9 +313,6 @@ pub fn leg2r_problem() -> Problem<Leg2RTask, MakeEnv> {
         env: || tandem_envs::make(Leg2REnv::ID),
     }
 }
-
-/// A constructor of the real system that carries its settings.
-pub type MakeEnvWith = Box<dyn Fn() -> std::result::Result<Box<dyn Env>, EnvError> + Send + Sync>;
 
 /// The 2R leg built from `config` (e.g. the true leg, or the reward in other units), reported as
 /// `id`, with its [`tandem_envs::TimeLimit`] of `config.max_episode_steps`; an error when the
