@@ -180,7 +180,7 @@ where
 
 /// Settings of p1's §6 online fine-tuning: a residual incremental policy from the
 /// error-evolution model `e_{k+1} = e_k + L_k Δa_{e,k}` (eq. 9) added to a pre-trained policy
-/// after the system changed. `Default`: 10 episodes (the budget), MPC over one step
+/// after the system changed. `Default`: 10 episodes (our budget), MPC over one step
 /// (`horizon` 1; p1 allows "MPC or LQR"), the model refit after every episode.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
