@@ -124,3 +124,99 @@ pub fn timed<R>(total: &mut f64, f: impl FnOnce() -> R) -> R {
     *total += t0.elapsed().as_secs_f64();
     r
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Ephemeral, InMemory};
+
+    /// Sums 1 + 2 + … + `n`, one term a step, checkpointing every `every` steps.
+    struct Sum {
+        seed: u64,
+        n: u64,
+        every: u64,
+        k: u64,
+        total: u64,
+    }
+
+    impl Sum {
+        fn new(seed: u64) -> Self {
+            Self {
+                seed,
+                n: 10,
+                every: 3,
+                k: 0,
+                total: 0,
+            }
+        }
+    }
+
+    impl Algorithm for Sum {
+        type Event = u64;
+        type Record = (u64, u64);
+
+        fn id(&self) -> (&str, u64) {
+            ("sum", self.seed)
+        }
+
+        fn done(&self) -> bool {
+            self.k >= self.n
+        }
+
+        fn step(&mut self, on_event: &mut dyn FnMut(u64), _: &dyn Checkpoints) -> Result<bool> {
+            self.k += 1;
+            self.total += self.k;
+            on_event(self.k);
+            Ok(self.k.is_multiple_of(self.every))
+        }
+
+        fn save(&self, ckpt: &mut Checkpoint) -> Result<()> {
+            Ok(ckpt.put_json("sum.state", &(self.k, self.total))?)
+        }
+
+        fn load(&mut self, ckpt: &Checkpoint) -> Result<()> {
+            (self.k, self.total) = ckpt.get_json("sum.state")?;
+            Ok(())
+        }
+
+        fn finish(self, _wall_seconds: f64) -> Result<(u64, u64)> {
+            Ok((self.k, self.total))
+        }
+    }
+
+    #[test]
+    fn a_run_stopped_at_any_step_resumes_from_its_last_checkpoint_to_the_same_record() {
+        let whole = drive(Sum::new(0), &mut Ephemeral, &mut |_| {}).unwrap();
+        assert_eq!(whole, (10, 55));
+        for stop_after in 1..10 {
+            let mut store = InMemory::default();
+            let stop = store.stop_flag();
+            let mut seen = Vec::new();
+            let e = drive(Sum::new(0), &mut store, &mut |k| {
+                seen.push(k);
+                stop.set(k == stop_after);
+            })
+            .unwrap_err();
+            assert!(matches!(e, AlgoError::Stopped), "{e}");
+            stop.set(false);
+            let resumed = drive(Sum::new(0), &mut store, &mut |k| seen.push(k)).unwrap();
+            assert_eq!(resumed, whole, "stopped after step {stop_after}");
+            // The steps after the last checkpoint (every 3rd) are done again.
+            let redone = stop_after - stop_after / 3 * 3;
+            assert_eq!(seen.len() as u64, 10 + redone, "stopped after {stop_after}");
+        }
+    }
+
+    #[test]
+    fn another_runs_checkpoint_is_refused_and_equal_runs_save_equal_bytes() {
+        let (mut a, mut b) = (InMemory::default(), InMemory::default());
+        drive(Sum::new(1), &mut a, &mut |_| {}).unwrap();
+        drive(Sum::new(1), &mut b, &mut |_| {}).unwrap();
+        assert_eq!(a.saves(), 3);
+        let bytes = |s: &mut InMemory| s.load("sum").unwrap().unwrap().to_bytes().unwrap();
+        assert_eq!(bytes(&mut a), bytes(&mut b));
+        let e = drive(Sum::new(2), &mut a, &mut |_| {}).unwrap_err();
+        assert!(matches!(e, AlgoError::Checkpoint(_)), "{e}");
+        assert!(e.to_string().contains("seed 1"), "{e}");
+    }
+}
