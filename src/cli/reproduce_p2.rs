@@ -916,7 +916,7 @@ mod tests {
         let md = markdown(&t, Experiment::CartPole, "CartPole-v1", "s", 1.0);
         assert!(md.contains("at most 0.31"), "{md}");
         assert!(md.contains("- REINFORCE alone: 600, never"), "{md}");
-        // The JSON has the keys the issue names, with null for the seed that never solved it.
+        // The JSON keys each method's episodes to solve, null for the seed that never solved it.
         let v: serde_json::Value = serde_json::from_str(&to_json_pretty(&t).unwrap()).unwrap();
         assert_eq!(
             v["model_free"]["episodes_to_solve"]["per_seed"][1],

@@ -374,6 +374,8 @@ pub struct ImaginedEpisodes<'a, A, T, F> {
     real_env: F,
     agent: A,
     seeds: SeedStream,
+    /// Width of the plant input of the task's actions.
+    control_dim: usize,
     model_env: Option<ModelEnv<MlpModel, T>>,
     real: Option<Transitions>,
     p: Progress,
@@ -398,10 +400,10 @@ where
         seed: u64,
     ) -> Result<Self> {
         cfg.validate()?;
-        let action_dim = task.control(&probe_action(task)).len();
+        let control_dim = task.control(&probe_action(task)).len();
         let model_env = match method {
             Method::WithModel => {
-                let model = MlpModel::new(task.state_dim(), action_dim, cfg.model.clone())?;
+                let model = MlpModel::new(task.state_dim(), control_dim, cfg.model.clone())?;
                 Some(ModelEnv::with_judges(model, task.clone(), cfg.judges)?)
             }
             Method::ModelFree => None,
@@ -413,6 +415,7 @@ where
             real_env,
             agent,
             seeds: SeedStream::new(seed),
+            control_dim,
             model_env,
             real: None,
             p: Progress {
@@ -507,8 +510,7 @@ where
         let seed = self.seeds.derive(&format!("real-episode-{k}"));
         let obs = self.env.reset(Some(seed));
         self.p.starts.push(self.env.state());
-        let action_dim = task.control(&probe_action(task)).len();
-        let mut b = TransitionsBuilder::new(task.state_dim(), action_dim);
+        let mut b = TransitionsBuilder::new(task.state_dim(), self.control_dim);
         let rec = self.model_env.is_some().then_some((task, &mut b));
         let ep = play(&mut self.env, &mut self.agent, obs, rec)?;
         self.p.t.real_returns.push(ep.total_reward());

@@ -750,7 +750,6 @@ pub fn run_with<T: Task, F, I: Imagine<T, Sac>>(
 where
     F: Fn() -> std::result::Result<Box<dyn Env>, EnvError>,
 {
-    cfg.validate()?;
     let algo = Mbpo::new(problem, cfg, imagination, seed, |obs, act| {
         let seeds = SeedStream::new(seed);
         Ok(Sac::new(cfg.sac.clone(), obs, act, seeds.derive("agent"))?)
