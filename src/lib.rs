@@ -2,8 +2,8 @@
 //!
 //! Sample-efficient robot learning, with model-based and model-free methods run in tandem.
 //! This facade re-exports the workspace crates, among them [`algos`], the model-based algorithms
-//! composed from the others, and holds what the `tandem` program adds: run directories, reports
-//! and the environment registry.
+//! composed from the others, and [`studies`], the papers' reproductions over them, and holds the
+//! registry of every environment.
 //!
 //! | module | crate | owns |
 //! |---|---|---|
@@ -16,9 +16,8 @@
 //! | [`agents`] | `tandem-agents` | DDPG, SAC, REINFORCE, DQN, replay, agent adapters |
 //! | [`algos`] | `tandem-algos` | MBPO, Dyna, M-DeMoRL, difference models, imagined episodes, GPS, MDGPS |
 //! | [`mujoco`] | `tandem-mujoco` | gymnasium's MuJoCo v5 tasks and MJCF scenes (real MuJoCo with the feature `mujoco`) |
+//! | [`studies`] | `tandem-studies` | the papers' studies, run directories, reports, stop requests |
 //!
-//! [`run`] writes run directories; [`report`] renders reproduction tables and figures;
-//! [`interrupt`] turns SIGINT/SIGTERM into a stop request that long runs poll.
 //! [`make_env`] and [`registered_envs`] are the registry of every environment: `tandem-envs`'s and,
 //! with the feature `mujoco`, gymnasium's MuJoCo tasks.
 
@@ -31,10 +30,7 @@ pub use tandem_models as models;
 pub use tandem_mujoco as mujoco;
 pub use tandem_nn as nn;
 pub use tandem_planners as planners;
-
-pub mod interrupt;
-pub mod report;
-pub mod run;
+pub use tandem_studies as studies;
 
 /// The registered environment `id` with its time limit: `tandem-envs`'s own ([`envs::make`]),
 /// then gymnasium's MuJoCo tasks ([`mujoco::make`]; without the feature `mujoco` their ids give an

@@ -133,10 +133,10 @@ pub fn reproduce_config(data: &[u8]) {
         return;
     };
     for base in [
-        cli::reproduce_p0::quick_config(),
+        tandem::studies::p0::quick_config(),
         tandem::algos::difference_models::P0Config::default(),
     ] {
-        let Ok(cfg) = cli::reproduce_p0::parse_config(base, text, "fuzz config") else {
+        let Ok(cfg) = tandem::studies::p0::parse_config(base, text, "fuzz config") else {
             continue;
         };
         let agent = AlgoConfig::Ddpg(cfg.ddpg.clone());

@@ -1,18 +1,12 @@
-//! `tandem reproduce`: whole-paper reproductions, one module each (`reproduce_p0`,
-//! `reproduce_p1`, ...), and `tandem reproduce merge`, which combines studies of disjoint seeds.
+//! `tandem reproduce`: the papers' studies ([`tandem_studies`]) by name, each with its own
+//! arguments, and `tandem reproduce merge`, which combines studies of disjoint seeds.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use clap::{Args, Subcommand};
+use tandem_studies::{StudyArgs, StudyOptions};
 
-use super::harness;
-use super::reproduce_p0::{P0Args, P0Study, P0Task};
-use super::reproduce_p1::P1Study;
-use super::reproduce_p2::{Experiment, P2Study};
-use super::reproduce_p3::P3Study;
-use super::reproduce_p4::{Door, P4Study, Pusher};
-use super::reproduce_p4_reacher::ReacherStudy;
-use super::{CliError, Result};
+use super::Result;
 
 /// The reproductions.
 #[derive(Debug, Subcommand)]
@@ -26,31 +20,108 @@ pub enum ReproduceCommand {
     /// p1 (the deep incremental model) on a gymnasium MuJoCo task (`--env`, needs `--features
     /// mujoco`): SAC, MBPO and Dyna-SAC with the incremental model at the same real steps and
     /// updates per step; p1 Fig. 1.
-    P1(super::reproduce_p1::P1Args),
+    P1(P1Args),
     /// p2 (model-augmented REINFORCE) on CartPole-v1: REINFORCE alone and with the learned model.
-    P2Cartpole(super::reproduce_p2::P2Args),
+    P2Cartpole(P2Args),
     /// p2 (model-augmented DQN) on its pixel maze: DQN alone and with the pixel model, and the
     /// pixel model's F1 after 10, 100 and 300 training episodes.
-    P2Maze(super::reproduce_p2::P2Args),
+    P2Maze(P2Args),
     /// p3 (M-DeMoRL) on the 2R leg: SAC, MBPO and M-DeMoRL on the same seeds and real-step
     /// budget; p3 Fig. 4, and Fig. 3's elite-fraction ablation with `--ablate-elites`.
-    P3Leg(super::reproduce_p3::P3Args),
+    P3Leg(P3Args),
     /// p3 (M-DeMoRL) on a gymnasium MuJoCo task (`--env`, needs `--features mujoco`): SAC, MBPO
     /// and M-DeMoRL with MBPO's settings for the task; p3 Fig. 2, and Fig. 3 with
     /// `--ablate-elites`.
-    P3Mujoco(super::reproduce_p3::P3MujocoArgs),
+    P3Mujoco(P3MujocoArgs),
     /// p4 (PILQR) on the gripper pusher (MuJoCo, needs `--features mujoco`): LQR-FLM, PI² and
     /// PILQR local controllers on four conditions, the same seeds and samples; p4 Fig. 3.
-    P4Pusher(super::reproduce_p4::P4Args),
+    P4Pusher(P4Args),
     /// p4 (PILQR) on the door (MuJoCo, needs `--features mujoco`): LQR-FLM, PI² and PILQR local
     /// controllers from four arm starts, the same seeds and samples.
-    P4Door(super::reproduce_p4::P4Args),
+    P4Door(P4Args),
     /// p4 (PILQR) Fig. 4 on gymnasium's reacher (MuJoCo, needs `--features mujoco`): neural
     /// policies by MDGPS with LQR-FLM, PI² or PILQR and by DDPG, final distance on 300 test targets.
-    P4Reacher(super::reproduce_p4_reacher::ReacherArgs),
+    P4Reacher(ReacherArgs),
     /// Combine p0-pendulum, p0-leo, p1, p2-cartpole, p2-maze, p3-leg, p3-mujoco, p4-pusher, p4-door or p4-reacher reproductions of disjoint seeds (e.g. one
     /// process per seed, `--first-seed`) into one table and figure; their settings must be equal.
     Merge(MergeArgs),
+}
+
+/// Arguments of `tandem reproduce p0-pendulum` and `p0-leo` (per seed, the cold start and the
+/// pre-trained warm start and difference methods are separate jobs).
+#[derive(Debug, Args)]
+pub struct P0Args {
+    /// Seeds, output, jobs, resume: as every study.
+    #[command(flatten)]
+    pub study: StudyArgs,
+}
+
+/// Arguments of `tandem reproduce p1`.
+#[derive(Debug, Clone, Args)]
+pub struct P1Args {
+    /// Seeds, output, jobs, resume: as every study.
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// The task: HalfCheetah-v5, Hopper-v5, Walker2d-v5 or InvertedPendulum-v5 [default:
+    /// HalfCheetah-v5; on `--resume`, the recorded one].
+    #[arg(long)]
+    pub env: Option<String>,
+}
+
+/// Arguments of `tandem reproduce p2-cartpole` and `p2-maze`.
+#[derive(Debug, Clone, Args)]
+pub struct P2Args {
+    /// Seeds (default 10, as p2 averages over 10 runs), output, jobs, resume: as every study.
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// p2-maze only: the maze, `PixelMaze-v0` (ours, from the paper alone) or `PixelMaze-v1`
+    /// (the authors' released layout), with its default settings [default: a `--config`
+    /// file's `env`, else PixelMaze-v0; on `--resume`, the recorded one].
+    #[arg(long)]
+    pub env: Option<String>,
+}
+
+/// Arguments of `tandem reproduce p3-leg`.
+#[derive(Debug, Clone, Args)]
+pub struct P3Args {
+    /// Seeds, output, jobs, resume: as every study.
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// Also run M-DeMoRL with elite fractions 1, 5, 10, 20, 50 and 100 % (p3 Fig. 3).
+    #[arg(long)]
+    pub ablate_elites: bool,
+    /// Also run MBPO with the true system as its model (`mbpo_oracle`; the leg only): what MBPO
+    /// would do with a perfect model, to tell model error from the loop's own limits.
+    #[arg(long)]
+    pub oracle: bool,
+}
+
+/// Arguments of `tandem reproduce p3-mujoco`.
+#[derive(Debug, Clone, Args)]
+pub struct P3MujocoArgs {
+    /// The p3-leg arguments.
+    #[command(flatten)]
+    pub p3: P3Args,
+    /// The task: HalfCheetah-v5, Hopper-v5, Walker2d-v5 or InvertedPendulum-v5 [default:
+    /// HalfCheetah-v5; on `--resume`, the recorded one].
+    #[arg(long)]
+    pub env: Option<String>,
+}
+
+/// Arguments of `tandem reproduce p4-pusher` and `p4-door`.
+#[derive(Debug, Clone, Args)]
+pub struct P4Args {
+    /// Seeds, output, jobs, resume: as every study.
+    #[command(flatten)]
+    pub study: StudyArgs,
+}
+
+/// Arguments of `tandem reproduce p4-reacher`.
+#[derive(Debug, Clone, Args)]
+pub struct ReacherArgs {
+    /// Seeds, output, jobs, resume: as every study.
+    #[command(flatten)]
+    pub study: StudyArgs,
 }
 
 /// Arguments of `tandem reproduce merge`.
@@ -67,71 +138,34 @@ pub struct MergeArgs {
     pub overwrite: bool,
 }
 
-/// Runs a reproduction.
+/// Runs a reproduction, or merges some.
 pub fn run(cmd: ReproduceCommand) -> Result<()> {
-    match cmd {
-        ReproduceCommand::P0Pendulum(args) => harness::run(&P0Study(P0Task::Pendulum), &args.study),
-        ReproduceCommand::P0Leo(args) => harness::run(&P0Study(P0Task::Leo), &args.study),
-        ReproduceCommand::P1(args) => harness::run(&P1Study::new(args.env), &args.study),
-        ReproduceCommand::P2Cartpole(args) => {
-            harness::run(&P2Study::new(Experiment::CartPole, args.env), &args.study)
+    let task = |env| StudyOptions {
+        env,
+        ..StudyOptions::default()
+    };
+    let p3 = |a: P3Args, env| {
+        let options = StudyOptions {
+            env,
+            ablate_elites: a.ablate_elites,
+            oracle: a.oracle,
+        };
+        (options, a.study)
+    };
+    let (name, (options, args)) = match cmd {
+        ReproduceCommand::P0Pendulum(a) => ("p0-pendulum", (task(None), a.study)),
+        ReproduceCommand::P0Leo(a) => ("p0-leo", (task(None), a.study)),
+        ReproduceCommand::P1(a) => ("p1", (task(a.env), a.study)),
+        ReproduceCommand::P2Cartpole(a) => ("p2-cartpole", (task(a.env), a.study)),
+        ReproduceCommand::P2Maze(a) => ("p2-maze", (task(a.env), a.study)),
+        ReproduceCommand::P3Leg(a) => ("p3-leg", p3(a, None)),
+        ReproduceCommand::P3Mujoco(a) => ("p3-mujoco", p3(a.p3, a.env)),
+        ReproduceCommand::P4Pusher(a) => ("p4-pusher", (task(None), a.study)),
+        ReproduceCommand::P4Door(a) => ("p4-door", (task(None), a.study)),
+        ReproduceCommand::P4Reacher(a) => ("p4-reacher", (task(None), a.study)),
+        ReproduceCommand::Merge(a) => {
+            return tandem_studies::merge(&a.dirs, a.out.as_deref(), a.overwrite)
         }
-        ReproduceCommand::P2Maze(args) => {
-            harness::run(&P2Study::new(Experiment::Maze, args.env), &args.study)
-        }
-        ReproduceCommand::P3Leg(args) => {
-            harness::run(&P3Study::leg(args.ablate_elites, args.oracle), &args.study)
-        }
-        ReproduceCommand::P3Mujoco(args) => harness::run(
-            &P3Study::mujoco(args.env, args.p3.ablate_elites, args.p3.oracle),
-            &args.p3.study,
-        ),
-        ReproduceCommand::P4Pusher(args) => harness::run(&P4Study::<Pusher>::new(), &args.study),
-        ReproduceCommand::P4Door(args) => harness::run(&P4Study::<Door>::new(), &args.study),
-        ReproduceCommand::P4Reacher(args) => harness::run(&ReacherStudy, &args.study),
-        ReproduceCommand::Merge(args) => {
-            let Some(first) = args.dirs.first() else {
-                return Err(CliError::input("merge", "no directories given"));
-            };
-            let name = harness::study_of(first)?;
-            let Some(study) = registry().into_iter().find(|s| s.name() == name) else {
-                return Err(CliError::input(
-                    first.display().to_string(),
-                    format!("`tandem reproduce merge` does not merge {name} studies"),
-                ));
-            };
-            study.merge(&args.dirs, args.out.as_deref(), args.overwrite)
-        }
-    }
-}
-
-/// A study as `merge` finds it by its name; the settings come from the directories.
-trait Registered {
-    fn name(&self) -> &str;
-    fn merge(&self, dirs: &[PathBuf], out: Option<&Path>, overwrite: bool) -> Result<()>;
-}
-
-impl<S: harness::Study> Registered for S {
-    fn name(&self) -> &str {
-        harness::Study::name(self)
-    }
-    fn merge(&self, dirs: &[PathBuf], out: Option<&Path>, overwrite: bool) -> Result<()> {
-        harness::merge(self, dirs, out, overwrite)
-    }
-}
-
-/// Every study of `tandem reproduce`.
-fn registry() -> Vec<Box<dyn Registered>> {
-    vec![
-        Box::new(P0Study(P0Task::Pendulum)),
-        Box::new(P0Study(P0Task::Leo)),
-        Box::new(P1Study::new(None)),
-        Box::new(P2Study::new(Experiment::CartPole, None)),
-        Box::new(P2Study::new(Experiment::Maze, None)),
-        Box::new(P3Study::leg(false, false)),
-        Box::new(P3Study::mujoco(None, false, false)),
-        Box::new(P4Study::<Pusher>::new()),
-        Box::new(P4Study::<Door>::new()),
-        Box::new(ReacherStudy),
-    ]
+    };
+    tandem_studies::run_study(name, &options, &args)
 }

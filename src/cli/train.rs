@@ -15,10 +15,10 @@ use std::time::Instant;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
-use tandem::interrupt::{Stop, EXIT_SIGINT};
 use tandem::make_env as make;
-use tandem::report::{ensure_finite, to_json_pretty, NonFinite};
-use tandem::run::{csv, svg_chart, Existing, Layout, RunDir, Series};
+use tandem::studies::interrupt::{Stop, EXIT_SIGINT};
+use tandem::studies::report::{ensure_finite, to_json_pretty, NonFinite};
+use tandem::studies::run::{csv, svg_chart, Existing, Layout, RunDir, Series};
 use tandem_agents::{Algo, AlgoConfig, Pause, TrainSettings, Trainer};
 
 use super::presets::{self, Preset};

@@ -8,7 +8,7 @@
 //! [`Stop::never`] or call [`Stop::request`].
 //!
 //! ```
-//! use tandem::interrupt::Stop;
+//! use tandem_studies::interrupt::Stop;
 //!
 //! let stop = Stop::never();
 //! let mut steps = 0;

@@ -2,7 +2,7 @@
 //! gymnasium's reacher (MuJoCo), trained by MDGPS with LQR-FLM, PI² or PILQR as the local
 //! optimizer and by DDPG, on the same seeds, measured by the mean final fingertip–target distance
 //! of the deterministic policy on the same 300 random test targets, against real samples (time
-//! steps) on a log axis. Through the shared [`super::harness`] (separate processes per seed,
+//! steps) on a log axis. Through the shared [`crate::harness`] (separate processes per seed,
 //! merge, resume).
 //!
 //! Writes, besides the harness' `config.json`, `runs/` and `state/`:
@@ -20,30 +20,21 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use clap::Args;
+use crate::report::{to_json_pretty, Curve, Figure, SamplesToTarget};
+use crate::run::RunDir;
 use serde::{Deserialize, Serialize};
-use tandem::algos::gps::LocalMethod;
-use tandem::algos::manipulation::{
+use tandem_algos::gps::LocalMethod;
+use tandem_algos::manipulation::{
     reacher_config, reacher_problem, reacher_test_set, train_ddpg_reacher, ReacherDdpg,
     TestedPoint, REACHER_TEST_CONDITIONS, REACHER_TEST_SEED,
 };
-use tandem::algos::mdgps::{train_mdgps, MdgpsConfig};
-use tandem::algos::Checkpoints;
-use tandem::mujoco::p4::{ReacherCost, REACHER_HORIZON};
-use tandem::report::{to_json_pretty, Curve, Figure, SamplesToTarget};
-use tandem::run::RunDir;
+use tandem_algos::mdgps::{train_mdgps, MdgpsConfig};
+use tandem_algos::Checkpoints;
+use tandem_mujoco::p4::{ReacherCost, REACHER_HORIZON};
 
-use super::harness::{self, JobError, Study, StudyArgs};
-use super::reproduce_p4::{figure_row, SeedFigure};
-use super::{CliError, Result};
-
-/// Arguments of `tandem reproduce p4-reacher`.
-#[derive(Debug, Clone, Args)]
-pub struct ReacherArgs {
-    /// Seeds, output, jobs, resume: as every study.
-    #[command(flatten)]
-    pub study: StudyArgs,
-}
+use crate::harness::{self, JobError, Study};
+use crate::p4::{figure_row, SeedFigure};
+use crate::{Error, Result};
 
 /// The methods, in the table's order.
 pub const METHODS: [&str; 4] = ["mdgps_lqr_flm", "mdgps_pi2", "mdgps_pilqr", "ddpg"];
@@ -87,7 +78,7 @@ impl Default for ReacherSettings {
 
 impl ReacherSettings {
     fn validate(&self, what: &str) -> Result<()> {
-        let bad = |m: String| CliError::input(what, m);
+        let bad = |m: String| Error::input(what, m);
         self.mdgps.validate().map_err(|e| bad(e.to_string()))?;
         self.cost.validate().map_err(bad)?;
         self.ddpg.validate().map_err(|e| bad(e.to_string()))?;
@@ -267,7 +258,7 @@ impl Study for ReacherStudy {
         wall: f64,
     ) -> Result<String> {
         let table = ReacherTable::new(s, records);
-        let json = to_json_pretty(&table).map_err(|e| CliError::Other(e.to_string()))?;
+        let json = to_json_pretty(&table).map_err(|e| Error::Other(e.to_string()))?;
         harness::write(dir, "table.json", &json)?;
         let md = table.markdown(s, records, wall);
         harness::write(dir, "table.md", &md)?;

@@ -1,6 +1,6 @@
 //! `tandem reproduce p1`: p1's comparison (its Fig. 1) of Dyna-SAC with the deep incremental
 //! model against SAC and MBPO on a gymnasium MuJoCo task, on the same seeds, real-step budget and
-//! SAC updates per real step, through the shared [`super::harness`] (resume, separate processes
+//! SAC updates per real step, through the shared [`crate::harness`] (resume, separate processes
 //! per seed, merge).
 //!
 //! Writes, besides the harness' `config.json`, `runs/` and `state/`:
@@ -15,32 +15,19 @@
 
 use std::path::Path;
 
-use clap::Args;
+use crate::report::{Figure, MarkdownText};
+use crate::run::RunDir;
 use serde::{Deserialize, Serialize};
-use tandem::algos::incremental_dyna::{run, Method, P1Config};
-use tandem::algos::mbpo::{mujoco_problem, RunRecord};
-use tandem::algos::Checkpoints;
-use tandem::report::{Figure, MarkdownText};
-use tandem::run::RunDir;
+use tandem_algos::incremental_dyna::{run, Method, P1Config};
+use tandem_algos::mbpo::{mujoco_problem, RunRecord};
+use tandem_algos::Checkpoints;
 
-use super::harness::{self, JobError, Study, StudyArgs};
-use super::reproduce_p3::{
+use crate::harness::{self, JobError, Study};
+use crate::p3::{
     check_target_method, loop_sentence, mujoco_ids, mujoco_loop, quick_loop, rates_and_wall,
     runs_table, seconds_per_seed, step_progress, target_of, target_sentence,
 };
-use super::{CliError, Result};
-
-/// Arguments of `tandem reproduce p1`.
-#[derive(Debug, Clone, Args)]
-pub struct P1Args {
-    /// Seeds, output, jobs, resume: as every study.
-    #[command(flatten)]
-    pub study: StudyArgs,
-    /// The task: HalfCheetah-v5, Hopper-v5, Walker2d-v5 or InvertedPendulum-v5 [default:
-    /// HalfCheetah-v5; on `--resume`, the recorded one].
-    #[arg(long)]
-    pub env: Option<String>,
-}
+use crate::{Error, Result};
 
 /// Everything that decides a p1 study's numbers.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -82,10 +69,10 @@ impl P1Settings {
 
     /// Checks what the runs rely on.
     fn validate(&self, what: &str) -> Result<()> {
-        let bad = |m: String| Err(CliError::input(what, m));
+        let bad = |m: String| Err(Error::input(what, m));
         self.p1
             .validate()
-            .map_err(|e| CliError::input(what, e.to_string()))?;
+            .map_err(|e| Error::input(what, e.to_string()))?;
         if mujoco_loop(&self.env).is_none() {
             return bad(format!("env {}: p1 runs {}", self.env, mujoco_ids()));
         }
@@ -134,7 +121,7 @@ impl Study for P1Study {
     fn settings(&self, quick: bool, config: Option<&Path>) -> Result<P1Settings> {
         let env = self.env.as_deref().unwrap_or(DEFAULT_ENV);
         let base = P1Settings::mujoco(env)
-            .ok_or_else(|| CliError::input("--env", format!("{env}: p1 runs {}", mujoco_ids())))?;
+            .ok_or_else(|| Error::input("--env", format!("{env}: p1 runs {}", mujoco_ids())))?;
         let base = if quick { base.quick() } else { base };
         let s = harness::read_overrides(base, config)?;
         let what = harness::settings_name(config);
@@ -235,7 +222,7 @@ const LABELS: [(&str, &str); 3] = [
 ];
 
 /// The table as Markdown with p1's words, the settings that matter and the wall time.
-fn markdown(t: &tandem::report::Table, s: &P1Settings, records: &[RunRecord], wall: f64) -> String {
+fn markdown(t: &crate::report::Table, s: &P1Settings, records: &[RunRecord], wall: f64) -> String {
     let b = &s.p1.base;
     let n_seeds = t.methods.values().map(|m| m.seeds.len()).max().unwrap_or(0);
     let m = &s.p1.model;

@@ -1,7 +1,7 @@
 //! `tandem reproduce p4-pusher` and `p4-door`: p4's local-controller experiments (Chebotar et al.,
 //! PILQR; Fig. 3 and the door): LQR-FLM, PI² and PILQR train one time-varying linear-Gaussian
 //! controller per condition (MuJoCo), on the same seeds and sample budget, through the shared
-//! [`super::harness`] (separate processes per seed, merge, resume).
+//! [`crate::harness`] (separate processes per seed, merge, resume).
 //!
 //! Each task has a measure of a trajectory's final state (the pusher: the block–goal distance,
 //! lower is better; the door: its angle, higher is better), a target that counts a condition as
@@ -21,28 +21,19 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use clap::Args;
+use crate::report::{mean_stderr, to_json_pretty, Curve, Figure, SamplesToTarget};
+use crate::run::RunDir;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
-use tandem::algos::gps::{train_local, LocalConfig, LocalMethod, LocalPoint, LocalProblem};
-use tandem::algos::manipulation::{door_problem, pusher_problem};
-use tandem::algos::{Checkpoints, Result as AlgoResult};
-use tandem::mujoco::p4::{
+use tandem_algos::gps::{train_local, LocalConfig, LocalMethod, LocalPoint, LocalProblem};
+use tandem_algos::manipulation::{door_problem, pusher_problem};
+use tandem_algos::{Checkpoints, Result as AlgoResult};
+use tandem_mujoco::p4::{
     DoorCost, PusherCost, DOOR_CONDITIONS, DOOR_TARGET, PUSHER_CONDITIONS, PUSHER_HARD,
 };
-use tandem::report::{mean_stderr, to_json_pretty, Curve, Figure, SamplesToTarget};
-use tandem::run::RunDir;
 
-use super::harness::{self, JobError, Study, StudyArgs};
-use super::{CliError, Result};
-
-/// Arguments of `tandem reproduce p4-pusher` and `p4-door`.
-#[derive(Debug, Clone, Args)]
-pub struct P4Args {
-    /// Seeds, output, jobs, resume: as every study.
-    #[command(flatten)]
-    pub study: StudyArgs,
-}
+use crate::harness::{self, JobError, Study};
+use crate::{Error, Result};
 
 /// What differs between p4's local-controller tasks.
 pub trait P4Task: Sync {
@@ -178,7 +169,7 @@ impl<C> P4Settings<C> {
     where
         C: Copy,
     {
-        let bad = |m: String| CliError::input(what, m);
+        let bad = |m: String| Error::input(what, m);
         self.local.validate().map_err(|e| bad(e.to_string()))?;
         T::validate_cost(&self.cost).map_err(bad)?;
         if !self.target.is_finite() {
@@ -322,7 +313,7 @@ impl<T: P4Task> Study for P4Study<T> {
         wall: f64,
     ) -> Result<String> {
         let table = P4Table::new::<T>(s.target, &s.local, records);
-        let json = to_json_pretty(&table).map_err(|e| CliError::Other(e.to_string()))?;
+        let json = to_json_pretty(&table).map_err(|e| Error::Other(e.to_string()))?;
         harness::write(dir, "table.json", &json)?;
         let md = table.markdown::<T>(&s.local, records, wall);
         harness::write(dir, "table.md", &md)?;

@@ -1,5 +1,5 @@
 //! `tandem reproduce p0-pendulum` and `tandem reproduce p0-leo`: p0's three methods (cold start,
-//! warm start, difference model) over seeds, through one pipeline ([`tandem::algos::difference_models`])
+//! warm start, difference model) over seeds, through one pipeline ([`tandem_algos::difference_models`])
 //! on either problem. In the output directory:
 //!
 //! - `config.json`: the [`P0Config`] used, seeds, status (`running`, `interrupted`, `complete`)
@@ -10,7 +10,7 @@
 //!   metre, frames of the gait);
 //! - `table.md`, `table.json`: p0's Table II (pendulum) or Table IV (Leo): the return at the
 //!   fixed budget and the true samples to the fixed target return, a typed
-//!   [`tandem::report::Table`] rendered by the shared report code with p0's words;
+//!   [`crate::report::Table`] rendered by the shared report code with p0's words;
 //! - pendulum: `fig5.svg`, p0's Fig. 5 (mean return on the true system against true samples,
 //!   ± standard error across seeds);
 //! - Leo: `fig8.svg` (p0's Fig. 8, the same plot), `table3.json` and a Table III section in
@@ -37,32 +37,22 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use clap::Args;
+use crate::report::gait::{filmstrip_svg, GaitRow};
+use crate::report::{
+    mean_stderr, Comparison, Figure, MarkdownText, MethodFigures, Reference, SeedRun, Table,
+};
+use crate::run::RunDir;
 use serde::{Deserialize, Serialize};
-use tandem::algos::difference_models::{
+use tandem_algos::difference_models::{
     ddpg_agent, leo_problem, pendulum_problem, run_seed, Method, P0Config, PolicyEval, Problem,
     RunRecord, Tick, LEO_MEASURES,
 };
-use tandem::algos::Checkpoints;
-use tandem::dynamics::biped::{leo_plant, skeleton};
-use tandem::dynamics::rigid_plant::{Overrides, RigidPlantConfig};
-use tandem::report::gait::{filmstrip_svg, GaitRow};
-use tandem::report::{
-    mean_stderr, Comparison, Figure, MarkdownText, MethodFigures, Reference, SeedRun, Table,
-};
-use tandem::run::RunDir;
+use tandem_algos::Checkpoints;
+use tandem_dynamics::biped::{leo_plant, skeleton};
+use tandem_dynamics::rigid_plant::{Overrides, RigidPlantConfig};
 
-use super::harness::{self, JobError, Study, StudyArgs};
-use super::{CliError, Result};
-
-/// Arguments of `tandem reproduce p0-pendulum` and `p0-leo` (per seed, the cold start and the
-/// pre-trained warm start and difference methods are separate jobs).
-#[derive(Debug, Args)]
-pub struct P0Args {
-    /// Seeds, output, jobs, resume: as every study.
-    #[command(flatten)]
-    pub study: StudyArgs,
-}
+use crate::harness::{self, JobError, Study};
+use crate::{Error, Result};
 
 /// The problem a p0 study runs on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -124,10 +114,10 @@ pub fn parse_config(base: P0Config, text: &str, what: &str) -> Result<P0Config> 
 /// `cfg` if valid, else an error naming `what`.
 fn checked(cfg: P0Config, what: &str) -> Result<P0Config> {
     cfg.validate()
-        .map_err(|e| CliError::input(what, e.to_string()))?;
+        .map_err(|e| Error::input(what, e.to_string()))?;
     let h = cfg.fit.holdout_fraction;
     if !(0.0..1.0).contains(&h) {
-        return Err(CliError::input(
+        return Err(Error::input(
             what,
             format!("fit.holdout_fraction is {h}, must be in [0, 1)"),
         ));
@@ -466,7 +456,7 @@ pub fn table3_markdown(rows: &BTreeMap<String, PolicyRow>) -> String {
 /// 0.3 s over the first 6 s of their episodes.
 pub fn gait_svg(records: &[RunRecord]) -> Result<String> {
     let plant = leo_plant(RigidPlantConfig::default(), &Overrides::default())
-        .map_err(|e| CliError::Other(format!("gait.svg: {e}")))?;
+        .map_err(|e| Error::Other(format!("gait.svg: {e}")))?;
     let Some(seed) = records.iter().map(|r| r.seed).min() else {
         return Ok(filmstrip_svg("no runs", &[]));
     };
@@ -492,7 +482,7 @@ pub fn gait_svg(records: &[RunRecord]) -> Result<String> {
             .step_by(stride)
             .map(|q| skeleton(plant.model(), q))
             .collect::<std::result::Result<Vec<_>, _>>()
-            .map_err(|e| CliError::Other(format!("gait.svg: {e}")))?;
+            .map_err(|e| Error::Other(format!("gait.svg: {e}")))?;
         let m = |k: &str| e.measures.get(k).copied();
         let work = m(LEO_MEASURES[1]).map_or("n/a".into(), |w| format!("{w:.0} J/m"));
         rows.push(GaitRow {
@@ -525,9 +515,9 @@ fn run_problem<P, T, F>(
     progress: &mut dyn FnMut(u64),
 ) -> std::result::Result<RunRecord, JobError>
 where
-    P: tandem::dynamics::Plant + Clone,
-    T: tandem::envs::Task + Clone,
-    F: Fn() -> std::result::Result<Box<dyn tandem::envs::Env>, tandem::envs::EnvError>,
+    P: tandem_dynamics::Plant + Clone,
+    T: tandem_envs::Task + Clone,
+    F: Fn() -> std::result::Result<Box<dyn tandem_envs::Env>, tandem_envs::EnvError>,
 {
     let m = Method::from_name(run).ok_or_else(|| JobError::Failed(format!("unknown run {run}")))?;
     let mut records = run_seed(
@@ -569,7 +559,7 @@ impl Study for P0Study {
             (P0Task::Leo, true) => leo_quick_config(),
         };
         let Some(path) = config else { return Ok(base) };
-        let text = std::fs::read_to_string(path).map_err(|source| CliError::Io {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
             path: path.to_path_buf(),
             source,
         })?;
@@ -645,8 +635,8 @@ impl Study for P0Study {
                 let t3 = table3(records);
                 md.push_str(&table3_markdown(&t3));
                 harness::write_table(dir, &table, &md)?;
-                let json = tandem::report::finite::to_json_pretty(&t3)
-                    .map_err(|e| CliError::Other(format!("table3.json: {e}")))?;
+                let json = crate::report::finite::to_json_pretty(&t3)
+                    .map_err(|e| Error::Other(format!("table3.json: {e}")))?;
                 harness::write(dir, "table3.json", &json)?;
                 harness::write(dir, "fig8.svg", &figure(self.0, records).svg())?;
                 harness::write(dir, "gait.svg", &gait_svg(records)?)?;
@@ -659,7 +649,7 @@ impl Study for P0Study {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tandem::core::CurvePoint;
+    use tandem_core::CurvePoint;
 
     fn record(method: Method, seed: u64, curve: &[(u64, f64)]) -> RunRecord {
         RunRecord {
@@ -771,8 +761,8 @@ mod tests {
     }
 
     /// The committed p0 results (`results/p0-pendulum/`), 5 seeds, 5078 s wall time.
-    const COMMITTED_JSON: &str = include_str!("../../results/p0-pendulum/table.json");
-    const COMMITTED_MD: &str = include_str!("../../results/p0-pendulum/table.md");
+    const COMMITTED_JSON: &str = include_str!("../../../results/p0-pendulum/table.json");
+    const COMMITTED_MD: &str = include_str!("../../../results/p0-pendulum/table.md");
 
     #[test]
     fn the_committed_table_reads_back_and_renders_to_the_committed_files() {

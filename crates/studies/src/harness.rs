@@ -23,18 +23,18 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
+use crate::interrupt::{Stop, EXIT_SIGINT};
+use crate::report::{ensure_finite, to_json_pretty, Curve, Table};
+use crate::run::{Existing, Layout, RunDir};
 use clap::Args;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
-use tandem::algos::{AlgoError, Checkpoints, Result as AlgoResult};
-use tandem::core::CurvePoint;
-use tandem::interrupt::{Stop, EXIT_SIGINT};
-use tandem::report::{ensure_finite, to_json_pretty, Curve, Table};
-use tandem::run::{Existing, Layout, RunDir};
+use tandem_algos::{AlgoError, Checkpoints, Result as AlgoResult};
+use tandem_core::CurvePoint;
 use tandem_nn::Checkpoint;
 
-use super::{CliError, Result};
+use crate::{Error, Result};
 
 /// The command line every study shares (`#[command(flatten)]` it into the study's arguments).
 #[derive(Debug, Clone, Args)]
@@ -74,6 +74,23 @@ pub struct StudyArgs {
     pub resume: Option<PathBuf>,
 }
 
+impl Default for StudyArgs {
+    /// The command line's defaults: the study's seeds from 0, full settings, two jobs.
+    fn default() -> Self {
+        Self {
+            seeds: None,
+            first_seed: None,
+            quick: false,
+            out: None,
+            jobs: 2,
+            config: None,
+            quiet: false,
+            overwrite: false,
+            resume: None,
+        }
+    }
+}
+
 /// Why a job ended early.
 #[derive(Debug, thiserror::Error)]
 pub enum JobError {
@@ -94,8 +111,8 @@ impl From<AlgoError> for JobError {
     }
 }
 
-impl From<CliError> for JobError {
-    fn from(e: CliError) -> Self {
+impl From<Error> for JobError {
+    fn from(e: Error) -> Self {
         JobError::Failed(e.to_string())
     }
 }
@@ -199,24 +216,24 @@ struct StudyName {
 /// The name of the study that wrote `dir` (its `config.json`'s `study`).
 pub fn study_of(dir: &Path) -> Result<String> {
     let path = dir.join("config.json");
-    let text = std::fs::read_to_string(&path).map_err(|source| CliError::Io {
+    let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
         path: path.clone(),
         source,
     })?;
     let n: StudyName = serde_json::from_str(&text)
-        .map_err(|e| CliError::input(path.display().to_string(), e.to_string()))?;
+        .map_err(|e| Error::input(path.display().to_string(), e.to_string()))?;
     Ok(n.study)
 }
 
-fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CliError + '_ {
-    move |source| CliError::Io {
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
+    move |source| Error::Io {
         path: path.to_path_buf(),
         source,
     }
 }
 
 fn write_json(dir: &RunDir, name: &str, value: &impl Serialize) -> Result<()> {
-    let text = to_json_pretty(value).map_err(|e| CliError::Other(format!("{name}: {e}")))?;
+    let text = to_json_pretty(value).map_err(|e| Error::Other(format!("{name}: {e}")))?;
     write(dir, name, &text)
 }
 
@@ -231,7 +248,7 @@ pub fn write(dir: &RunDir, name: &str, text: &str) -> Result<()> {
 pub fn write_table(dir: &RunDir, table: &Table, markdown: &str) -> Result<()> {
     let json = table
         .to_json()
-        .map_err(|e| CliError::Other(format!("table.json: {e}")))?;
+        .map_err(|e| Error::Other(format!("table.json: {e}")))?;
     write(dir, "table.json", &json)?;
     write(dir, "table.md", markdown)
 }
@@ -270,7 +287,7 @@ pub fn mean_curves<R>(
 fn read_config<S: Study>(study: &S, dir: &Path, what: &str) -> Result<RunConfig<S::Settings>> {
     let path = dir.join("config.json");
     let text = std::fs::read_to_string(&path).map_err(|e| {
-        CliError::input(
+        Error::input(
             what,
             format!(
                 "{} cannot be read ({e}): not a study's directory",
@@ -278,10 +295,10 @@ fn read_config<S: Study>(study: &S, dir: &Path, what: &str) -> Result<RunConfig<
             ),
         )
     })?;
-    let bad = |e: serde_json::Error| CliError::input(path.display().to_string(), e.to_string());
+    let bad = |e: serde_json::Error| Error::input(path.display().to_string(), e.to_string());
     let name: StudyName = serde_json::from_str(&text).map_err(bad)?;
     if name.study != study.name() {
-        return Err(CliError::input(
+        return Err(Error::input(
             what,
             format!(
                 "the directory holds a {} study, not {}",
@@ -296,7 +313,7 @@ fn read_config<S: Study>(study: &S, dir: &Path, what: &str) -> Result<RunConfig<
 /// The settings of a new study from the command line.
 fn fresh<S: Study>(study: &S, args: &StudyArgs) -> Result<RunConfig<S::Settings>> {
     let settings = study.settings(args.quick, args.config.as_deref())?;
-    ensure_finite(&settings).map_err(|e| CliError::input("settings", e.to_string()))?;
+    ensure_finite(&settings).map_err(|e| Error::input("settings", e.to_string()))?;
     Ok(RunConfig {
         study: study.name().to_string(),
         config: settings,
@@ -330,7 +347,7 @@ fn recorded<S: Study>(study: &S, args: &StudyArgs, dir: &Path) -> Result<RunConf
         }
     }
     if !conflicts.is_empty() {
-        return Err(CliError::input(
+        return Err(Error::input(
             what,
             format!(
                 "conflicts with the run being resumed: {}; a resumed run keeps its settings",
@@ -398,12 +415,11 @@ fn write_record<S: Study>(
     let sub = record_dir(dir, run, seed);
     std::fs::create_dir_all(&sub).map_err(io(&sub))?;
     let (header, rows) = study.curve(r);
-    let curve = tandem::run::csv(&header, &rows);
+    let curve = crate::run::csv(&header, &rows);
     let path = sub.join("curve.csv");
     tandem_nn::write_atomic(&path, curve.as_bytes()).map_err(io(&path))?;
     let path = sub.join("record.json");
-    let text =
-        to_json_pretty(r).map_err(|e| CliError::Other(format!("{}: {e}", path.display())))?;
+    let text = to_json_pretty(r).map_err(|e| Error::Other(format!("{}: {e}", path.display())))?;
     tandem_nn::write_atomic(&path, text.as_bytes()).map_err(io(&path))
 }
 
@@ -413,9 +429,9 @@ fn read_record<R: DeserializeOwned>(dir: &Path, run: &str, seed: u64) -> Result<
     match std::fs::read_to_string(&path) {
         Ok(text) => serde_json::from_str(&text)
             .map(Some)
-            .map_err(|e| CliError::input(path.display().to_string(), e.to_string())),
+            .map_err(|e| Error::input(path.display().to_string(), e.to_string())),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(source) => Err(CliError::Io { path, source }),
+        Err(source) => Err(Error::Io { path, source }),
     }
 }
 
@@ -430,7 +446,7 @@ fn read_records<S: Study>(
     for seed in seeds {
         for run in study.jobs(settings, seed).iter().flatten() {
             let r = read_record(dir, run, seed)?.ok_or_else(|| {
-                CliError::Other(format!(
+                Error::Other(format!(
                     "{}: seed {seed}: the {run} run left no record",
                     dir.display()
                 ))
@@ -457,7 +473,7 @@ fn layout<S: Study>(study: &S, merged: bool) -> Layout {
 /// Runs (or resumes) `study` as the command line says.
 pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
     tandem_nn::set_gemm_threads(1);
-    let stop = Stop::on_signals().map_err(|e| CliError::Other(format!("signal handlers: {e}")))?;
+    let stop = Stop::on_signals().map_err(|e| Error::Other(format!("signal handlers: {e}")))?;
     let mut rc = match &args.resume {
         Some(dir) => recorded(study, args, dir)?,
         None => fresh(study, args)?,
@@ -467,8 +483,8 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
         (None, true) => (args.out.as_deref(), Existing::Overwrite),
         (None, false) => (args.out.as_deref(), Existing::Refuse),
     };
-    let dir = RunDir::create(out, study.name(), layout(study, false), existing)
-        .map_err(CliError::other)?;
+    let dir =
+        RunDir::create(out, study.name(), layout(study, false), existing).map_err(Error::other)?;
     if let Some(pid) = dir.stale_lock_taken_over() {
         eprintln!(
             "note: took over {} from process {pid}, which is no longer running",
@@ -531,13 +547,13 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
     let mut errors = errors.into_inner().expect("threads joined");
     errors.sort();
     if let Some((seed, e)) = errors.first() {
-        return Err(CliError::Other(format!("seed {seed}: {e}")));
+        return Err(Error::Other(format!("seed {seed}: {e}")));
     }
     if stop.requested() {
         rc.status = "interrupted".into();
         rc.wall_seconds = Some(wall);
         write_json(&dir, "config.json", &rc)?;
-        return Err(CliError::Interrupted {
+        return Err(Error::Interrupted {
             what: format!(
                 "finished runs and the others' last checkpoints are in {}; continue with \
                  `tandem reproduce {} --resume {}`",
@@ -569,7 +585,7 @@ fn job_state(dir: &Path, seed: u64, runs: &[String]) -> PathBuf {
 
 fn remove_dir(path: &Path) -> Result<()> {
     match std::fs::remove_dir_all(path) {
-        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(CliError::Io {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(Error::Io {
             path: path.to_path_buf(),
             source: e,
         }),
@@ -627,7 +643,7 @@ pub fn merge<S: Study>(
         let what = d.display().to_string();
         let rc = read_config(study, d, &what)?;
         if rc.status != "complete" {
-            return Err(CliError::input(
+            return Err(Error::input(
                 what,
                 format!(
                     "the study is {}; finish it first (`tandem reproduce {} --resume {}`)",
@@ -639,7 +655,7 @@ pub fn merge<S: Study>(
         }
         if let Some((first, f)) = parts.first() {
             if (&f.config, f.quick) != (&rc.config, rc.quick) {
-                return Err(CliError::input(
+                return Err(Error::input(
                     what,
                     format!(
                         "its settings differ from {}'s: only runs of one configuration merge",
@@ -651,7 +667,7 @@ pub fn merge<S: Study>(
         parts.push((d.clone(), rc));
     }
     let Some((_, first)) = parts.first() else {
-        return Err(CliError::input("merge", "no directories given"));
+        return Err(Error::input("merge", "no directories given"));
     };
     let settings = &first.config;
     let mut seeds: Vec<u64> = Vec::new();
@@ -659,7 +675,7 @@ pub fn merge<S: Study>(
     for (d, rc) in &parts {
         let range = rc.first_seed..rc.first_seed + rc.seeds;
         if let Some(s) = range.clone().find(|s| seeds.contains(s)) {
-            return Err(CliError::input(
+            return Err(Error::input(
                 d.display().to_string(),
                 format!("seed {s} is in two of the merged directories"),
             ));
@@ -677,7 +693,7 @@ pub fn merge<S: Study>(
         Existing::Refuse
     };
     let name = format!("{}-merged", study.name());
-    let dir = RunDir::create(out, &name, layout(study, true), existing).map_err(CliError::other)?;
+    let dir = RunDir::create(out, &name, layout(study, true), existing).map_err(Error::other)?;
     let mut records = Vec::new();
     for (seed, rs) in by_seed {
         for (run, r) in study.jobs(settings, seed).iter().flatten().zip(rs) {
@@ -720,8 +736,7 @@ pub fn override_settings<C: Serialize + DeserializeOwned>(
     text: &str,
     what: &str,
 ) -> Result<C> {
-    let over: toml::Table =
-        toml::from_str(text).map_err(|e| CliError::input(what, e.to_string()))?;
+    let over: toml::Table = toml::from_str(text).map_err(|e| Error::input(what, e.to_string()))?;
     override_with_table(base, over, what)
 }
 
@@ -731,12 +746,12 @@ pub fn override_with_table<C: Serialize + DeserializeOwned>(
     over: toml::Table,
     what: &str,
 ) -> Result<C> {
-    let mut v = toml::Value::try_from(base).map_err(CliError::other)?;
+    let mut v = toml::Value::try_from(base).map_err(Error::other)?;
     merge_toml(&mut v, toml::Value::Table(over));
     let c: C = v
         .try_into()
-        .map_err(|e: toml::de::Error| CliError::input(what, e.to_string()))?;
-    ensure_finite(&c).map_err(|e| CliError::input(what, e.to_string()))?;
+        .map_err(|e: toml::de::Error| Error::input(what, e.to_string()))?;
+    ensure_finite(&c).map_err(|e| Error::input(what, e.to_string()))?;
     Ok(c)
 }
 
@@ -761,7 +776,7 @@ fn merge_toml(base: &mut toml::Value, over: toml::Value) {
 /// applying the rest ([`override_with_table`]).
 pub fn read_table(path: &Path) -> Result<toml::Table> {
     let text = std::fs::read_to_string(path).map_err(io(path))?;
-    toml::from_str(&text).map_err(|e| CliError::input(settings_name(Some(path)), e.to_string()))
+    toml::from_str(&text).map_err(|e| Error::input(settings_name(Some(path)), e.to_string()))
 }
 
 /// How errors name a study's settings: `--config PATH` for a file's, `settings` for the

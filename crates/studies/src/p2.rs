@@ -8,7 +8,7 @@
 //!   model; plus the pixel model's own experiment, its F1 per channel on held-out transitions
 //!   after 10, 100 and 300 training episodes, and its predicted frames (Fig. 7).
 //!
-//! Both run through the shared [`super::harness`] (checkpoints, `--resume`, one process per seed,
+//! Both run through the shared [`crate::harness`] (checkpoints, `--resume`, one process per seed,
 //! `tandem reproduce merge`), each method and seed a job, and write in the output directory,
 //! besides the harness' `config.json` and `state/`:
 //!
@@ -30,30 +30,16 @@
 
 use std::path::Path;
 
-use clap::Args;
+use crate::report::{ensure_finite, to_json_pretty, Curve, Figure, SamplesToTarget};
+use crate::run::RunDir;
 use serde::{Deserialize, Serialize};
-use tandem::algos::imagined_episodes::{cartpole, Event, Method, P2Config, RunRecord};
-use tandem::algos::imagined_pixels::{self, MazeConfig, Quality, QualityConfig};
-use tandem::algos::{Checkpoints, Result as AlgoResult};
-use tandem::report::{ensure_finite, to_json_pretty, Curve, Figure, SamplesToTarget};
-use tandem::run::RunDir;
+use tandem_algos::imagined_episodes::{cartpole, Event, Method, P2Config, RunRecord};
+use tandem_algos::imagined_pixels::{self, MazeConfig, Quality, QualityConfig};
+use tandem_algos::{Checkpoints, Result as AlgoResult};
 use tandem_envs::PixelMazeEnv;
 
-use super::harness::{self, JobError, Study, StudyArgs};
-use super::{CliError, Result};
-
-/// Arguments of `tandem reproduce p2-cartpole` and `p2-maze`.
-#[derive(Debug, Clone, Args)]
-pub struct P2Args {
-    /// Seeds (default 10, as p2 averages over 10 runs), output, jobs, resume: as every study.
-    #[command(flatten)]
-    pub study: StudyArgs,
-    /// p2-maze only: the maze, `PixelMaze-v0` (ours, from the paper alone) or `PixelMaze-v1`
-    /// (the authors' released layout), with its default settings [default: a `--config`
-    /// file's `env`, else PixelMaze-v0; on `--resume`, the recorded one].
-    #[arg(long)]
-    pub env: Option<String>,
-}
+use crate::harness::{self, JobError, Study};
+use crate::{Error, Result};
 
 /// Which of p2's experiments.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -124,7 +110,7 @@ impl Settings {
         let settings = match exp {
             Experiment::CartPole => {
                 if env.is_some() {
-                    return Err(CliError::input(
+                    return Err(Error::input(
                         "--env",
                         "--env applies to p2-maze only (p2-cartpole runs CartPole-v1)",
                     ));
@@ -145,7 +131,7 @@ impl Settings {
                     None => None,
                     Some(toml::Value::String(e)) => Some(e.clone()),
                     Some(v) => {
-                        return Err(CliError::input(
+                        return Err(Error::input(
                             &what,
                             format!("env = {v}: the maze's id is a string"),
                         ))
@@ -153,7 +139,7 @@ impl Settings {
                 };
                 let env = match (env, file_env.as_deref()) {
                     (Some(a), Some(b)) if a != b => {
-                        return Err(CliError::input(
+                        return Err(Error::input(
                             "--env",
                             format!("{a}, but {what} says env = \"{b}\""),
                         ))
@@ -161,8 +147,8 @@ impl Settings {
                     (Some(e), _) | (None, Some(e)) => e,
                     (None, None) => PixelMazeEnv::ID,
                 };
-                let mut runs = MazeConfig::for_env(env)
-                    .map_err(|e| CliError::input("--env", e.to_string()))?;
+                let mut runs =
+                    MazeConfig::for_env(env).map_err(|e| Error::input("--env", e.to_string()))?;
                 let mut quality = QualityConfig::default();
                 if quick {
                     let (q_runs, q_quality) = quick_maze_config();
@@ -174,7 +160,7 @@ impl Settings {
                 }
                 if let Some(q) = over.remove("quality") {
                     let toml::Value::Table(q) = q else {
-                        return Err(CliError::input(&what, "quality must be a table, [quality]"));
+                        return Err(Error::input(&what, "quality must be a table, [quality]"));
                     };
                     quality = harness::override_with_table(&quality, q, &what)?;
                 }
@@ -186,7 +172,7 @@ impl Settings {
         };
         settings
             .validate()
-            .map_err(|e| CliError::input(&what, e.to_string()))?;
+            .map_err(|e| Error::input(&what, e.to_string()))?;
         Ok(settings)
     }
 
@@ -421,7 +407,7 @@ pub fn f1_table(qs: &[Quality]) -> Option<std::collections::BTreeMap<String, F1R
             .iter()
             .enumerate()
             .map(|(i, p)| {
-                let mean = |f: fn(&tandem::algos::imagined_pixels::QualityPoint) -> f64| {
+                let mean = |f: fn(&tandem_algos::imagined_pixels::QualityPoint) -> f64| {
                     qs.iter()
                         .filter_map(|q| q.points.get(i))
                         .map(f)
@@ -846,9 +832,9 @@ impl Study for P2Study {
         let (target, window, _) = s.solved();
         let mut t = table(&runs, target, s.solved_text());
         t.f1 = f1_table(&qualities);
-        ensure_finite(&t).map_err(CliError::other)?;
+        ensure_finite(&t).map_err(Error::other)?;
         let md = markdown(&t, exp, s.env(), &s.describe(), wall);
-        let json = to_json_pretty(&t).map_err(|e| CliError::Other(format!("table.json: {e}")))?;
+        let json = to_json_pretty(&t).map_err(|e| Error::Other(format!("table.json: {e}")))?;
         harness::write(dir, "table.json", &json)?;
         harness::write(dir, "table.md", &md)?;
         harness::write(
@@ -859,7 +845,7 @@ impl Study for P2Study {
         if let (Settings::Maze { runs, .. }, Some(q)) = (s, qualities.first()) {
             harness::write(dir, "fig7.svg", &fig7(q, runs.model.threshold))?;
             let text = to_json_pretty(&qualities)
-                .map_err(|e| CliError::Other(format!("quality.json: {e}")))?;
+                .map_err(|e| Error::Other(format!("quality.json: {e}")))?;
             harness::write(dir, "quality.json", &text)?;
         }
         Ok(md)
@@ -925,10 +911,10 @@ mod tests {
         assert_eq!(v["with_model"]["episodes_to_solve"]["mean"], 400.0);
     }
 
-    fn point(episodes: u64, agent: f64) -> tandem::algos::imagined_pixels::QualityPoint {
+    fn point(episodes: u64, agent: f64) -> tandem_algos::imagined_pixels::QualityPoint {
         let mut truth = vec![0.0f32; 768];
         truth[(3 * 16 + 5) * 3 + 2] = 1.0; // one blue (agent) pixel at row 3, column 5
-        tandem::algos::imagined_pixels::QualityPoint {
+        tandem_algos::imagined_pixels::QualityPoint {
             episodes,
             transitions: 10 * episodes,
             heldout_transitions: 100,
@@ -964,7 +950,7 @@ mod tests {
     /// The committed maze results (`results/p2-maze/`) read back as a table, with the F1 table.
     #[test]
     fn the_committed_maze_table_reads_back() {
-        let text = include_str!("../../results/p2-maze/table.json");
+        let text = include_str!("../../../results/p2-maze/table.json");
         let t: P2Table = serde_json::from_str(text).unwrap();
         assert_eq!(t.model_free.episodes_to_solve.seeds, 10);
         let f1 = t.f1.as_ref().unwrap();
@@ -978,7 +964,7 @@ mod tests {
     /// The committed results (`results/p2-cartpole/`) read back as a table.
     #[test]
     fn the_committed_table_reads_back() {
-        let text = include_str!("../../results/p2-cartpole/table.json");
+        let text = include_str!("../../../results/p2-cartpole/table.json");
         let t: P2Table = serde_json::from_str(text).unwrap();
         assert_eq!(t.model_free.episodes_to_solve.seeds, 10);
         assert_eq!(t.with_model.episodes_to_solve.seeds, 10);

@@ -1,6 +1,6 @@
 //! `tandem reproduce p3-leg` and `p3-mujoco`: p3's comparison of SAC, MBPO and M-DeMoRL on the 2R
 //! leg or a gymnasium MuJoCo task, on the same seeds and real-step budget, through the shared
-//! [`super::harness`] (resume, separate processes per seed, merge).
+//! [`crate::harness`] (resume, separate processes per seed, merge).
 //!
 //! Writes, besides the harness' `config.json`, `runs/` and `state/`:
 //!
@@ -15,54 +15,26 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use clap::Args;
+use crate::report::{Comparison, Figure, MarkdownText, MethodFigures, SeedRun, Table};
+use crate::run::RunDir;
 use serde::{Deserialize, Serialize};
-use tandem::algos::m_demorl::{run, Method, P3Config};
-use tandem::algos::mbpo::{
+use tandem_algos::m_demorl::{run, Method, P3Config};
+use tandem_algos::mbpo::{
     leg2r_problem_with, mujoco_problem, run_oracle, Event, MbpoConfig, Problem, RunRecord,
     MUJOCO_TASKS,
 };
-use tandem::algos::Checkpoints;
-use tandem::core::LinearSchedule;
-use tandem::mujoco::TaskKind;
-use tandem::report::{Comparison, Figure, MarkdownText, MethodFigures, SeedRun, Table};
-use tandem::run::RunDir;
+use tandem_algos::Checkpoints;
+use tandem_core::LinearSchedule;
 use tandem_envs::{Env, EnvError, Leg2RConfig, Leg2REnv, Leg2RModel, Task};
 use tandem_models::PlantModel;
+use tandem_mujoco::TaskKind;
 use tandem_planners::Utility;
 
-use super::harness::{self, JobError, Study, StudyArgs};
-use super::{CliError, Result};
+use crate::harness::{self, JobError, Study};
+use crate::{Error, Result};
 
 /// p3's elite fractions (Fig. 3).
 pub const ELITE_FRACTIONS: [f64; 6] = [0.01, 0.05, 0.10, 0.20, 0.50, 1.0];
-
-/// Arguments of `tandem reproduce p3-leg`.
-#[derive(Debug, Clone, Args)]
-pub struct P3Args {
-    /// Seeds, output, jobs, resume: as every study.
-    #[command(flatten)]
-    pub study: StudyArgs,
-    /// Also run M-DeMoRL with elite fractions 1, 5, 10, 20, 50 and 100 % (p3 Fig. 3).
-    #[arg(long)]
-    pub ablate_elites: bool,
-    /// Also run MBPO with the true system as its model (`mbpo_oracle`; the leg only): what MBPO
-    /// would do with a perfect model, to tell model error from the loop's own limits.
-    #[arg(long)]
-    pub oracle: bool,
-}
-
-/// Arguments of `tandem reproduce p3-mujoco`.
-#[derive(Debug, Clone, Args)]
-pub struct P3MujocoArgs {
-    /// The p3-leg arguments.
-    #[command(flatten)]
-    pub p3: P3Args,
-    /// The task: HalfCheetah-v5, Hopper-v5, Walker2d-v5 or InvertedPendulum-v5 [default:
-    /// HalfCheetah-v5; on `--resume`, the recorded one].
-    #[arg(long)]
-    pub env: Option<String>,
-}
 
 /// Everything that decides a p3-leg study's numbers.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -114,7 +86,7 @@ impl Default for P3Settings {
 
 /// The shared loop at `--quick`'s toy sizes: 3 epochs of 300 steps, networks of 16×16, an
 /// ensemble of 3, refits every 150 steps, 2 rollouts per step, one update per step.
-pub(super) fn quick_loop(b: &mut MbpoConfig) {
+pub(crate) fn quick_loop(b: &mut MbpoConfig) {
     b.sac.hidden = vec![16, 16];
     b.sac.batch_size = 32;
     b.sac.learning_starts = 100;
@@ -147,13 +119,13 @@ const MUJOCO_TARGETS: [(&str, f64); 4] = [
 
 /// The shared loop on the MuJoCo task `env` ([`MbpoConfig::mujoco`]) and its fixed target
 /// return; `None` for a task the studies do not run.
-pub(super) fn mujoco_loop(env: &str) -> Option<(MbpoConfig, f64)> {
+pub(crate) fn mujoco_loop(env: &str) -> Option<(MbpoConfig, f64)> {
     let (_, target) = MUJOCO_TARGETS.iter().find(|(id, _)| *id == env)?;
     Some((MbpoConfig::mujoco(env)?, *target))
 }
 
 /// The ids `p3-mujoco` runs, for messages.
-pub(super) fn mujoco_ids() -> String {
+pub(crate) fn mujoco_ids() -> String {
     MUJOCO_TASKS.join(", ")
 }
 
@@ -207,10 +179,10 @@ impl P3Settings {
 
     /// Checks what the runs rely on.
     fn validate(&self, what: &str) -> Result<()> {
-        let bad = |m: String| Err(CliError::input(what, m));
+        let bad = |m: String| Err(Error::input(what, m));
         self.p3
             .validate()
-            .map_err(|e| CliError::input(what, e.to_string()))?;
+            .map_err(|e| Error::input(what, e.to_string()))?;
         match &self.leg {
             Some(leg) => {
                 if let Err(e) = leg2r_problem_with(&self.env, leg) {
@@ -343,7 +315,7 @@ impl Study for P3Study {
             Target::Mujoco(env) => {
                 let env = env.as_deref().unwrap_or(MUJOCO_TASKS[0]);
                 P3Settings::mujoco(env).ok_or_else(|| {
-                    CliError::input("--env", format!("{env}: p3-mujoco runs {}", mujoco_ids()))
+                    Error::input("--env", format!("{env}: p3-mujoco runs {}", mujoco_ids()))
                 })?
             }
         };
@@ -508,7 +480,7 @@ where
 }
 
 /// The run's events as the harness' progress: the real steps, every 100.
-pub(super) fn step_progress(progress: &mut dyn FnMut(u64)) -> impl FnMut(Event) + '_ {
+pub(crate) fn step_progress(progress: &mut dyn FnMut(u64)) -> impl FnMut(Event) + '_ {
     move |e| {
         if let Event::Step { real_steps } = e {
             if real_steps % 100 == 0 {
@@ -519,7 +491,7 @@ pub(super) fn step_progress(progress: &mut dyn FnMut(u64)) -> impl FnMut(Event) 
 }
 
 /// How the sample ratios are taken.
-pub(super) const RATIO_NOTE: &str =
+pub(crate) const RATIO_NOTE: &str =
     "per-seed real steps to the target, a seed that never reached it counted at the steps it used";
 
 /// The runs' names in table order: the three methods, then the ablation.
@@ -556,7 +528,7 @@ pub fn table(records: &[RunRecord], s: &P3Settings) -> Table {
 
 /// "All methods take … updates per real step": the budget, evaluations and SAC of the loop
 /// every method of a study shares.
-pub(super) fn loop_sentence(b: &MbpoConfig) -> String {
+pub(crate) fn loop_sentence(b: &MbpoConfig) -> String {
     format!(
         "All methods take {} real steps ({} epochs of {}), evaluated every {} with {} \
          deterministic episodes (not counted); SAC {:?} hidden units, {} random steps, {} \
@@ -573,7 +545,7 @@ pub(super) fn loop_sentence(b: &MbpoConfig) -> String {
 }
 
 /// An error message unless `method` is `None` or one of the runs `known`.
-pub(super) fn check_target_method(
+pub(crate) fn check_target_method(
     method: Option<&str>,
     known: &[&str],
 ) -> std::result::Result<(), String> {
@@ -587,7 +559,7 @@ pub(super) fn check_target_method(
 
 /// The return whose reaching is counted: the mean return at `budget` of the runs `method`
 /// where it names one that has runs, else `fixed`.
-pub(super) fn target_of(
+pub(crate) fn target_of(
     records: &[RunRecord],
     budget: u64,
     fixed: f64,
@@ -609,7 +581,7 @@ pub(super) fn target_of(
 /// Per run of `names` (those with records): the return at the budget and the real steps to
 /// `target` (with the mean return per epoch where `epoch_length` is given); the `baselines`'
 /// real steps over `ours`'s.
-pub(super) fn runs_table(
+pub(crate) fn runs_table(
     records: &[RunRecord],
     names: &[String],
     budget: u64,
@@ -764,7 +736,7 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
 }
 
 /// "SAC update rate … Wall time … s.": each labelled run's updates per second of update time.
-pub(super) fn rates_and_wall(records: &[RunRecord], labels: &[(&str, &str)], wall: f64) -> String {
+pub(crate) fn rates_and_wall(records: &[RunRecord], labels: &[(&str, &str)], wall: f64) -> String {
     let rates: Vec<String> = labels
         .iter()
         .filter_map(|(n, l)| update_rate(records, n).map(|r| format!("{r:.0} updates/s ({l})")))
@@ -776,7 +748,7 @@ pub(super) fn rates_and_wall(records: &[RunRecord], labels: &[(&str, &str)], wal
 }
 
 /// "Seconds per seed of one thread (mean): …" for each labelled run ([`time_split`]).
-pub(super) fn seconds_per_seed(records: &[RunRecord], labels: &[(&str, &str)]) -> String {
+pub(crate) fn seconds_per_seed(records: &[RunRecord], labels: &[(&str, &str)]) -> String {
     let parts: Vec<String> = labels
         .iter()
         .filter_map(|(n, l)| time_split(records, n).map(|t| format!("{l} {t}")))
@@ -799,7 +771,7 @@ fn update_rate(records: &[RunRecord], name: &str) -> Option<f64> {
 }
 
 /// What the target return is: a fixed figure, or a run's mean return at the budget.
-pub(super) fn target_sentence(t: &Table, method: Option<&str>, labels: &[(&str, &str)]) -> String {
+pub(crate) fn target_sentence(t: &Table, method: Option<&str>, labels: &[(&str, &str)]) -> String {
     let target = t
         .methods
         .values()
