@@ -14,6 +14,7 @@
 //! | [`OffPolicyLoop`], [`EpisodeRunner`], [`evaluate`] | the one off-policy loop every pipeline runs: real and model steps, two replay buffers mixed at a set ratio, exact sample counts, stable-baselines3's schedule, evaluation, save/resume |
 //! | [`Trainer`], [`TrainSettings`], [`RunLog`] | `tandem train`'s loop: any of the four agents on one environment, on the shared loop |
 //! | [`Adapted`], [`Feature`] | an adapter in front of any off-policy agent: observation features, reward scale, settable exploration noise |
+//! | [`GlobalPolicy`], [`PolicyConfig`], [`PolicyInput`] | GPS's neural Gaussian policy, regressed onto target actions (MDGPS's global policy) |
 //!
 //! Networks are `tandem-nn`'s hand-derived [`tandem_nn::Mlp`]s with in-place Adam; the actor
 //! gradients (DDPG through the critic's input gradient, SAC's reparametrized tanh-Gaussian) are
@@ -47,6 +48,7 @@ pub mod conv_qnet;
 pub mod ddpg;
 pub mod dqn;
 pub mod error;
+pub mod global_policy;
 pub mod learner;
 pub mod noise;
 pub mod off_policy;
@@ -67,6 +69,7 @@ pub use conv_qnet::{ConvQNet, ConvQNetConfig};
 pub use ddpg::{random_action, Ddpg};
 pub use dqn::Dqn;
 pub use error::{AgentError, Result};
+pub use global_policy::{FeatureMap, GlobalPolicy, PolicyConfig, PolicyInput, Weighting};
 pub use learner::{Algo, AlgoConfig, Learner};
 pub use noise::{Noise, NoiseConfig};
 pub use off_policy::{

@@ -131,20 +131,6 @@ pub struct Condition {
 /// block–goal distance.
 pub type Measure = Box<dyn Fn(usize, &[f64]) -> f64 + Send + Sync>;
 
-/// Writes the features of a state (first argument) into a buffer (second).
-pub type FeatureMap = std::sync::Arc<dyn Fn(&[f64], &mut [f64]) + Send + Sync>;
-
-/// What the global policy sees of a state: `dim` features written by `map(state, out)` (e.g. a
-/// task's observation: angles as cosines and sines, the end effector's offset to the target).
-/// Without one the policy sees the state itself.
-#[derive(Clone)]
-pub struct PolicyInput {
-    /// Number of features.
-    pub dim: usize,
-    /// Writes the features of a state into `out` (`dim` long).
-    pub map: FeatureMap,
-}
-
 /// What the local controllers are trained on.
 pub struct LocalProblem {
     /// The system the samples come from (a plant, or any model).
@@ -157,7 +143,7 @@ pub struct LocalProblem {
     pub measure: Measure,
     /// What a neural policy for the task sees of a state (MDGPS's global policy); `None`: the
     /// state itself. The local controllers always act on the state.
-    pub policy_input: Option<PolicyInput>,
+    pub policy_input: Option<tandem_agents::PolicyInput>,
 }
 
 /// One point of a condition's curve.

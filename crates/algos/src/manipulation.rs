@@ -131,8 +131,8 @@ pub fn reacher_problem(cost: ReacherCost, conditions: usize, seed: u64) -> Resul
 
 /// The reacher's global policy sees `Reacher-v5`'s observation
 /// ([`tandem_mujoco::p4::reacher_observation`]), as DDPG does.
-pub fn reacher_policy_input() -> super::gps::PolicyInput {
-    super::gps::PolicyInput {
+pub fn reacher_policy_input() -> tandem_agents::PolicyInput {
+    tandem_agents::PolicyInput {
         dim: tandem_mujoco::p4::REACHER_OBS_DIM,
         map: std::sync::Arc::new(tandem_mujoco::p4::reacher_observation),
     }
