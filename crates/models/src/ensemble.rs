@@ -12,7 +12,7 @@ use tandem_core::seeding::SeedStream;
 use tandem_core::Rng;
 use tandem_nn::{
     gaussian_nll, Activation, Checkpoint, Checkpointable, GaussianHead, GaussianOutput, Mlp,
-    MlpConfig, MlpWorkspace, NnError,
+    MlpConfig, MlpWorkspace, NnError, RowBlock, RowDealer,
 };
 
 use crate::data::{check_input, holdout_indices};
@@ -266,7 +266,7 @@ impl ProbabilisticEnsemble {
     /// slot `i` (member `self.elites[i]`) takes the rows `assign` gives it (all rows when `assign`
     /// is `None`), its standardized means and log-variances left in `bufs.slots[i]` with its row
     /// indices. When the work is large enough to pay for it, the slots' rows are dealt in equal
-    /// blocks to as many groups as rayon's pool has threads ([`deal_rows`]), run side by side
+    /// blocks to as many groups as rayon's pool has threads ([`RowDealer`]), run side by side
     /// (one elite per thread left one of two threads idle a third of the pass with five elites).
     /// A slot's rows are cut only where each block gets exactly the numbers of the whole slot's
     /// pass ([`Mlp::rows_run_apart`]), and every block has its own buffers, so the numbers do not
@@ -281,11 +281,7 @@ impl ProbabilisticEnsemble {
         let din = self.state_dim + self.action_dim;
         let dim = self.out_dim();
         let e = self.elites.len();
-        let EliteScratch {
-            slots,
-            blocks,
-            group_lens,
-        } = bufs;
+        let EliteScratch { slots, dealer } = bufs;
         slots.resize_with(e, SlotScratch::default);
         for (i, sc) in slots.iter_mut().enumerate() {
             sc.rows.clear();
@@ -300,35 +296,29 @@ impl ProbabilisticEnsemble {
                 }
             }
         }
-        let macs = b * self.members[0].net.num_params();
-        let threads = if macs >= PARALLEL_MIN_MACS {
-            rayon::current_num_threads()
-        } else {
-            1
-        };
+        let threads = RowDealer::<BlockScratch>::threads_for(b * self.members[0].net.num_params());
         let net = |i: usize| &self.members[self.elites[i]].net;
-        let dealt = deal_rows(
+        dealer.deal(
             e,
             |i| slots[i].rows.len(),
             threads,
             |i, whole, part| net(i).rows_run_apart(whole, part),
-            blocks,
-            group_lens,
         );
-        let blocks = &mut blocks[..dealt];
-        let run = |bl: &mut BlockScratch| -> tandem_nn::Result<()> {
+        let run = |bl: &mut RowBlock<BlockScratch>| -> tandem_nn::Result<()> {
             let m = &self.members[self.elites[bl.slot]];
             let input = match assign {
                 None => x,
                 Some(_) => &slots[bl.slot].x[..],
             };
             let rows = bl.end - bl.start;
+            let bufs = &mut bl.bufs;
             let out = m
                 .net
-                .forward(&input[bl.start * din..bl.end * din], rows, &mut bl.ws)?;
-            m.head.predict(out, rows, &mut bl.g)
+                .forward(&input[bl.start * din..bl.end * din], rows, &mut bufs.ws)?;
+            m.head.predict(out, rows, &mut bufs.g)
         };
-        run_groups(blocks, group_lens, &run).map_err(nn_other)?;
+        dealer.run(&run).map_err(nn_other)?;
+        let blocks = dealer.blocks_mut();
         // Each slot's outputs in row order (the blocks are in slot and row order); a slot in one
         // block takes that block's buffers as they are.
         let mut k = 0;
@@ -339,112 +329,21 @@ impl ProbabilisticEnsemble {
             }
             match &mut blocks[first..k] {
                 [one] => {
-                    std::mem::swap(&mut sc.mean, &mut one.g.mean);
-                    std::mem::swap(&mut sc.log_var, &mut one.g.log_var);
+                    std::mem::swap(&mut sc.mean, &mut one.bufs.g.mean);
+                    std::mem::swap(&mut sc.log_var, &mut one.bufs.g.log_var);
                 }
                 several => {
                     sc.mean.clear();
                     sc.log_var.clear();
                     for bl in several {
-                        sc.mean.extend_from_slice(&bl.g.mean);
-                        sc.log_var.extend_from_slice(&bl.g.log_var);
+                        sc.mean.extend_from_slice(&bl.bufs.g.mean);
+                        sc.log_var.extend_from_slice(&bl.bufs.g.log_var);
                     }
                 }
             }
             debug_assert_eq!(sc.mean.len(), sc.rows.len() * dim);
         }
         Ok(())
-    }
-}
-
-/// Work (multiply-adds over all elites' rows) below which the elites run one after the other on
-/// one thread: handing rows to another thread costs a few microseconds.
-const PARALLEL_MIN_MACS: usize = 1 << 20;
-
-/// Rows per vector of the widest kernels (16 `f32` lanes): a slot's rows are cut at multiples of
-/// it, so no block adds a half-empty vector.
-const ROW_ALIGN: usize = 16;
-
-/// Deals the rows of `slots` elite slots (`count(i)` rows for slot `i`) to `threads` groups of
-/// about equal rows, in slot and row order: the blocks `(slot, start, end)` go to the front of
-/// `blocks` (its storage reused; the number dealt is returned) and the number of blocks of each
-/// group to `group_lens`. A slot's rows are cut only at multiples of [`ROW_ALIGN`] and only where
-/// `apart(slot, whole, part)` holds for both resulting blocks; otherwise the group boundary moves
-/// to the nearer end of that slot. Empty slots get no block.
-fn deal_rows(
-    slots: usize,
-    count: impl Fn(usize) -> usize,
-    threads: usize,
-    apart: impl Fn(usize, usize, usize) -> bool,
-    blocks: &mut Vec<BlockScratch>,
-    group_lens: &mut Vec<usize>,
-) -> usize {
-    fn push(blocks: &mut Vec<BlockScratch>, k: usize, slot: usize, start: usize, end: usize) {
-        if blocks.len() == k {
-            blocks.push(BlockScratch::default());
-        }
-        let bl = &mut blocks[k];
-        (bl.slot, bl.start, bl.end) = (slot, start, end);
-    }
-    let total: usize = (0..slots).map(&count).sum();
-    let threads = threads.max(1);
-    group_lens.clear();
-    let (mut dealt, mut group, mut done, mut in_group) = (0, 0, 0, 0);
-    for slot in 0..slots {
-        let n = count(slot);
-        let mut start = 0;
-        while start < n {
-            let rest = n - start;
-            // Rows dealt when this group should end.
-            let boundary = total * (group + 1) / threads;
-            let last_group = group + 1 == threads;
-            let (end, close) = if last_group || done + rest <= boundary {
-                (n, !last_group && done + rest == boundary)
-            } else {
-                let room = boundary.saturating_sub(done);
-                let cut = (room + ROW_ALIGN / 2) / ROW_ALIGN * ROW_ALIGN;
-                if cut > 0 && cut < rest && apart(slot, n, cut) && apart(slot, n, rest - cut) {
-                    (start + cut, true)
-                } else if in_group == 0 || 2 * room >= rest {
-                    (n, true)
-                } else {
-                    // The whole rest goes to the next group.
-                    group_lens.push(in_group);
-                    (group, in_group) = (group + 1, 0);
-                    continue;
-                }
-            };
-            push(blocks, dealt, slot, start, end);
-            dealt += 1;
-            (done, in_group, start) = (done + end - start, in_group + 1, end);
-            if close {
-                group_lens.push(in_group);
-                (group, in_group) = (group + 1, 0);
-            }
-        }
-    }
-    if in_group > 0 {
-        group_lens.push(in_group);
-    }
-    dealt
-}
-
-/// Runs `f` on every block, the groups (`group_lens[g]` consecutive blocks each) side by side
-/// ([`tandem_nn::join`]), each group's blocks in order on one thread. The first error is returned.
-fn run_groups<E: Send>(
-    blocks: &mut [BlockScratch],
-    group_lens: &[usize],
-    f: &(impl Fn(&mut BlockScratch) -> Result<(), E> + Sync),
-) -> Result<(), E> {
-    match group_lens {
-        [] => Ok(()),
-        [_] => blocks.iter_mut().try_for_each(f),
-        _ => {
-            let (left, right) = group_lens.split_at(group_lens.len() / 2);
-            let (bl, br) = blocks.split_at_mut(left.iter().sum());
-            let (a, b) = tandem_nn::join(|| run_groups(bl, left, f), || run_groups(br, right, f));
-            a.and(b)
-        }
     }
 }
 
@@ -458,13 +357,10 @@ struct SlotScratch {
     log_var: Vec<f32>,
 }
 
-/// Reusable buffers of one block of a slot's rows (`start..end` of the slot's rows): the
-/// network's workspace and the Gaussian outputs.
+/// Reusable buffers of one block of a slot's rows: the network's workspace and the Gaussian
+/// outputs.
 #[derive(Debug, Default)]
 struct BlockScratch {
-    slot: usize,
-    start: usize,
-    end: usize,
     ws: MlpWorkspace,
     g: GaussianOutput,
 }
@@ -473,8 +369,7 @@ struct BlockScratch {
 #[derive(Debug, Default)]
 struct EliteScratch {
     slots: Vec<SlotScratch>,
-    blocks: Vec<BlockScratch>,
-    group_lens: Vec<usize>,
+    dealer: RowDealer<BlockScratch>,
 }
 
 /// The elites' inference buffers behind a mutex, so that `predict` through `&self` allocates only
@@ -1188,84 +1083,6 @@ mod tests {
         assert_eq!(one.3, two.3);
     }
 
-    /// The blocks `deal_rows` gives, as `(slot, start, end)` per group.
-    fn dealt(
-        counts: &[usize],
-        threads: usize,
-        apart: impl Fn(usize, usize, usize) -> bool,
-    ) -> Vec<Vec<(usize, usize, usize)>> {
-        let (mut blocks, mut lens) = (Vec::new(), Vec::new());
-        let n = deal_rows(
-            counts.len(),
-            |i| counts[i],
-            threads,
-            apart,
-            &mut blocks,
-            &mut lens,
-        );
-        assert_eq!(lens.iter().sum::<usize>(), n);
-        let mut it = blocks[..n].iter().map(|b| (b.slot, b.start, b.end));
-        lens.iter()
-            .map(|&l| it.by_ref().take(l).collect())
-            .collect()
-    }
-
-    #[test]
-    fn rows_are_dealt_in_equal_aligned_blocks_where_they_may_be_cut() {
-        let yes = |_: usize, _: usize, _: usize| true;
-        // Five elites of 100 rows on two threads: the middle one is cut at 48 rows.
-        assert_eq!(
-            dealt(&[100; 5], 2, yes),
-            vec![
-                vec![(0, 0, 100), (1, 0, 100), (2, 0, 48)],
-                vec![(2, 48, 100), (3, 0, 100), (4, 0, 100)]
-            ]
-        );
-        // Where the cut would change the numbers, the nearer end of the slot is the boundary.
-        let no = |_: usize, _: usize, _: usize| false;
-        assert_eq!(
-            dealt(&[100; 5], 2, no),
-            vec![
-                vec![(0, 0, 100), (1, 0, 100), (2, 0, 100)],
-                vec![(3, 0, 100), (4, 0, 100)]
-            ]
-        );
-        let only_whole = |_: usize, whole: usize, part: usize| part * 2 >= whole;
-        assert_eq!(
-            dealt(&[100, 30, 100], 2, only_whole),
-            vec![vec![(0, 0, 100), (1, 0, 30)], vec![(2, 0, 100)]]
-        );
-        // One thread: every non-empty slot whole, in one group.
-        assert_eq!(dealt(&[7, 0, 9], 1, yes), vec![vec![(0, 0, 7), (2, 0, 9)]]);
-        // Random slot sizes, 1-4 threads: the blocks cover each slot's rows once and in order,
-        // no more groups than threads, cuts on multiples of 16, groups within a block of equal.
-        let mut rng = rng_from_seed(2);
-        for _ in 0..300 {
-            let k = rng.random_range(1..8);
-            let counts: Vec<usize> = (0..k).map(|_| rng.random_range(0..3000)).collect();
-            let threads = rng.random_range(1..5);
-            let groups = dealt(&counts, threads, yes);
-            assert!(groups.len() <= threads && groups.iter().all(|g| !g.is_empty()));
-            let flat: Vec<_> = groups.concat();
-            let mut next = vec![0; k];
-            for &(slot, start, end) in &flat {
-                assert_eq!(start, next[slot], "{counts:?}");
-                assert!(end > start && (end == counts[slot] || end % ROW_ALIGN == 0));
-                next[slot] = end;
-            }
-            assert_eq!(next, counts);
-            let total: usize = counts.iter().sum();
-            for g in &groups {
-                let rows: usize = g.iter().map(|&(_, a, b)| b - a).sum();
-                let largest = counts.iter().max().unwrap();
-                assert!(
-                    rows <= total / threads + ROW_ALIGN.max(*largest),
-                    "{counts:?}"
-                );
-            }
-        }
-    }
-
     /// Inference large enough to deal its rows to threads (five elites of 3×200, 500 rows: one
     /// elite's rows cut between two threads) gives the numbers of one thread, bit for bit, in
     /// every propagation mode, on two and three threads.
@@ -1280,7 +1097,7 @@ mod tests {
         };
         let ens = ProbabilisticEnsemble::new(3, 1, cfg).unwrap();
         let net = ens.member_network(0).unwrap();
-        assert!(500 * net.num_params() >= PARALLEL_MIN_MACS);
+        assert!(500 * net.num_params() >= tandem_nn::row_deal::PARALLEL_MIN_MACS);
         assert!(net.rows_run_apart(100, 48) && net.rows_run_apart(100, 52));
         let mut rng = rng_from_seed(9);
         let s = Array2::from_shape_fn((500, 3), |_| rng.random_range(-1.0..1.0));
