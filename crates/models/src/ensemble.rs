@@ -15,11 +15,13 @@ use tandem_nn::{
     MlpConfig, MlpWorkspace, NnError, RowBlock, RowDealer,
 };
 
-use crate::data::{check_input, holdout_indices};
+use crate::data::check_input;
 use crate::model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
-use crate::train::{nn_other, nn_train, standardized_inputs, Opt, OptimizerConfig, Standardizer};
+use crate::train::{
+    nn_other, nn_train, FitRows, FitSpec, Opt, OptimizerConfig, Standardized, Standardizer, Targets,
+};
 
 /// How a batch is propagated through the ensemble (PETS, Sec. 4.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -148,12 +150,10 @@ pub struct ProbabilisticEnsemble {
     cfg: EnsembleConfig,
     state_dim: usize,
     action_dim: usize,
-    members: Vec<Member>,
+    /// The members; their targets `[Δs, r]`.
+    learned: Standardized<Vec<Member>>,
     elites: Vec<usize>,
     holdout_mse: Vec<f64>,
-    in_state: Standardizer,
-    in_action: Standardizer,
-    out_norm: Standardizer,
     propagation: Propagation,
     member_offset: usize,
     scratch: Scratch,
@@ -204,15 +204,12 @@ impl ProbabilisticEnsemble {
         Ok(Self {
             elites: (0..cfg.elites).collect(),
             holdout_mse: vec![f64::NAN; cfg.members],
-            in_state: Standardizer::identity(state_dim),
-            in_action: Standardizer::identity(action_dim),
-            out_norm: Standardizer::identity(dim),
             propagation: cfg.propagation,
             member_offset: 0,
             scratch: Scratch::default(),
             state_dim,
             action_dim,
-            members,
+            learned: Standardized::new(members, [state_dim, action_dim], dim),
             cfg,
         })
     }
@@ -254,7 +251,7 @@ impl ProbabilisticEnsemble {
 
     /// The network of member `k` (for checkpoints and inspection).
     pub fn member_network(&self, k: usize) -> Option<&Mlp> {
-        self.members.get(k).map(|m| &m.net)
+        self.learned.trained.get(k).map(|m| &m.net)
     }
 
     /// Width of the Gaussian output (`S`, plus one with the reward).
@@ -296,8 +293,9 @@ impl ProbabilisticEnsemble {
                 }
             }
         }
-        let threads = RowDealer::<BlockScratch>::threads_for(b * self.members[0].net.num_params());
-        let net = |i: usize| &self.members[self.elites[i]].net;
+        let threads =
+            RowDealer::<BlockScratch>::threads_for(b * self.learned.trained[0].net.num_params());
+        let net = |i: usize| &self.learned.trained[self.elites[i]].net;
         dealer.deal(
             e,
             |i| slots[i].rows.len(),
@@ -305,7 +303,7 @@ impl ProbabilisticEnsemble {
             |i, whole, part| net(i).rows_run_apart(whole, part),
         );
         let run = |bl: &mut RowBlock<BlockScratch>| -> tandem_nn::Result<()> {
-            let m = &self.members[self.elites[bl.slot]];
+            let m = &self.learned.trained[self.elites[bl.slot]];
             let input = match assign {
                 None => x,
                 Some(_) => &slots[bl.slot].x[..],
@@ -403,7 +401,7 @@ struct Learned {
 /// run that saves and loads its ensemble predicts and fits on exactly as one that did not.
 impl Checkpointable for ProbabilisticEnsemble {
     fn save_to(&self, prefix: &str, ckpt: &mut Checkpoint) -> tandem_nn::Result<()> {
-        for (k, m) in self.members.iter().enumerate() {
+        for (k, m) in self.learned.trained.iter().enumerate() {
             let p = format!("{prefix}.member{k}");
             m.net.save_to(&format!("{p}.net"), ckpt)?;
             m.opt.save_to(&format!("{p}.opt"), ckpt)?;
@@ -415,9 +413,9 @@ impl Checkpointable for ProbabilisticEnsemble {
             elites: self.elites.clone(),
             holdout_mse: self.holdout_mse.clone(),
             norms: (
-                self.in_state.clone(),
-                self.in_action.clone(),
-                self.out_norm.clone(),
+                self.learned.inputs[0].clone(),
+                self.learned.inputs[1].clone(),
+                self.learned.targets.clone(),
             ),
             propagation: self.propagation,
             member_offset: self.member_offset,
@@ -430,7 +428,7 @@ impl Checkpointable for ProbabilisticEnsemble {
         let l: Learned = ckpt.get_json(&name)?;
         let (s, a, d) = (self.state_dim, self.action_dim, self.out_dim());
         let widths = (l.norms.0.dim(), l.norms.1.dim(), l.norms.2.dim());
-        let k = self.members.len();
+        let k = self.learned.trained.len();
         if widths != (s, a, d)
             || l.holdout_mse.len() != k
             || l.elites.len() != self.cfg.elites
@@ -445,7 +443,7 @@ impl Checkpointable for ProbabilisticEnsemble {
                 self.cfg.elites
             )));
         }
-        let mut members = self.members.clone();
+        let mut members = self.learned.trained.clone();
         for (k, m) in members.iter_mut().enumerate() {
             let p = format!("{prefix}.member{k}");
             m.net.load_from(&format!("{p}.net"), ckpt)?;
@@ -454,32 +452,17 @@ impl Checkpointable for ProbabilisticEnsemble {
             let n = m.head.bounds().len();
             ckpt.read_f32_into(&format!("{p}.bounds"), &[n], m.head.bounds_mut())?;
         }
-        self.members = members;
-        (self.in_state, self.in_action, self.out_norm) = l.norms;
+        let (in_state, in_action, out_norm) = l.norms;
+        self.learned = Standardized {
+            trained: members,
+            inputs: [in_state, in_action],
+            targets: out_norm,
+        };
         self.elites = l.elites;
         self.holdout_mse = l.holdout_mse;
         self.propagation = l.propagation;
         self.member_offset = l.member_offset;
         Ok(())
-    }
-}
-
-/// Per-member training data and loss of one minibatch.
-struct Batch<'a> {
-    x: &'a [f32],
-    y: &'a [f32],
-    din: usize,
-    dim: usize,
-}
-
-impl Batch<'_> {
-    fn gather(&self, idx: &[usize], xb: &mut Vec<f32>, yb: &mut Vec<f32>) {
-        xb.clear();
-        yb.clear();
-        for &i in idx {
-            xb.extend_from_slice(&self.x[i * self.din..(i + 1) * self.din]);
-            yb.extend_from_slice(&self.y[i * self.dim..(i + 1) * self.dim]);
-        }
     }
 }
 
@@ -500,7 +483,7 @@ struct FitScratch {
 /// Held-out `(nll per element, mse per element)` of one member.
 fn member_eval(
     m: &Member,
-    data: &Batch<'_>,
+    data: &FitRows,
     idx: &[usize],
 ) -> Result<(f64, f64), tandem_nn::NnError> {
     if idx.is_empty() {
@@ -511,7 +494,8 @@ fn member_eval(
     let mut g = GaussianOutput::default();
     let (mut nll, mut mse) = (0.0, 0.0);
     for chunk in idx.chunks(1024) {
-        data.gather(chunk, &mut xb, &mut yb);
+        data.gather_inputs(chunk, &mut xb);
+        data.gather_targets(chunk, &mut yb);
         let out = m.net.forward(&xb, chunk.len(), &mut ws)?;
         m.head.predict(out, chunk.len(), &mut g)?;
         let l = gaussian_nll(&g.mean, &g.log_var, &yb, None, None)?;
@@ -522,7 +506,7 @@ fn member_eval(
             .zip(&yb)
             .map(|(p, t)| f64::from((p - t) * (p - t)))
             .sum::<f64>()
-            / data.dim as f64;
+            / data.dout as f64;
     }
     Ok((nll / idx.len() as f64, mse / idx.len() as f64))
 }
@@ -539,13 +523,9 @@ impl DynamicsModel for ProbabilisticEnsemble {
     fn predict(&self, input: &ModelInput<'_>, rng: &mut Rng) -> Result<Prediction, ModelError> {
         let b = check_input(input, self.state_dim, self.action_dim, false)?;
         let (s, dim) = (self.state_dim, self.out_dim());
-        let x = standardized_inputs(
-            &[
-                (input.states, &self.in_state),
-                (input.actions, &self.in_action),
-            ],
-            b,
-        );
+        let mut x = Vec::new();
+        self.learned
+            .inputs_into(input.states, input.actions, b, &mut x);
         let mut next = input.states.to_owned();
         let mut var = Array2::zeros((b, s));
         let mut rewards = self.cfg.learn_reward.then(|| Array1::zeros(b));
@@ -566,8 +546,8 @@ impl DynamicsModel for ProbabilisticEnsemble {
                 for sc in &bufs.slots[..e] {
                     for r in 0..b {
                         for j in 0..dim {
-                            let mu = self.out_norm.invert(j, sc.mean[r * dim + j]);
-                            let sd = self.out_norm.std[j];
+                            let mu = self.learned.targets.invert(j, sc.mean[r * dim + j]);
+                            let sd = self.learned.targets.std[j];
                             let v = f64::from(sc.log_var[r * dim + j]).exp() * sd * sd;
                             mean_acc[[r, j]] += mu;
                             sq_acc[[r, j]] += mu * mu;
@@ -601,8 +581,8 @@ impl DynamicsModel for ProbabilisticEnsemble {
                 for sc in &bufs.slots[..e] {
                     for (q, &r) in sc.rows.iter().enumerate() {
                         for j in 0..dim {
-                            let mu = self.out_norm.invert(j, sc.mean[q * dim + j]);
-                            let sd = self.out_norm.std[j];
+                            let mu = self.learned.targets.invert(j, sc.mean[q * dim + j]);
+                            let sd = self.learned.targets.std[j];
                             let v = f64::from(sc.log_var[q * dim + j]).exp() * sd * sd;
                             if j < s {
                                 let noise: f64 = if self.cfg.sample {
@@ -629,191 +609,182 @@ impl DynamicsModel for ProbabilisticEnsemble {
     }
 
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
-        let (s, a) = (self.state_dim, self.action_dim);
-        data.validate(s, a)?;
-        let n = data.len();
-        let dim = self.out_dim();
-        let din = s + a;
-        let seeds = SeedStream::new(cfg.seed);
-        let mut split_rng = seeds.rng("holdout");
-        let (train, holdout) = holdout_indices(n, cfg.holdout_fraction, &mut split_rng);
-        let mut targets = Array2::zeros((n, dim));
-        for r in 0..n {
-            for j in 0..s {
-                targets[[r, j]] = data.next_states[[r, j]] - data.states[[r, j]];
-            }
-            if self.cfg.learn_reward {
-                targets[[r, s]] = data.rewards[r];
-            }
-        }
-        let in_state = Standardizer::fit(data.states.view(), &train);
-        let in_action = Standardizer::fit(data.actions.view(), &train);
-        let out_norm = Standardizer::fit(targets.view(), &train);
-        let x = standardized_inputs(
-            &[
-                (data.states.view(), &in_state),
-                (data.actions.view(), &in_action),
-            ],
-            n,
-        );
-        let y = standardized_inputs(&[(targets.view(), &out_norm)], n);
-        let batch_data = Batch {
-            x: &x,
-            y: &y,
-            din,
-            dim,
+        data.validate(self.state_dim, self.action_dim)?;
+        let spec = FitSpec {
+            second_input: data.actions.view(),
+            targets: Targets::StateChange {
+                reward: self.cfg.learn_reward,
+            },
+            filter: None,
         };
-
-        let mut members = self.members.clone();
-        let mut rngs: Vec<Rng> = (0..members.len())
-            .map(|k| seeds.rng(&format!("member-{k}")))
-            .collect();
-        let member_rows: Vec<Vec<usize>> = rngs
-            .iter_mut()
-            .map(|rng| match self.cfg.member_data {
-                MemberData::Bootstrap => (0..train.len())
-                    .map(|_| train[rng.random_range(0..train.len())])
-                    .collect(),
-                MemberData::Shuffle => train.clone(),
-            })
-            .collect();
-
-        let bs = cfg.batch_size.max(1);
-        let mut report = FitReport::default();
-        let mut hold_mse = vec![f64::NAN; members.len()];
-        let mut scratch: Vec<FitScratch> =
-            (0..members.len()).map(|_| FitScratch::default()).collect();
-        let learn_bounds = self.cfg.learn_log_var_bounds;
-        // One epoch of member `k`: (mean training NLL, held-out (NLL, MSE) when there is a
-        // holdout). Members share nothing, so they train side by side on rayon's threads with
-        // the numbers they would have one after the other.
-        let member_epoch =
-            |epoch: usize,
-             (((m, rng), rows), sc): (((&mut Member, &mut Rng), &Vec<usize>), &mut FitScratch)|
-             -> Result<(f64, Option<(f64, f64)>), ModelError> {
-                let mut order = rows.clone();
-                order.shuffle(rng);
-                let FitScratch {
-                    ws,
-                    xb,
-                    yb,
-                    g,
-                    d_mean,
-                    d_lv,
-                    d_out,
-                    d_bounds,
-                    grads,
-                } = sc;
-                grads.resize(m.net.num_params(), 0.0);
-                d_bounds.resize(2 * dim, 0.0);
-                let mut total = 0.0;
-                for (step, idx) in order.chunks(bs).enumerate() {
-                    let nb = idx.len();
-                    batch_data.gather(idx, xb, yb);
-                    let out = m
-                        .net
-                        .forward_train(xb, nb, ws, None)
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                    m.head
-                        .forward(out, nb, g)
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                    d_mean.resize(nb * dim, 0.0);
-                    d_lv.resize(nb * dim, 0.0);
-                    let nll = gaussian_nll(&g.mean, &g.log_var, yb, Some(d_mean), Some(d_lv))
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                    if !nll.is_finite() {
-                        return Err(ModelError::Diverged { epoch, step });
-                    }
-                    total += f64::from(nll) * nb as f64;
-                    // Sum over outputs, mean over the batch (gaussian_nll averages both).
-                    let scale = dim as f32;
-                    d_mean.iter_mut().for_each(|v| *v *= scale);
-                    d_lv.iter_mut().for_each(|v| *v *= scale);
-                    d_out.resize(nb * 2 * dim, 0.0);
-                    m.head
-                        .backward(g, d_mean, d_lv, d_out, Some(d_bounds))
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                    m.net
-                        .backward(ws, d_out, Some(grads), None)
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                    m.opt
-                        .step(m.net.params_mut(), grads)
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                    if learn_bounds {
-                        // PETS penalty 0.01 (Σ max − Σ min).
-                        for (j, db) in d_bounds.iter_mut().enumerate() {
-                            *db += if j < dim { -0.01 } else { 0.01 };
-                        }
-                        m.bounds_opt
-                            .step(m.head.bounds_mut(), d_bounds)
-                            .map_err(|e| nn_train(e, epoch, step))?;
-                    }
-                }
-                let train_nll = total / order.len().max(1) as f64;
-                if holdout.is_empty() {
-                    return Ok((train_nll, None));
-                }
-                let (nll, mse) =
-                    member_eval(m, &batch_data, &holdout).map_err(|e| nn_train(e, epoch, 0))?;
-                if !nll.is_finite() {
-                    return Err(ModelError::Diverged { epoch, step: 0 });
-                }
-                Ok((train_nll, Some((nll, mse))))
-            };
-        let parallel = members.len() > 1 && rayon::current_num_threads() > 1;
-        for epoch in 0..cfg.epochs {
-            let results: Vec<_> = if parallel {
-                members
-                    .par_iter_mut()
-                    .zip(rngs.par_iter_mut())
-                    .zip(member_rows.par_iter())
-                    .zip(scratch.par_iter_mut())
-                    .map(|item| member_epoch(epoch, item))
-                    .collect()
-            } else {
-                members
-                    .iter_mut()
-                    .zip(rngs.iter_mut())
-                    .zip(member_rows.iter())
-                    .zip(scratch.iter_mut())
-                    .map(|item| member_epoch(epoch, item))
-                    .collect()
-            };
-            // Summed in member order, as one member after the other would.
-            let mut epoch_train = 0.0;
-            let mut epoch_hold = 0.0;
-            for (k, r) in results.into_iter().enumerate() {
-                let (train_nll, hold) = r?;
-                epoch_train += train_nll;
-                if let Some((nll, mse)) = hold {
-                    epoch_hold += nll;
-                    hold_mse[k] = mse;
-                }
-            }
-            let kf = members.len() as f64;
-            report.train_loss.push(epoch_train / kf);
-            if !holdout.is_empty() {
-                report.holdout_loss.push(epoch_hold / kf);
-            }
-        }
-        // Elites: lowest held-out MSE (training MSE without a holdout).
-        if holdout.is_empty() {
-            for (k, m) in members.iter().enumerate() {
-                hold_mse[k] = member_eval(m, &batch_data, &train).map_err(nn_other)?.1;
-            }
-        }
-        let mut order: Vec<usize> = (0..members.len()).collect();
-        order.sort_by(|&i, &j| hold_mse[i].total_cmp(&hold_mse[j]));
-        order.truncate(self.cfg.elites);
-
-        self.members = members;
-        self.elites = order;
-        self.holdout_mse = hold_mse;
-        self.in_state = in_state;
-        self.in_action = in_action;
-        self.out_norm = out_norm;
+        let seeds = SeedStream::new(cfg.seed);
+        let ens = &self.cfg;
+        let (report, elites, holdout_mse) = self.learned.fit(
+            data,
+            cfg,
+            spec,
+            &mut seeds.rng("holdout"),
+            |members, rows, _| train_members(members, rows, cfg, ens, &seeds),
+        )?;
+        self.elites = elites;
+        self.holdout_mse = holdout_mse;
         Ok(report)
     }
+}
+
+/// Trains every member on `data` (its bootstrap or shuffle of the training rows drawn from its
+/// stream of `seeds`) for `cfg.epochs` epochs; returns the report (mean over members per epoch),
+/// the elites (lowest held-out MSE first; training MSE without a holdout) and each member's MSE.
+fn train_members(
+    members: &mut [Member],
+    data: &FitRows,
+    cfg: &FitConfig,
+    ens: &EnsembleConfig,
+    seeds: &SeedStream,
+) -> Result<(FitReport, Vec<usize>, Vec<f64>), ModelError> {
+    let dim = data.dout;
+    let mut rngs: Vec<Rng> = (0..members.len())
+        .map(|k| seeds.rng(&format!("member-{k}")))
+        .collect();
+    let member_rows: Vec<Vec<usize>> = rngs
+        .iter_mut()
+        .map(|rng| match ens.member_data {
+            MemberData::Bootstrap => (0..data.train.len())
+                .map(|_| data.train[rng.random_range(0..data.train.len())])
+                .collect(),
+            MemberData::Shuffle => data.train.clone(),
+        })
+        .collect();
+
+    let bs = cfg.batch_size.max(1);
+    let mut report = FitReport::default();
+    let mut hold_mse = vec![f64::NAN; members.len()];
+    let mut scratch: Vec<FitScratch> = (0..members.len()).map(|_| FitScratch::default()).collect();
+    let learn_bounds = ens.learn_log_var_bounds;
+    // One epoch of member `k`: (mean training NLL, held-out (NLL, MSE) when there is a
+    // holdout). Members share nothing, so they train side by side on rayon's threads with
+    // the numbers they would have one after the other.
+    let member_epoch =
+        |epoch: usize,
+         (((m, rng), rows), sc): (((&mut Member, &mut Rng), &Vec<usize>), &mut FitScratch)|
+         -> Result<(f64, Option<(f64, f64)>), ModelError> {
+            let mut order = rows.clone();
+            order.shuffle(rng);
+            let FitScratch {
+                ws,
+                xb,
+                yb,
+                g,
+                d_mean,
+                d_lv,
+                d_out,
+                d_bounds,
+                grads,
+            } = sc;
+            grads.resize(m.net.num_params(), 0.0);
+            d_bounds.resize(2 * dim, 0.0);
+            let mut total = 0.0;
+            for (step, idx) in order.chunks(bs).enumerate() {
+                let nb = idx.len();
+                data.gather_inputs(idx, xb);
+                data.gather_targets(idx, yb);
+                let out = m
+                    .net
+                    .forward_train(xb, nb, ws, None)
+                    .map_err(|e| nn_train(e, epoch, step))?;
+                m.head
+                    .forward(out, nb, g)
+                    .map_err(|e| nn_train(e, epoch, step))?;
+                d_mean.resize(nb * dim, 0.0);
+                d_lv.resize(nb * dim, 0.0);
+                let nll = gaussian_nll(&g.mean, &g.log_var, yb, Some(d_mean), Some(d_lv))
+                    .map_err(|e| nn_train(e, epoch, step))?;
+                if !nll.is_finite() {
+                    return Err(ModelError::Diverged { epoch, step });
+                }
+                total += f64::from(nll) * nb as f64;
+                // Sum over outputs, mean over the batch (gaussian_nll averages both).
+                let scale = dim as f32;
+                d_mean.iter_mut().for_each(|v| *v *= scale);
+                d_lv.iter_mut().for_each(|v| *v *= scale);
+                d_out.resize(nb * 2 * dim, 0.0);
+                m.head
+                    .backward(g, d_mean, d_lv, d_out, Some(d_bounds))
+                    .map_err(|e| nn_train(e, epoch, step))?;
+                m.net
+                    .backward(ws, d_out, Some(grads), None)
+                    .map_err(|e| nn_train(e, epoch, step))?;
+                m.opt
+                    .step(m.net.params_mut(), grads)
+                    .map_err(|e| nn_train(e, epoch, step))?;
+                if learn_bounds {
+                    // PETS penalty 0.01 (Σ max − Σ min).
+                    for (j, db) in d_bounds.iter_mut().enumerate() {
+                        *db += if j < dim { -0.01 } else { 0.01 };
+                    }
+                    m.bounds_opt
+                        .step(m.head.bounds_mut(), d_bounds)
+                        .map_err(|e| nn_train(e, epoch, step))?;
+                }
+            }
+            let train_nll = total / order.len().max(1) as f64;
+            if data.holdout.is_empty() {
+                return Ok((train_nll, None));
+            }
+            let (nll, mse) =
+                member_eval(m, data, &data.holdout).map_err(|e| nn_train(e, epoch, 0))?;
+            if !nll.is_finite() {
+                return Err(ModelError::Diverged { epoch, step: 0 });
+            }
+            Ok((train_nll, Some((nll, mse))))
+        };
+    let parallel = members.len() > 1 && rayon::current_num_threads() > 1;
+    for epoch in 0..cfg.epochs {
+        let results: Vec<_> = if parallel {
+            members
+                .par_iter_mut()
+                .zip(rngs.par_iter_mut())
+                .zip(member_rows.par_iter())
+                .zip(scratch.par_iter_mut())
+                .map(|item| member_epoch(epoch, item))
+                .collect()
+        } else {
+            members
+                .iter_mut()
+                .zip(rngs.iter_mut())
+                .zip(member_rows.iter())
+                .zip(scratch.iter_mut())
+                .map(|item| member_epoch(epoch, item))
+                .collect()
+        };
+        // Summed in member order, as one member after the other would.
+        let mut epoch_train = 0.0;
+        let mut epoch_hold = 0.0;
+        for (k, r) in results.into_iter().enumerate() {
+            let (train_nll, hold) = r?;
+            epoch_train += train_nll;
+            if let Some((nll, mse)) = hold {
+                epoch_hold += nll;
+                hold_mse[k] = mse;
+            }
+        }
+        let kf = members.len() as f64;
+        report.train_loss.push(epoch_train / kf);
+        if !data.holdout.is_empty() {
+            report.holdout_loss.push(epoch_hold / kf);
+        }
+    }
+    // Elites: lowest held-out MSE (training MSE without a holdout).
+    if data.holdout.is_empty() {
+        for (k, m) in members.iter().enumerate() {
+            hold_mse[k] = member_eval(m, data, &data.train).map_err(nn_other)?.1;
+        }
+    }
+    let mut order: Vec<usize> = (0..members.len()).collect();
+    order.sort_by(|&i, &j| hold_mse[i].total_cmp(&hold_mse[j]));
+    order.truncate(ens.elites);
+
+    Ok((report, order, hold_mse))
 }
 
 #[cfg(test)]
