@@ -6,13 +6,12 @@ use ndarray::{Array1, Array2};
 use rand::seq::SliceRandom;
 use rand::Rng as _;
 use rand_distr::{Distribution, StandardNormal};
-use rayon::prelude::*;
 use std::sync::Mutex;
 use tandem_core::seeding::SeedStream;
 use tandem_core::Rng;
 use tandem_nn::{
-    gaussian_nll, Activation, Checkpoint, Checkpointable, GaussianHead, GaussianOutput, Mlp,
-    MlpConfig, MlpWorkspace, NnError, RowBlock, RowDealer,
+    gaussian_nll, map_side_by_side, Activation, Checkpoint, Checkpointable, GaussianHead,
+    GaussianOutput, Mlp, MlpConfig, MlpWorkspace, NnError, RowBlock, RowDealer,
 };
 
 use crate::data::check_input;
@@ -466,6 +465,18 @@ impl Checkpointable for ProbabilisticEnsemble {
     }
 }
 
+/// One member's epoch: its mean training NLL and, with a holdout, its held-out (NLL, MSE).
+type EpochLosses = (f64, Option<(f64, f64)>);
+
+/// One member in a fit: its training rows (a bootstrap or all of them), its random stream and
+/// its buffers.
+struct MemberFit<'a> {
+    member: &'a mut Member,
+    rng: Rng,
+    rows: Vec<usize>,
+    scratch: FitScratch,
+}
+
 /// Reusable buffers of one member's training steps.
 #[derive(Default)]
 struct FitScratch {
@@ -643,120 +654,111 @@ fn train_members(
     seeds: &SeedStream,
 ) -> Result<(FitReport, Vec<usize>, Vec<f64>), ModelError> {
     let dim = data.dout;
-    let mut rngs: Vec<Rng> = (0..members.len())
-        .map(|k| seeds.rng(&format!("member-{k}")))
-        .collect();
-    let member_rows: Vec<Vec<usize>> = rngs
+    let mut fits: Vec<MemberFit<'_>> = members
         .iter_mut()
-        .map(|rng| match ens.member_data {
-            MemberData::Bootstrap => (0..data.train.len())
-                .map(|_| data.train[rng.random_range(0..data.train.len())])
-                .collect(),
-            MemberData::Shuffle => data.train.clone(),
+        .enumerate()
+        .map(|(k, member)| {
+            let mut rng = seeds.rng(&format!("member-{k}"));
+            let rows = match ens.member_data {
+                MemberData::Bootstrap => (0..data.train.len())
+                    .map(|_| data.train[rng.random_range(0..data.train.len())])
+                    .collect(),
+                MemberData::Shuffle => data.train.clone(),
+            };
+            MemberFit {
+                member,
+                rng,
+                rows,
+                scratch: FitScratch::default(),
+            }
         })
         .collect();
 
     let bs = cfg.batch_size.max(1);
     let mut report = FitReport::default();
-    let mut hold_mse = vec![f64::NAN; members.len()];
-    let mut scratch: Vec<FitScratch> = (0..members.len()).map(|_| FitScratch::default()).collect();
+    let mut hold_mse = vec![f64::NAN; fits.len()];
     let learn_bounds = ens.learn_log_var_bounds;
     // One epoch of member `k`: (mean training NLL, held-out (NLL, MSE) when there is a
     // holdout). Members share nothing, so they train side by side on rayon's threads with
     // the numbers they would have one after the other.
-    let member_epoch =
-        |epoch: usize,
-         (((m, rng), rows), sc): (((&mut Member, &mut Rng), &Vec<usize>), &mut FitScratch)|
-         -> Result<(f64, Option<(f64, f64)>), ModelError> {
-            let mut order = rows.clone();
-            order.shuffle(rng);
-            let FitScratch {
-                ws,
-                xb,
-                yb,
-                g,
-                d_mean,
-                d_lv,
-                d_out,
-                d_bounds,
-                grads,
-            } = sc;
-            grads.resize(m.net.num_params(), 0.0);
-            d_bounds.resize(2 * dim, 0.0);
-            let mut total = 0.0;
-            for (step, idx) in order.chunks(bs).enumerate() {
-                let nb = idx.len();
-                data.gather_inputs(idx, xb);
-                data.gather_targets(idx, yb);
-                let out = m
-                    .net
-                    .forward_train(xb, nb, ws, None)
-                    .map_err(|e| nn_train(e, epoch, step))?;
-                m.head
-                    .forward(out, nb, g)
-                    .map_err(|e| nn_train(e, epoch, step))?;
-                d_mean.resize(nb * dim, 0.0);
-                d_lv.resize(nb * dim, 0.0);
-                let nll = gaussian_nll(&g.mean, &g.log_var, yb, Some(d_mean), Some(d_lv))
-                    .map_err(|e| nn_train(e, epoch, step))?;
-                if !nll.is_finite() {
-                    return Err(ModelError::Diverged { epoch, step });
-                }
-                total += f64::from(nll) * nb as f64;
-                // Sum over outputs, mean over the batch (gaussian_nll averages both).
-                let scale = dim as f32;
-                d_mean.iter_mut().for_each(|v| *v *= scale);
-                d_lv.iter_mut().for_each(|v| *v *= scale);
-                d_out.resize(nb * 2 * dim, 0.0);
-                m.head
-                    .backward(g, d_mean, d_lv, d_out, Some(d_bounds))
-                    .map_err(|e| nn_train(e, epoch, step))?;
-                m.net
-                    .backward(ws, d_out, Some(grads), None)
-                    .map_err(|e| nn_train(e, epoch, step))?;
-                m.opt
-                    .step(m.net.params_mut(), grads)
-                    .map_err(|e| nn_train(e, epoch, step))?;
-                if learn_bounds {
-                    // PETS penalty 0.01 (Σ max − Σ min).
-                    for (j, db) in d_bounds.iter_mut().enumerate() {
-                        *db += if j < dim { -0.01 } else { 0.01 };
-                    }
-                    m.bounds_opt
-                        .step(m.head.bounds_mut(), d_bounds)
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                }
-            }
-            let train_nll = total / order.len().max(1) as f64;
-            if data.holdout.is_empty() {
-                return Ok((train_nll, None));
-            }
-            let (nll, mse) =
-                member_eval(m, data, &data.holdout).map_err(|e| nn_train(e, epoch, 0))?;
+    let member_epoch = |epoch: usize, fit: &mut MemberFit| -> Result<EpochLosses, ModelError> {
+        let MemberFit {
+            member: m,
+            rng,
+            rows,
+            scratch: sc,
+        } = fit;
+        let mut order = rows.clone();
+        order.shuffle(rng);
+        let FitScratch {
+            ws,
+            xb,
+            yb,
+            g,
+            d_mean,
+            d_lv,
+            d_out,
+            d_bounds,
+            grads,
+        } = sc;
+        grads.resize(m.net.num_params(), 0.0);
+        d_bounds.resize(2 * dim, 0.0);
+        let mut total = 0.0;
+        for (step, idx) in order.chunks(bs).enumerate() {
+            let nb = idx.len();
+            data.gather_inputs(idx, xb);
+            data.gather_targets(idx, yb);
+            let out = m
+                .net
+                .forward_train(xb, nb, ws, None)
+                .map_err(|e| nn_train(e, epoch, step))?;
+            m.head
+                .forward(out, nb, g)
+                .map_err(|e| nn_train(e, epoch, step))?;
+            d_mean.resize(nb * dim, 0.0);
+            d_lv.resize(nb * dim, 0.0);
+            let nll = gaussian_nll(&g.mean, &g.log_var, yb, Some(d_mean), Some(d_lv))
+                .map_err(|e| nn_train(e, epoch, step))?;
             if !nll.is_finite() {
-                return Err(ModelError::Diverged { epoch, step: 0 });
+                return Err(ModelError::Diverged { epoch, step });
             }
-            Ok((train_nll, Some((nll, mse))))
-        };
-    let parallel = members.len() > 1 && rayon::current_num_threads() > 1;
+            total += f64::from(nll) * nb as f64;
+            // Sum over outputs, mean over the batch (gaussian_nll averages both).
+            let scale = dim as f32;
+            d_mean.iter_mut().for_each(|v| *v *= scale);
+            d_lv.iter_mut().for_each(|v| *v *= scale);
+            d_out.resize(nb * 2 * dim, 0.0);
+            m.head
+                .backward(g, d_mean, d_lv, d_out, Some(d_bounds))
+                .map_err(|e| nn_train(e, epoch, step))?;
+            m.net
+                .backward(ws, d_out, Some(grads), None)
+                .map_err(|e| nn_train(e, epoch, step))?;
+            m.opt
+                .step(m.net.params_mut(), grads)
+                .map_err(|e| nn_train(e, epoch, step))?;
+            if learn_bounds {
+                // PETS penalty 0.01 (Σ max − Σ min).
+                for (j, db) in d_bounds.iter_mut().enumerate() {
+                    *db += if j < dim { -0.01 } else { 0.01 };
+                }
+                m.bounds_opt
+                    .step(m.head.bounds_mut(), d_bounds)
+                    .map_err(|e| nn_train(e, epoch, step))?;
+            }
+        }
+        let train_nll = total / order.len().max(1) as f64;
+        if data.holdout.is_empty() {
+            return Ok((train_nll, None));
+        }
+        let (nll, mse) = member_eval(m, data, &data.holdout).map_err(|e| nn_train(e, epoch, 0))?;
+        if !nll.is_finite() {
+            return Err(ModelError::Diverged { epoch, step: 0 });
+        }
+        Ok((train_nll, Some((nll, mse))))
+    };
     for epoch in 0..cfg.epochs {
-        let results: Vec<_> = if parallel {
-            members
-                .par_iter_mut()
-                .zip(rngs.par_iter_mut())
-                .zip(member_rows.par_iter())
-                .zip(scratch.par_iter_mut())
-                .map(|item| member_epoch(epoch, item))
-                .collect()
-        } else {
-            members
-                .iter_mut()
-                .zip(rngs.iter_mut())
-                .zip(member_rows.iter())
-                .zip(scratch.iter_mut())
-                .map(|item| member_epoch(epoch, item))
-                .collect()
-        };
+        let results = map_side_by_side(&mut fits, |fit| member_epoch(epoch, fit));
         // Summed in member order, as one member after the other would.
         let mut epoch_train = 0.0;
         let mut epoch_hold = 0.0;
@@ -768,7 +770,7 @@ fn train_members(
                 hold_mse[k] = mse;
             }
         }
-        let kf = members.len() as f64;
+        let kf = fits.len() as f64;
         report.train_loss.push(epoch_train / kf);
         if !data.holdout.is_empty() {
             report.holdout_loss.push(epoch_hold / kf);

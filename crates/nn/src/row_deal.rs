@@ -1,6 +1,8 @@
-//! [`RowDealer`]: the rows of several batched passes ("slots", e.g. an ensemble's members, each
-//! on its own rows) dealt in equal blocks to threads and run side by side, with the numbers of
-//! one thread.
+//! Work dealt to threads with the numbers of one thread: [`RowDealer`], the rows of several
+//! batched passes ("slots", e.g. an ensemble's members, each on its own rows) in equal blocks;
+//! [`map_side_by_side`], independent items (an ensemble's members in training) one per task.
+
+use rayon::prelude::*;
 
 /// Work (multiply-adds over all slots' rows) below which the slots run one after the other on
 /// one thread: handing rows to another thread costs a few microseconds.
@@ -143,6 +145,20 @@ impl<B: Default + Send> RowDealer<B> {
     }
 }
 
+/// `f` on every item, side by side on rayon's threads when there are two or more of both, else one
+/// after the other; the results in item order. Items that share nothing get the numbers they
+/// would get one after the other.
+pub fn map_side_by_side<T: Send, R: Send>(
+    items: &mut [T],
+    f: impl Fn(&mut T) -> R + Sync + Send,
+) -> Vec<R> {
+    if items.len() > 1 && rayon::current_num_threads() > 1 {
+        items.par_iter_mut().map(f).collect()
+    } else {
+        items.iter_mut().map(f).collect()
+    }
+}
+
 /// [`RowDealer::run`] on `blocks` cut into groups of `group_lens[g]` consecutive blocks.
 fn run_groups<B: Send, E: Send>(
     blocks: &mut [RowBlock<B>],
@@ -273,6 +289,21 @@ mod tests {
                 };
                 assert_eq!(dealer.run(&fail), Err(2));
             });
+        }
+    }
+
+    #[test]
+    fn items_side_by_side_come_back_in_order() {
+        for threads in [1, 2, 3] {
+            let mut items: Vec<usize> = (0..7).collect();
+            let out = crate::on_threads(threads, || {
+                map_side_by_side(&mut items, |i| {
+                    *i += 10;
+                    *i * 2
+                })
+            });
+            assert_eq!(out, (10..17).map(|i| i * 2).collect::<Vec<_>>());
+            assert_eq!(items, (10..17).collect::<Vec<_>>());
         }
     }
 }
