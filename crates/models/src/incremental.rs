@@ -248,13 +248,7 @@ struct IncrementalObjective {
 }
 
 impl Objective for IncrementalObjective {
-    fn loss(
-        &self,
-        rows: &FitRows,
-        idx: &[usize],
-        out: &[f32],
-        mut d_out: Option<&mut [f32]>,
-    ) -> f64 {
+    fn loss(&self, fit: &FitRows, idx: &[usize], out: &[f32], mut grad: Option<&mut [f32]>) -> f64 {
         let (s, a) = (self.s, self.a);
         let n_out = if self.diagonal { s } else { s * a };
         let n = idx.len() as f32;
@@ -268,9 +262,9 @@ impl Objective for IncrementalObjective {
                 } else {
                     (0..a).map(|j| o[i * a + j] * u[j]).sum()
                 };
-                let e = pred - rows.y[row * s + i];
+                let e = pred - fit.y[row * s + i];
                 total += f64::from(e * e);
-                if let Some(g) = d_out.as_deref_mut() {
+                if let Some(g) = grad.as_deref_mut() {
                     let g = &mut g[k * n_out..(k + 1) * n_out];
                     if self.diagonal {
                         g[i] = 2.0 * e * u[i] / n;

@@ -190,25 +190,19 @@ struct MlpObjective {
 }
 
 impl Objective for MlpObjective {
-    fn loss(
-        &self,
-        rows: &FitRows,
-        idx: &[usize],
-        out: &[f32],
-        mut d_out: Option<&mut [f32]>,
-    ) -> f64 {
+    fn loss(&self, fit: &FitRows, idx: &[usize], out: &[f32], mut grad: Option<&mut [f32]>) -> f64 {
         let s = self.s;
         let dout = s + usize::from(self.reward) + usize::from(self.term);
         let n = idx.len() as f32;
         let mut total = 0.0f64;
         for (k, &i) in idx.iter().enumerate() {
             let o = &out[k * dout..(k + 1) * dout];
-            let y = rows.targets(i);
+            let y = fit.targets(i);
             let regress = s + usize::from(self.reward);
             for j in 0..regress {
                 let e = o[j] - y[j];
                 total += f64::from(e * e);
-                if let Some(d) = d_out.as_deref_mut() {
+                if let Some(d) = grad.as_deref_mut() {
                     d[k * dout + j] = 2.0 * e / n;
                 }
             }
@@ -220,13 +214,13 @@ impl Objective for MlpObjective {
             let z: Vec<f32> = (0..idx.len()).map(|k| out[k * dout + dout - 1]).collect();
             let t: Vec<f32> = idx.iter().map(|&i| self.done[i]).collect();
             let mut g = vec![0.0; idx.len()];
-            let grad = d_out.is_some().then_some(g.as_mut_slice());
-            match bce_with_logits(&z, &t, grad) {
+            let bce_grad = grad.is_some().then_some(g.as_mut_slice());
+            match bce_with_logits(&z, &t, bce_grad) {
                 Ok(l) => total += f64::from(l) * idx.len() as f64,
                 // A non-finite logit: report a non-finite loss, as the sum above would.
                 Err(_) => total = f64::NAN,
             }
-            if let Some(d) = d_out {
+            if let Some(d) = grad {
                 for (k, gk) in g.iter().enumerate() {
                     d[k * dout + dout - 1] = *gk;
                 }

@@ -163,21 +163,15 @@ impl<P: Plant> ResidualModel<P> {
 struct SquaredError;
 
 impl Objective for SquaredError {
-    fn loss(
-        &self,
-        rows: &FitRows,
-        idx: &[usize],
-        out: &[f32],
-        mut d_out: Option<&mut [f32]>,
-    ) -> f64 {
-        let d = rows.dout;
+    fn loss(&self, fit: &FitRows, idx: &[usize], out: &[f32], mut grad: Option<&mut [f32]>) -> f64 {
+        let d = fit.dout;
         let n = idx.len() as f32;
         let mut total = 0.0f64;
         for (k, &i) in idx.iter().enumerate() {
             for j in 0..d {
-                let e = out[k * d + j] - rows.y[i * d + j];
+                let e = out[k * d + j] - fit.y[i * d + j];
                 total += f64::from(e * e);
-                if let Some(g) = d_out.as_deref_mut() {
+                if let Some(g) = grad.as_deref_mut() {
                     g[k * d + j] = 2.0 * e / n;
                 }
             }

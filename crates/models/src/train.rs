@@ -326,9 +326,9 @@ impl tandem_nn::Checkpointable for Network {
 
 /// A network's loss over rows of a fit.
 pub(crate) trait Objective {
-    /// Mean loss over rows `idx` of `rows` for network outputs `out`; writes `dL/dout` when
-    /// asked.
-    fn loss(&self, rows: &FitRows, idx: &[usize], out: &[f32], d_out: Option<&mut [f32]>) -> f64;
+    /// Mean loss over rows `idx` of `fit` for network outputs `out`; writes `dL/dout` into `grad`
+    /// when given.
+    fn loss(&self, fit: &FitRows, idx: &[usize], out: &[f32], grad: Option<&mut [f32]>) -> f64;
 }
 
 /// Scratch buffers of a training loop.
