@@ -6,20 +6,21 @@ use ndarray::{Array1, Array2};
 use rand::seq::SliceRandom;
 use rand::Rng as _;
 use rand_distr::{Distribution, StandardNormal};
-use rayon::prelude::*;
 use std::sync::Mutex;
 use tandem_core::seeding::SeedStream;
 use tandem_core::Rng;
 use tandem_nn::{
-    gaussian_nll, Activation, Checkpoint, Checkpointable, GaussianHead, GaussianOutput, Mlp,
-    MlpConfig, MlpWorkspace, NnError,
+    gaussian_nll, map_side_by_side, Activation, Checkpoint, Checkpointable, GaussianHead,
+    GaussianOutput, Mlp, MlpConfig, MlpWorkspace, NnError, RowBlock, RowDealer,
 };
 
-use crate::data::{check_input, holdout_indices};
+use crate::data::check_input;
 use crate::model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
-use crate::train::{nn_other, nn_train, standardized_inputs, Opt, OptimizerConfig, Standardizer};
+use crate::train::{
+    nn_other, nn_train, FitRows, FitSpec, Opt, OptimizerConfig, Standardized, Standardizer, Targets,
+};
 
 /// How a batch is propagated through the ensemble (PETS, Sec. 4.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -148,12 +149,10 @@ pub struct ProbabilisticEnsemble {
     cfg: EnsembleConfig,
     state_dim: usize,
     action_dim: usize,
-    members: Vec<Member>,
+    /// The members; their targets `[Δs, r]`.
+    learned: Standardized<Vec<Member>>,
     elites: Vec<usize>,
     holdout_mse: Vec<f64>,
-    in_state: Standardizer,
-    in_action: Standardizer,
-    out_norm: Standardizer,
     propagation: Propagation,
     member_offset: usize,
     scratch: Scratch,
@@ -204,15 +203,12 @@ impl ProbabilisticEnsemble {
         Ok(Self {
             elites: (0..cfg.elites).collect(),
             holdout_mse: vec![f64::NAN; cfg.members],
-            in_state: Standardizer::identity(state_dim),
-            in_action: Standardizer::identity(action_dim),
-            out_norm: Standardizer::identity(dim),
             propagation: cfg.propagation,
             member_offset: 0,
             scratch: Scratch::default(),
             state_dim,
             action_dim,
-            members,
+            learned: Standardized::new(members, [state_dim, action_dim], dim),
             cfg,
         })
     }
@@ -254,7 +250,7 @@ impl ProbabilisticEnsemble {
 
     /// The network of member `k` (for checkpoints and inspection).
     pub fn member_network(&self, k: usize) -> Option<&Mlp> {
-        self.members.get(k).map(|m| &m.net)
+        self.learned.trained.get(k).map(|m| &m.net)
     }
 
     /// Width of the Gaussian output (`S`, plus one with the reward).
@@ -266,7 +262,7 @@ impl ProbabilisticEnsemble {
     /// slot `i` (member `self.elites[i]`) takes the rows `assign` gives it (all rows when `assign`
     /// is `None`), its standardized means and log-variances left in `bufs.slots[i]` with its row
     /// indices. When the work is large enough to pay for it, the slots' rows are dealt in equal
-    /// blocks to as many groups as rayon's pool has threads ([`deal_rows`]), run side by side
+    /// blocks to as many groups as rayon's pool has threads ([`RowDealer`]), run side by side
     /// (one elite per thread left one of two threads idle a third of the pass with five elites).
     /// A slot's rows are cut only where each block gets exactly the numbers of the whole slot's
     /// pass ([`Mlp::rows_run_apart`]), and every block has its own buffers, so the numbers do not
@@ -281,11 +277,7 @@ impl ProbabilisticEnsemble {
         let din = self.state_dim + self.action_dim;
         let dim = self.out_dim();
         let e = self.elites.len();
-        let EliteScratch {
-            slots,
-            blocks,
-            group_lens,
-        } = bufs;
+        let EliteScratch { slots, dealer } = bufs;
         slots.resize_with(e, SlotScratch::default);
         for (i, sc) in slots.iter_mut().enumerate() {
             sc.rows.clear();
@@ -300,35 +292,30 @@ impl ProbabilisticEnsemble {
                 }
             }
         }
-        let macs = b * self.members[0].net.num_params();
-        let threads = if macs >= PARALLEL_MIN_MACS {
-            rayon::current_num_threads()
-        } else {
-            1
-        };
-        let net = |i: usize| &self.members[self.elites[i]].net;
-        let dealt = deal_rows(
+        let threads =
+            RowDealer::<BlockScratch>::threads_for(b * self.learned.trained[0].net.num_params());
+        let net = |i: usize| &self.learned.trained[self.elites[i]].net;
+        dealer.deal(
             e,
             |i| slots[i].rows.len(),
             threads,
             |i, whole, part| net(i).rows_run_apart(whole, part),
-            blocks,
-            group_lens,
         );
-        let blocks = &mut blocks[..dealt];
-        let run = |bl: &mut BlockScratch| -> tandem_nn::Result<()> {
-            let m = &self.members[self.elites[bl.slot]];
+        let run = |bl: &mut RowBlock<BlockScratch>| -> tandem_nn::Result<()> {
+            let m = &self.learned.trained[self.elites[bl.slot]];
             let input = match assign {
                 None => x,
                 Some(_) => &slots[bl.slot].x[..],
             };
             let rows = bl.end - bl.start;
+            let bufs = &mut bl.bufs;
             let out = m
                 .net
-                .forward(&input[bl.start * din..bl.end * din], rows, &mut bl.ws)?;
-            m.head.predict(out, rows, &mut bl.g)
+                .forward(&input[bl.start * din..bl.end * din], rows, &mut bufs.ws)?;
+            m.head.predict(out, rows, &mut bufs.g)
         };
-        run_groups(blocks, group_lens, &run).map_err(nn_other)?;
+        dealer.run(&run).map_err(nn_other)?;
+        let blocks = dealer.blocks_mut();
         // Each slot's outputs in row order (the blocks are in slot and row order); a slot in one
         // block takes that block's buffers as they are.
         let mut k = 0;
@@ -339,112 +326,21 @@ impl ProbabilisticEnsemble {
             }
             match &mut blocks[first..k] {
                 [one] => {
-                    std::mem::swap(&mut sc.mean, &mut one.g.mean);
-                    std::mem::swap(&mut sc.log_var, &mut one.g.log_var);
+                    std::mem::swap(&mut sc.mean, &mut one.bufs.g.mean);
+                    std::mem::swap(&mut sc.log_var, &mut one.bufs.g.log_var);
                 }
                 several => {
                     sc.mean.clear();
                     sc.log_var.clear();
                     for bl in several {
-                        sc.mean.extend_from_slice(&bl.g.mean);
-                        sc.log_var.extend_from_slice(&bl.g.log_var);
+                        sc.mean.extend_from_slice(&bl.bufs.g.mean);
+                        sc.log_var.extend_from_slice(&bl.bufs.g.log_var);
                     }
                 }
             }
             debug_assert_eq!(sc.mean.len(), sc.rows.len() * dim);
         }
         Ok(())
-    }
-}
-
-/// Work (multiply-adds over all elites' rows) below which the elites run one after the other on
-/// one thread: handing rows to another thread costs a few microseconds.
-const PARALLEL_MIN_MACS: usize = 1 << 20;
-
-/// Rows per vector of the widest kernels (16 `f32` lanes): a slot's rows are cut at multiples of
-/// it, so no block adds a half-empty vector.
-const ROW_ALIGN: usize = 16;
-
-/// Deals the rows of `slots` elite slots (`count(i)` rows for slot `i`) to `threads` groups of
-/// about equal rows, in slot and row order: the blocks `(slot, start, end)` go to the front of
-/// `blocks` (its storage reused; the number dealt is returned) and the number of blocks of each
-/// group to `group_lens`. A slot's rows are cut only at multiples of [`ROW_ALIGN`] and only where
-/// `apart(slot, whole, part)` holds for both resulting blocks; otherwise the group boundary moves
-/// to the nearer end of that slot. Empty slots get no block.
-fn deal_rows(
-    slots: usize,
-    count: impl Fn(usize) -> usize,
-    threads: usize,
-    apart: impl Fn(usize, usize, usize) -> bool,
-    blocks: &mut Vec<BlockScratch>,
-    group_lens: &mut Vec<usize>,
-) -> usize {
-    fn push(blocks: &mut Vec<BlockScratch>, k: usize, slot: usize, start: usize, end: usize) {
-        if blocks.len() == k {
-            blocks.push(BlockScratch::default());
-        }
-        let bl = &mut blocks[k];
-        (bl.slot, bl.start, bl.end) = (slot, start, end);
-    }
-    let total: usize = (0..slots).map(&count).sum();
-    let threads = threads.max(1);
-    group_lens.clear();
-    let (mut dealt, mut group, mut done, mut in_group) = (0, 0, 0, 0);
-    for slot in 0..slots {
-        let n = count(slot);
-        let mut start = 0;
-        while start < n {
-            let rest = n - start;
-            // Rows dealt when this group should end.
-            let boundary = total * (group + 1) / threads;
-            let last_group = group + 1 == threads;
-            let (end, close) = if last_group || done + rest <= boundary {
-                (n, !last_group && done + rest == boundary)
-            } else {
-                let room = boundary.saturating_sub(done);
-                let cut = (room + ROW_ALIGN / 2) / ROW_ALIGN * ROW_ALIGN;
-                if cut > 0 && cut < rest && apart(slot, n, cut) && apart(slot, n, rest - cut) {
-                    (start + cut, true)
-                } else if in_group == 0 || 2 * room >= rest {
-                    (n, true)
-                } else {
-                    // The whole rest goes to the next group.
-                    group_lens.push(in_group);
-                    (group, in_group) = (group + 1, 0);
-                    continue;
-                }
-            };
-            push(blocks, dealt, slot, start, end);
-            dealt += 1;
-            (done, in_group, start) = (done + end - start, in_group + 1, end);
-            if close {
-                group_lens.push(in_group);
-                (group, in_group) = (group + 1, 0);
-            }
-        }
-    }
-    if in_group > 0 {
-        group_lens.push(in_group);
-    }
-    dealt
-}
-
-/// Runs `f` on every block, the groups (`group_lens[g]` consecutive blocks each) side by side
-/// ([`tandem_nn::join`]), each group's blocks in order on one thread. The first error is returned.
-fn run_groups<E: Send>(
-    blocks: &mut [BlockScratch],
-    group_lens: &[usize],
-    f: &(impl Fn(&mut BlockScratch) -> Result<(), E> + Sync),
-) -> Result<(), E> {
-    match group_lens {
-        [] => Ok(()),
-        [_] => blocks.iter_mut().try_for_each(f),
-        _ => {
-            let (left, right) = group_lens.split_at(group_lens.len() / 2);
-            let (bl, br) = blocks.split_at_mut(left.iter().sum());
-            let (a, b) = tandem_nn::join(|| run_groups(bl, left, f), || run_groups(br, right, f));
-            a.and(b)
-        }
     }
 }
 
@@ -458,13 +354,10 @@ struct SlotScratch {
     log_var: Vec<f32>,
 }
 
-/// Reusable buffers of one block of a slot's rows (`start..end` of the slot's rows): the
-/// network's workspace and the Gaussian outputs.
+/// Reusable buffers of one block of a slot's rows: the network's workspace and the Gaussian
+/// outputs.
 #[derive(Debug, Default)]
 struct BlockScratch {
-    slot: usize,
-    start: usize,
-    end: usize,
     ws: MlpWorkspace,
     g: GaussianOutput,
 }
@@ -473,8 +366,7 @@ struct BlockScratch {
 #[derive(Debug, Default)]
 struct EliteScratch {
     slots: Vec<SlotScratch>,
-    blocks: Vec<BlockScratch>,
-    group_lens: Vec<usize>,
+    dealer: RowDealer<BlockScratch>,
 }
 
 /// The elites' inference buffers behind a mutex, so that `predict` through `&self` allocates only
@@ -508,7 +400,7 @@ struct Learned {
 /// run that saves and loads its ensemble predicts and fits on exactly as one that did not.
 impl Checkpointable for ProbabilisticEnsemble {
     fn save_to(&self, prefix: &str, ckpt: &mut Checkpoint) -> tandem_nn::Result<()> {
-        for (k, m) in self.members.iter().enumerate() {
+        for (k, m) in self.learned.trained.iter().enumerate() {
             let p = format!("{prefix}.member{k}");
             m.net.save_to(&format!("{p}.net"), ckpt)?;
             m.opt.save_to(&format!("{p}.opt"), ckpt)?;
@@ -520,9 +412,9 @@ impl Checkpointable for ProbabilisticEnsemble {
             elites: self.elites.clone(),
             holdout_mse: self.holdout_mse.clone(),
             norms: (
-                self.in_state.clone(),
-                self.in_action.clone(),
-                self.out_norm.clone(),
+                self.learned.inputs[0].clone(),
+                self.learned.inputs[1].clone(),
+                self.learned.targets.clone(),
             ),
             propagation: self.propagation,
             member_offset: self.member_offset,
@@ -535,7 +427,7 @@ impl Checkpointable for ProbabilisticEnsemble {
         let l: Learned = ckpt.get_json(&name)?;
         let (s, a, d) = (self.state_dim, self.action_dim, self.out_dim());
         let widths = (l.norms.0.dim(), l.norms.1.dim(), l.norms.2.dim());
-        let k = self.members.len();
+        let k = self.learned.trained.len();
         if widths != (s, a, d)
             || l.holdout_mse.len() != k
             || l.elites.len() != self.cfg.elites
@@ -550,7 +442,7 @@ impl Checkpointable for ProbabilisticEnsemble {
                 self.cfg.elites
             )));
         }
-        let mut members = self.members.clone();
+        let mut members = self.learned.trained.clone();
         for (k, m) in members.iter_mut().enumerate() {
             let p = format!("{prefix}.member{k}");
             m.net.load_from(&format!("{p}.net"), ckpt)?;
@@ -559,8 +451,12 @@ impl Checkpointable for ProbabilisticEnsemble {
             let n = m.head.bounds().len();
             ckpt.read_f32_into(&format!("{p}.bounds"), &[n], m.head.bounds_mut())?;
         }
-        self.members = members;
-        (self.in_state, self.in_action, self.out_norm) = l.norms;
+        let (in_state, in_action, out_norm) = l.norms;
+        self.learned = Standardized {
+            trained: members,
+            inputs: [in_state, in_action],
+            targets: out_norm,
+        };
         self.elites = l.elites;
         self.holdout_mse = l.holdout_mse;
         self.propagation = l.propagation;
@@ -569,23 +465,16 @@ impl Checkpointable for ProbabilisticEnsemble {
     }
 }
 
-/// Per-member training data and loss of one minibatch.
-struct Batch<'a> {
-    x: &'a [f32],
-    y: &'a [f32],
-    din: usize,
-    dim: usize,
-}
+/// One member's epoch: its mean training NLL and, with a holdout, its held-out (NLL, MSE).
+type EpochLosses = (f64, Option<(f64, f64)>);
 
-impl Batch<'_> {
-    fn gather(&self, idx: &[usize], xb: &mut Vec<f32>, yb: &mut Vec<f32>) {
-        xb.clear();
-        yb.clear();
-        for &i in idx {
-            xb.extend_from_slice(&self.x[i * self.din..(i + 1) * self.din]);
-            yb.extend_from_slice(&self.y[i * self.dim..(i + 1) * self.dim]);
-        }
-    }
+/// One member in a fit: its training rows (a bootstrap or all of them), its random stream and
+/// its buffers.
+struct MemberFit<'a> {
+    member: &'a mut Member,
+    rng: Rng,
+    rows: Vec<usize>,
+    scratch: FitScratch,
 }
 
 /// Reusable buffers of one member's training steps.
@@ -605,7 +494,7 @@ struct FitScratch {
 /// Held-out `(nll per element, mse per element)` of one member.
 fn member_eval(
     m: &Member,
-    data: &Batch<'_>,
+    data: &FitRows,
     idx: &[usize],
 ) -> Result<(f64, f64), tandem_nn::NnError> {
     if idx.is_empty() {
@@ -616,7 +505,8 @@ fn member_eval(
     let mut g = GaussianOutput::default();
     let (mut nll, mut mse) = (0.0, 0.0);
     for chunk in idx.chunks(1024) {
-        data.gather(chunk, &mut xb, &mut yb);
+        data.gather_inputs(chunk, &mut xb);
+        data.gather_targets(chunk, &mut yb);
         let out = m.net.forward(&xb, chunk.len(), &mut ws)?;
         m.head.predict(out, chunk.len(), &mut g)?;
         let l = gaussian_nll(&g.mean, &g.log_var, &yb, None, None)?;
@@ -627,7 +517,7 @@ fn member_eval(
             .zip(&yb)
             .map(|(p, t)| f64::from((p - t) * (p - t)))
             .sum::<f64>()
-            / data.dim as f64;
+            / data.dout as f64;
     }
     Ok((nll / idx.len() as f64, mse / idx.len() as f64))
 }
@@ -644,13 +534,9 @@ impl DynamicsModel for ProbabilisticEnsemble {
     fn predict(&self, input: &ModelInput<'_>, rng: &mut Rng) -> Result<Prediction, ModelError> {
         let b = check_input(input, self.state_dim, self.action_dim, false)?;
         let (s, dim) = (self.state_dim, self.out_dim());
-        let x = standardized_inputs(
-            &[
-                (input.states, &self.in_state),
-                (input.actions, &self.in_action),
-            ],
-            b,
-        );
+        let mut x = Vec::new();
+        self.learned
+            .inputs_into(input.states, input.actions, b, &mut x);
         let mut next = input.states.to_owned();
         let mut var = Array2::zeros((b, s));
         let mut rewards = self.cfg.learn_reward.then(|| Array1::zeros(b));
@@ -671,8 +557,8 @@ impl DynamicsModel for ProbabilisticEnsemble {
                 for sc in &bufs.slots[..e] {
                     for r in 0..b {
                         for j in 0..dim {
-                            let mu = self.out_norm.invert(j, sc.mean[r * dim + j]);
-                            let sd = self.out_norm.std[j];
+                            let mu = self.learned.targets.invert(j, sc.mean[r * dim + j]);
+                            let sd = self.learned.targets.std[j];
                             let v = f64::from(sc.log_var[r * dim + j]).exp() * sd * sd;
                             mean_acc[[r, j]] += mu;
                             sq_acc[[r, j]] += mu * mu;
@@ -706,8 +592,8 @@ impl DynamicsModel for ProbabilisticEnsemble {
                 for sc in &bufs.slots[..e] {
                     for (q, &r) in sc.rows.iter().enumerate() {
                         for j in 0..dim {
-                            let mu = self.out_norm.invert(j, sc.mean[q * dim + j]);
-                            let sd = self.out_norm.std[j];
+                            let mu = self.learned.targets.invert(j, sc.mean[q * dim + j]);
+                            let sd = self.learned.targets.std[j];
                             let v = f64::from(sc.log_var[q * dim + j]).exp() * sd * sd;
                             if j < s {
                                 let noise: f64 = if self.cfg.sample {
@@ -734,191 +620,173 @@ impl DynamicsModel for ProbabilisticEnsemble {
     }
 
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
-        let (s, a) = (self.state_dim, self.action_dim);
-        data.validate(s, a)?;
-        let n = data.len();
-        let dim = self.out_dim();
-        let din = s + a;
-        let seeds = SeedStream::new(cfg.seed);
-        let mut split_rng = seeds.rng("holdout");
-        let (train, holdout) = holdout_indices(n, cfg.holdout_fraction, &mut split_rng);
-        let mut targets = Array2::zeros((n, dim));
-        for r in 0..n {
-            for j in 0..s {
-                targets[[r, j]] = data.next_states[[r, j]] - data.states[[r, j]];
-            }
-            if self.cfg.learn_reward {
-                targets[[r, s]] = data.rewards[r];
-            }
-        }
-        let in_state = Standardizer::fit(data.states.view(), &train);
-        let in_action = Standardizer::fit(data.actions.view(), &train);
-        let out_norm = Standardizer::fit(targets.view(), &train);
-        let x = standardized_inputs(
-            &[
-                (data.states.view(), &in_state),
-                (data.actions.view(), &in_action),
-            ],
-            n,
-        );
-        let y = standardized_inputs(&[(targets.view(), &out_norm)], n);
-        let batch_data = Batch {
-            x: &x,
-            y: &y,
-            din,
-            dim,
+        data.validate(self.state_dim, self.action_dim)?;
+        let spec = FitSpec {
+            second_input: data.actions.view(),
+            targets: Targets::StateChange {
+                reward: self.cfg.learn_reward,
+            },
+            filter: None,
         };
-
-        let mut members = self.members.clone();
-        let mut rngs: Vec<Rng> = (0..members.len())
-            .map(|k| seeds.rng(&format!("member-{k}")))
-            .collect();
-        let member_rows: Vec<Vec<usize>> = rngs
-            .iter_mut()
-            .map(|rng| match self.cfg.member_data {
-                MemberData::Bootstrap => (0..train.len())
-                    .map(|_| train[rng.random_range(0..train.len())])
-                    .collect(),
-                MemberData::Shuffle => train.clone(),
-            })
-            .collect();
-
-        let bs = cfg.batch_size.max(1);
-        let mut report = FitReport::default();
-        let mut hold_mse = vec![f64::NAN; members.len()];
-        let mut scratch: Vec<FitScratch> =
-            (0..members.len()).map(|_| FitScratch::default()).collect();
-        let learn_bounds = self.cfg.learn_log_var_bounds;
-        // One epoch of member `k`: (mean training NLL, held-out (NLL, MSE) when there is a
-        // holdout). Members share nothing, so they train side by side on rayon's threads with
-        // the numbers they would have one after the other.
-        let member_epoch =
-            |epoch: usize,
-             (((m, rng), rows), sc): (((&mut Member, &mut Rng), &Vec<usize>), &mut FitScratch)|
-             -> Result<(f64, Option<(f64, f64)>), ModelError> {
-                let mut order = rows.clone();
-                order.shuffle(rng);
-                let FitScratch {
-                    ws,
-                    xb,
-                    yb,
-                    g,
-                    d_mean,
-                    d_lv,
-                    d_out,
-                    d_bounds,
-                    grads,
-                } = sc;
-                grads.resize(m.net.num_params(), 0.0);
-                d_bounds.resize(2 * dim, 0.0);
-                let mut total = 0.0;
-                for (step, idx) in order.chunks(bs).enumerate() {
-                    let nb = idx.len();
-                    batch_data.gather(idx, xb, yb);
-                    let out = m
-                        .net
-                        .forward_train(xb, nb, ws, None)
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                    m.head
-                        .forward(out, nb, g)
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                    d_mean.resize(nb * dim, 0.0);
-                    d_lv.resize(nb * dim, 0.0);
-                    let nll = gaussian_nll(&g.mean, &g.log_var, yb, Some(d_mean), Some(d_lv))
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                    if !nll.is_finite() {
-                        return Err(ModelError::Diverged { epoch, step });
-                    }
-                    total += f64::from(nll) * nb as f64;
-                    // Sum over outputs, mean over the batch (gaussian_nll averages both).
-                    let scale = dim as f32;
-                    d_mean.iter_mut().for_each(|v| *v *= scale);
-                    d_lv.iter_mut().for_each(|v| *v *= scale);
-                    d_out.resize(nb * 2 * dim, 0.0);
-                    m.head
-                        .backward(g, d_mean, d_lv, d_out, Some(d_bounds))
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                    m.net
-                        .backward(ws, d_out, Some(grads), None)
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                    m.opt
-                        .step(m.net.params_mut(), grads)
-                        .map_err(|e| nn_train(e, epoch, step))?;
-                    if learn_bounds {
-                        // PETS penalty 0.01 (Σ max − Σ min).
-                        for (j, db) in d_bounds.iter_mut().enumerate() {
-                            *db += if j < dim { -0.01 } else { 0.01 };
-                        }
-                        m.bounds_opt
-                            .step(m.head.bounds_mut(), d_bounds)
-                            .map_err(|e| nn_train(e, epoch, step))?;
-                    }
-                }
-                let train_nll = total / order.len().max(1) as f64;
-                if holdout.is_empty() {
-                    return Ok((train_nll, None));
-                }
-                let (nll, mse) =
-                    member_eval(m, &batch_data, &holdout).map_err(|e| nn_train(e, epoch, 0))?;
-                if !nll.is_finite() {
-                    return Err(ModelError::Diverged { epoch, step: 0 });
-                }
-                Ok((train_nll, Some((nll, mse))))
-            };
-        let parallel = members.len() > 1 && rayon::current_num_threads() > 1;
-        for epoch in 0..cfg.epochs {
-            let results: Vec<_> = if parallel {
-                members
-                    .par_iter_mut()
-                    .zip(rngs.par_iter_mut())
-                    .zip(member_rows.par_iter())
-                    .zip(scratch.par_iter_mut())
-                    .map(|item| member_epoch(epoch, item))
-                    .collect()
-            } else {
-                members
-                    .iter_mut()
-                    .zip(rngs.iter_mut())
-                    .zip(member_rows.iter())
-                    .zip(scratch.iter_mut())
-                    .map(|item| member_epoch(epoch, item))
-                    .collect()
-            };
-            // Summed in member order, as one member after the other would.
-            let mut epoch_train = 0.0;
-            let mut epoch_hold = 0.0;
-            for (k, r) in results.into_iter().enumerate() {
-                let (train_nll, hold) = r?;
-                epoch_train += train_nll;
-                if let Some((nll, mse)) = hold {
-                    epoch_hold += nll;
-                    hold_mse[k] = mse;
-                }
-            }
-            let kf = members.len() as f64;
-            report.train_loss.push(epoch_train / kf);
-            if !holdout.is_empty() {
-                report.holdout_loss.push(epoch_hold / kf);
-            }
-        }
-        // Elites: lowest held-out MSE (training MSE without a holdout).
-        if holdout.is_empty() {
-            for (k, m) in members.iter().enumerate() {
-                hold_mse[k] = member_eval(m, &batch_data, &train).map_err(nn_other)?.1;
-            }
-        }
-        let mut order: Vec<usize> = (0..members.len()).collect();
-        order.sort_by(|&i, &j| hold_mse[i].total_cmp(&hold_mse[j]));
-        order.truncate(self.cfg.elites);
-
-        self.members = members;
-        self.elites = order;
-        self.holdout_mse = hold_mse;
-        self.in_state = in_state;
-        self.in_action = in_action;
-        self.out_norm = out_norm;
+        let seeds = SeedStream::new(cfg.seed);
+        let ens = &self.cfg;
+        let (report, elites, holdout_mse) = self.learned.fit(
+            data,
+            cfg,
+            spec,
+            &mut seeds.rng("holdout"),
+            |members, rows, _| train_members(members, rows, cfg, ens, &seeds),
+        )?;
+        self.elites = elites;
+        self.holdout_mse = holdout_mse;
         Ok(report)
     }
+}
+
+/// Trains every member on `data` (its bootstrap or shuffle of the training rows drawn from its
+/// stream of `seeds`) for `cfg.epochs` epochs; returns the report (mean over members per epoch),
+/// the elites (lowest held-out MSE first; training MSE without a holdout) and each member's MSE.
+fn train_members(
+    members: &mut [Member],
+    data: &FitRows,
+    cfg: &FitConfig,
+    ens: &EnsembleConfig,
+    seeds: &SeedStream,
+) -> Result<(FitReport, Vec<usize>, Vec<f64>), ModelError> {
+    let dim = data.dout;
+    let mut fits: Vec<MemberFit<'_>> = members
+        .iter_mut()
+        .enumerate()
+        .map(|(k, member)| {
+            let mut rng = seeds.rng(&format!("member-{k}"));
+            let rows = match ens.member_data {
+                MemberData::Bootstrap => (0..data.train.len())
+                    .map(|_| data.train[rng.random_range(0..data.train.len())])
+                    .collect(),
+                MemberData::Shuffle => data.train.clone(),
+            };
+            MemberFit {
+                member,
+                rng,
+                rows,
+                scratch: FitScratch::default(),
+            }
+        })
+        .collect();
+
+    let bs = cfg.batch_size.max(1);
+    let mut report = FitReport::default();
+    let mut hold_mse = vec![f64::NAN; fits.len()];
+    let learn_bounds = ens.learn_log_var_bounds;
+    // One epoch of member `k`: (mean training NLL, held-out (NLL, MSE) when there is a
+    // holdout). Members share nothing, so they train side by side on rayon's threads with
+    // the numbers they would have one after the other.
+    let member_epoch = |epoch: usize, fit: &mut MemberFit| -> Result<EpochLosses, ModelError> {
+        let MemberFit {
+            member: m,
+            rng,
+            rows,
+            scratch: sc,
+        } = fit;
+        let mut order = rows.clone();
+        order.shuffle(rng);
+        let FitScratch {
+            ws,
+            xb,
+            yb,
+            g,
+            d_mean,
+            d_lv,
+            d_out,
+            d_bounds,
+            grads,
+        } = sc;
+        grads.resize(m.net.num_params(), 0.0);
+        d_bounds.resize(2 * dim, 0.0);
+        let mut total = 0.0;
+        for (step, idx) in order.chunks(bs).enumerate() {
+            let nb = idx.len();
+            data.gather_inputs(idx, xb);
+            data.gather_targets(idx, yb);
+            let out = m
+                .net
+                .forward_train(xb, nb, ws, None)
+                .map_err(|e| nn_train(e, epoch, step))?;
+            m.head
+                .forward(out, nb, g)
+                .map_err(|e| nn_train(e, epoch, step))?;
+            d_mean.resize(nb * dim, 0.0);
+            d_lv.resize(nb * dim, 0.0);
+            let nll = gaussian_nll(&g.mean, &g.log_var, yb, Some(d_mean), Some(d_lv))
+                .map_err(|e| nn_train(e, epoch, step))?;
+            if !nll.is_finite() {
+                return Err(ModelError::Diverged { epoch, step });
+            }
+            total += f64::from(nll) * nb as f64;
+            // Sum over outputs, mean over the batch (gaussian_nll averages both).
+            let scale = dim as f32;
+            d_mean.iter_mut().for_each(|v| *v *= scale);
+            d_lv.iter_mut().for_each(|v| *v *= scale);
+            d_out.resize(nb * 2 * dim, 0.0);
+            m.head
+                .backward(g, d_mean, d_lv, d_out, Some(d_bounds))
+                .map_err(|e| nn_train(e, epoch, step))?;
+            m.net
+                .backward(ws, d_out, Some(grads), None)
+                .map_err(|e| nn_train(e, epoch, step))?;
+            m.opt
+                .step(m.net.params_mut(), grads)
+                .map_err(|e| nn_train(e, epoch, step))?;
+            if learn_bounds {
+                // PETS penalty 0.01 (Σ max − Σ min).
+                for (j, db) in d_bounds.iter_mut().enumerate() {
+                    *db += if j < dim { -0.01 } else { 0.01 };
+                }
+                m.bounds_opt
+                    .step(m.head.bounds_mut(), d_bounds)
+                    .map_err(|e| nn_train(e, epoch, step))?;
+            }
+        }
+        let train_nll = total / order.len().max(1) as f64;
+        if data.holdout.is_empty() {
+            return Ok((train_nll, None));
+        }
+        let (nll, mse) = member_eval(m, data, &data.holdout).map_err(|e| nn_train(e, epoch, 0))?;
+        if !nll.is_finite() {
+            return Err(ModelError::Diverged { epoch, step: 0 });
+        }
+        Ok((train_nll, Some((nll, mse))))
+    };
+    for epoch in 0..cfg.epochs {
+        let results = map_side_by_side(&mut fits, |fit| member_epoch(epoch, fit));
+        // Summed in member order, as one member after the other would.
+        let mut epoch_train = 0.0;
+        let mut epoch_hold = 0.0;
+        for (k, r) in results.into_iter().enumerate() {
+            let (train_nll, hold) = r?;
+            epoch_train += train_nll;
+            if let Some((nll, mse)) = hold {
+                epoch_hold += nll;
+                hold_mse[k] = mse;
+            }
+        }
+        let kf = fits.len() as f64;
+        report.train_loss.push(epoch_train / kf);
+        if !data.holdout.is_empty() {
+            report.holdout_loss.push(epoch_hold / kf);
+        }
+    }
+    // Elites: lowest held-out MSE (training MSE without a holdout).
+    if data.holdout.is_empty() {
+        for (k, m) in members.iter().enumerate() {
+            hold_mse[k] = member_eval(m, data, &data.train).map_err(nn_other)?.1;
+        }
+    }
+    let mut order: Vec<usize> = (0..members.len()).collect();
+    order.sort_by(|&i, &j| hold_mse[i].total_cmp(&hold_mse[j]));
+    order.truncate(ens.elites);
+
+    Ok((report, order, hold_mse))
 }
 
 #[cfg(test)]
@@ -1188,84 +1056,6 @@ mod tests {
         assert_eq!(one.3, two.3);
     }
 
-    /// The blocks `deal_rows` gives, as `(slot, start, end)` per group.
-    fn dealt(
-        counts: &[usize],
-        threads: usize,
-        apart: impl Fn(usize, usize, usize) -> bool,
-    ) -> Vec<Vec<(usize, usize, usize)>> {
-        let (mut blocks, mut lens) = (Vec::new(), Vec::new());
-        let n = deal_rows(
-            counts.len(),
-            |i| counts[i],
-            threads,
-            apart,
-            &mut blocks,
-            &mut lens,
-        );
-        assert_eq!(lens.iter().sum::<usize>(), n);
-        let mut it = blocks[..n].iter().map(|b| (b.slot, b.start, b.end));
-        lens.iter()
-            .map(|&l| it.by_ref().take(l).collect())
-            .collect()
-    }
-
-    #[test]
-    fn rows_are_dealt_in_equal_aligned_blocks_where_they_may_be_cut() {
-        let yes = |_: usize, _: usize, _: usize| true;
-        // Five elites of 100 rows on two threads: the middle one is cut at 48 rows.
-        assert_eq!(
-            dealt(&[100; 5], 2, yes),
-            vec![
-                vec![(0, 0, 100), (1, 0, 100), (2, 0, 48)],
-                vec![(2, 48, 100), (3, 0, 100), (4, 0, 100)]
-            ]
-        );
-        // Where the cut would change the numbers, the nearer end of the slot is the boundary.
-        let no = |_: usize, _: usize, _: usize| false;
-        assert_eq!(
-            dealt(&[100; 5], 2, no),
-            vec![
-                vec![(0, 0, 100), (1, 0, 100), (2, 0, 100)],
-                vec![(3, 0, 100), (4, 0, 100)]
-            ]
-        );
-        let only_whole = |_: usize, whole: usize, part: usize| part * 2 >= whole;
-        assert_eq!(
-            dealt(&[100, 30, 100], 2, only_whole),
-            vec![vec![(0, 0, 100), (1, 0, 30)], vec![(2, 0, 100)]]
-        );
-        // One thread: every non-empty slot whole, in one group.
-        assert_eq!(dealt(&[7, 0, 9], 1, yes), vec![vec![(0, 0, 7), (2, 0, 9)]]);
-        // Random slot sizes, 1-4 threads: the blocks cover each slot's rows once and in order,
-        // no more groups than threads, cuts on multiples of 16, groups within a block of equal.
-        let mut rng = rng_from_seed(2);
-        for _ in 0..300 {
-            let k = rng.random_range(1..8);
-            let counts: Vec<usize> = (0..k).map(|_| rng.random_range(0..3000)).collect();
-            let threads = rng.random_range(1..5);
-            let groups = dealt(&counts, threads, yes);
-            assert!(groups.len() <= threads && groups.iter().all(|g| !g.is_empty()));
-            let flat: Vec<_> = groups.concat();
-            let mut next = vec![0; k];
-            for &(slot, start, end) in &flat {
-                assert_eq!(start, next[slot], "{counts:?}");
-                assert!(end > start && (end == counts[slot] || end % ROW_ALIGN == 0));
-                next[slot] = end;
-            }
-            assert_eq!(next, counts);
-            let total: usize = counts.iter().sum();
-            for g in &groups {
-                let rows: usize = g.iter().map(|&(_, a, b)| b - a).sum();
-                let largest = counts.iter().max().unwrap();
-                assert!(
-                    rows <= total / threads + ROW_ALIGN.max(*largest),
-                    "{counts:?}"
-                );
-            }
-        }
-    }
-
     /// Inference large enough to deal its rows to threads (five elites of 3×200, 500 rows: one
     /// elite's rows cut between two threads) gives the numbers of one thread, bit for bit, in
     /// every propagation mode, on two and three threads.
@@ -1280,7 +1070,7 @@ mod tests {
         };
         let ens = ProbabilisticEnsemble::new(3, 1, cfg).unwrap();
         let net = ens.member_network(0).unwrap();
-        assert!(500 * net.num_params() >= PARALLEL_MIN_MACS);
+        assert!(500 * net.num_params() >= tandem_nn::row_deal::PARALLEL_MIN_MACS);
         assert!(net.rows_run_apart(100, 48) && net.rows_run_apart(100, 52));
         let mut rng = rng_from_seed(9);
         let s = Array2::from_shape_fn((500, 3), |_| rng.random_range(-1.0..1.0));

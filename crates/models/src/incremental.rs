@@ -12,7 +12,8 @@ use crate::model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
 use crate::train::{
-    nn_other, standardized_inputs, train_network, Objective, Opt, OptimizerConfig, Standardizer,
+    nn_other, standardized_inputs, FitRows, FitSpec, Network, Objective, OptimizerConfig,
+    RowFilter, Standardized, Standardizer, Targets,
 };
 
 /// Shape of the learned matrix `L_t` (`S x A`).
@@ -105,12 +106,10 @@ pub struct IncrementalModel {
     cfg: IncrementalModelConfig,
     state_dim: usize,
     action_dim: usize,
-    net: Mlp,
-    opt: Opt,
-    in_state: Standardizer,
-    in_prev: Standardizer,
-    /// RMS of the state changes (length S) and of the action changes (length A).
-    ds_scale: Vec<f64>,
+    /// The network giving `M`, its inputs `(s_t, a_{t−1})`; its targets' scales are the RMS of
+    /// the state changes (`σ_Δs`, length S).
+    learned: Standardized<Network>,
+    /// RMS of the action changes (`σ_Δa`, length A).
     da_scale: Vec<f64>,
     /// `L0`, row-major `S x A` (zeros without a prior).
     l0: Vec<f64>,
@@ -178,15 +177,10 @@ impl IncrementalModel {
         // Zero output layer: L = L0 before any fit (Remark 4).
         let last = *net.layers().last().expect("at least one layer");
         net.params_mut()[last.weight_offset..last.bias_offset + last.fan_out].fill(0.0);
-        let opt = cfg.optimizer.build(net.num_params())?;
         Ok(Self {
             state_dim: s,
             action_dim: a,
-            net,
-            opt,
-            in_state: Standardizer::identity(s),
-            in_prev: Standardizer::identity(a),
-            ds_scale: vec![1.0; s],
+            learned: Standardized::new(Network::new(net, &cfg.optimizer)?, [s, a], s),
             da_scale: vec![1.0; a],
             l0,
             cfg,
@@ -200,7 +194,7 @@ impl IncrementalModel {
 
     /// The network giving `L_θ` (for checkpoints and inspection).
     pub fn network(&self) -> &Mlp {
-        &self.net
+        &self.learned.trained.net
     }
 
     /// `L_t = L_θ(s_t, a_{t−1})` for each row, `S x A` each.
@@ -221,14 +215,17 @@ impl IncrementalModel {
         prev: ArrayView2<'a, f64>,
         b: usize,
     ) -> Result<Vec<f32>, ModelError> {
-        let x = standardized_inputs(&[(states, &self.in_state), (prev, &self.in_prev)], b);
-        let mut ws = self.net.workspace();
-        Ok(self.net.forward(&x, b, &mut ws).map_err(nn_other)?.to_vec())
+        let mut x = Vec::new();
+        self.learned.inputs_into(states, prev, b, &mut x);
+        let net = &self.learned.trained.net;
+        let mut ws = net.workspace();
+        Ok(net.forward(&x, b, &mut ws).map_err(nn_other)?.to_vec())
     }
 
     fn gain_of(&self, out: &[f32], r: usize) -> DMatrix<f64> {
         let (s, a) = (self.state_dim, self.action_dim);
-        let n_out = self.net.output_dim();
+        let n_out = self.learned.trained.net.output_dim();
+        let ds_scale = &self.learned.targets.std;
         let o = &out[r * n_out..(r + 1) * n_out];
         DMatrix::from_fn(s, a, |i, j| {
             let m = match self.cfg.structure {
@@ -236,36 +233,22 @@ impl IncrementalModel {
                 GainStructure::Diagonal if i == j => f64::from(o[i]),
                 GainStructure::Diagonal => 0.0,
             };
-            self.l0[i * a + j] + self.ds_scale[i] * m / self.da_scale[j]
+            self.l0[i * a + j] + ds_scale[i] * m / self.da_scale[j]
         })
     }
 }
 
-/// Standardized `(s_t, a_{t−1})`, scaled action changes `u = Δa / σ_Δa` and residual targets
-/// `r = Δs / σ_Δs − σ_Δs⁻¹ L0 Δa`.
+/// The squared error of `M u` against the residual targets `r = Δs / σ_Δs − σ_Δs⁻¹ L0 Δa`, with
+/// the scaled action changes `u = Δa / σ_Δa`.
 struct IncrementalObjective {
-    din: usize,
     s: usize,
     a: usize,
     diagonal: bool,
-    x: Vec<f32>,
     u: Vec<f32>,
-    r: Vec<f32>,
 }
 
 impl Objective for IncrementalObjective {
-    fn in_dim(&self) -> usize {
-        self.din
-    }
-
-    fn inputs(&self, idx: &[usize], buf: &mut [f32]) {
-        for (k, &i) in idx.iter().enumerate() {
-            buf[k * self.din..(k + 1) * self.din]
-                .copy_from_slice(&self.x[i * self.din..(i + 1) * self.din]);
-        }
-    }
-
-    fn loss(&self, idx: &[usize], out: &[f32], mut d_out: Option<&mut [f32]>) -> f64 {
+    fn loss(&self, fit: &FitRows, idx: &[usize], out: &[f32], mut grad: Option<&mut [f32]>) -> f64 {
         let (s, a) = (self.s, self.a);
         let n_out = if self.diagonal { s } else { s * a };
         let n = idx.len() as f32;
@@ -279,9 +262,9 @@ impl Objective for IncrementalObjective {
                 } else {
                     (0..a).map(|j| o[i * a + j] * u[j]).sum()
                 };
-                let e = pred - self.r[row * s + i];
+                let e = pred - fit.y[row * s + i];
                 total += f64::from(e * e);
-                if let Some(g) = d_out.as_deref_mut() {
+                if let Some(g) = grad.as_deref_mut() {
                     let g = &mut g[k * n_out..(k + 1) * n_out];
                     if self.diagonal {
                         g[i] = 2.0 * e * u[i] / n;
@@ -338,77 +321,40 @@ impl DynamicsModel for IncrementalModel {
             .outer_iter()
             .map(|r| r.iter().any(|v| v.abs() > self.cfg.min_action_change))
             .collect();
-        let mut rng = rng_from_seed(cfg.seed);
-        let (train, holdout) = crate::data::holdout_indices(n, cfg.holdout_fraction, &mut rng);
-        let train: Vec<usize> = train.into_iter().filter(|&i| informative[i]).collect();
-        let holdout: Vec<usize> = holdout.into_iter().filter(|&i| informative[i]).collect();
-        if train.is_empty() {
-            return Err(ModelError::Other(
-                "incremental model: no training transition with a nonzero action change \
-                 (Δa = 0 carries no information about L)"
-                    .into(),
-            ));
-        }
-        let rms = |m: &Array2<f64>| -> Vec<f64> {
-            (0..m.ncols())
-                .map(|j| {
-                    let v = train.iter().map(|&i| m[[i, j]] * m[[i, j]]).sum::<f64>()
-                        / train.len() as f64;
-                    let r = v.sqrt();
-                    if r < 1e-9 {
-                        1.0
-                    } else {
-                        r
-                    }
-                })
-                .collect()
-        };
-        let (ds_scale, da_scale) = (rms(&ds), rms(&da));
-        let in_state = Standardizer::fit(data.states.view(), &train);
-        let in_prev = Standardizer::fit(data.prev_actions.view(), &train);
-        let mut u = vec![0.0f32; n * a];
-        let mut r = vec![0.0f32; n * s];
+        // Δs − L0 Δa: what the network's `M` has to explain.
+        let mut residual = Array2::zeros((n, s));
         for row in 0..n {
-            for j in 0..a {
-                u[row * a + j] = (da[[row, j]] / da_scale[j]) as f32;
-            }
             for i in 0..s {
                 let prior: f64 = (0..a).map(|j| self.l0[i * a + j] * da[[row, j]]).sum();
-                r[row * s + i] = ((ds[[row, i]] - prior) / ds_scale[i]) as f32;
+                residual[[row, i]] = ds[[row, i]] - prior;
             }
         }
-        let obj = IncrementalObjective {
-            din: s + a,
-            s,
-            a,
-            diagonal: self.cfg.structure == GainStructure::Diagonal,
-            x: standardized_inputs(
-                &[
-                    (data.states.view(), &in_state),
-                    (data.prev_actions.view(), &in_prev),
-                ],
-                n,
-            ),
-            u,
-            r,
+        let spec = FitSpec {
+            second_input: data.prev_actions.view(),
+            targets: Targets::ScaledByRms {
+                values: residual,
+                rms_of: ds.view(),
+            },
+            filter: Some(RowFilter {
+                keep: &informative,
+                none_kept: "incremental model: no training transition with a nonzero action \
+                            change (Δa = 0 carries no information about L)",
+            }),
         };
-        let mut net = self.net.clone();
-        let mut opt = self.opt.clone();
-        let report = train_network(
-            &mut net,
-            &mut opt,
-            &obj,
-            &train,
-            &holdout,
-            cfg.epochs,
-            cfg.batch_size,
-            &mut rng,
-        )?;
-        self.net = net;
-        self.opt = opt;
-        self.in_state = in_state;
-        self.in_prev = in_prev;
-        self.ds_scale = ds_scale;
+        let diagonal = self.cfg.structure == GainStructure::Diagonal;
+        let mut rng = rng_from_seed(cfg.seed);
+        let (report, da_scale) =
+            self.learned
+                .fit(data, cfg, spec, &mut rng, |network, rows, rng| {
+                    let da_norm = Standardizer::root_mean_square(da.view(), &rows.train);
+                    let obj = IncrementalObjective {
+                        s,
+                        a,
+                        diagonal,
+                        u: standardized_inputs(&[(da.view(), &da_norm)], n),
+                    };
+                    Ok((network.train(&obj, rows, cfg, rng)?, da_norm.std))
+                })?;
         self.da_scale = da_scale;
         Ok(report)
     }
@@ -430,12 +376,12 @@ struct Learned {
 /// predicts and fits on exactly as one that did not.
 impl Checkpointable for IncrementalModel {
     fn save_to(&self, prefix: &str, ckpt: &mut Checkpoint) -> tandem_nn::Result<()> {
-        self.net.save_to(&format!("{prefix}.net"), ckpt)?;
-        self.opt.save_to(&format!("{prefix}.opt"), ckpt)?;
+        let l = &self.learned;
+        l.trained.save_to(prefix, ckpt)?;
         let learned = Learned {
-            in_state: self.in_state.clone(),
-            in_prev: self.in_prev.clone(),
-            ds_scale: self.ds_scale.clone(),
+            in_state: l.inputs[0].clone(),
+            in_prev: l.inputs[1].clone(),
+            ds_scale: l.targets.std.clone(),
             da_scale: self.da_scale.clone(),
         };
         ckpt.put_json(&format!("{prefix}.learned"), &learned)
@@ -458,12 +404,13 @@ impl Checkpointable for IncrementalModel {
                 (s, a, s, a)
             )));
         }
-        let (mut net, mut opt) = (self.net.clone(), self.opt.clone());
-        net.load_from(&format!("{prefix}.net"), ckpt)?;
-        opt.load_from(&format!("{prefix}.opt"), ckpt)?;
-        (self.net, self.opt) = (net, opt);
-        (self.in_state, self.in_prev) = (l.in_state, l.in_prev);
-        (self.ds_scale, self.da_scale) = (l.ds_scale, l.da_scale);
+        self.learned.trained.load_from(prefix, ckpt)?;
+        self.learned.inputs = [l.in_state, l.in_prev];
+        self.learned.targets = Standardizer {
+            mean: vec![0.0; s],
+            std: l.ds_scale,
+        };
+        self.da_scale = l.da_scale;
         Ok(())
     }
 }

@@ -13,8 +13,8 @@ use crate::model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
 use crate::train::{
-    nn_other, standardized_inputs, standardized_inputs_into, train_network, Objective, Opt,
-    OptimizerConfig, PredictScratch, Standardizer,
+    nn_other, FitRows, FitSpec, Network, Objective, OptimizerConfig, PredictScratch, Standardized,
+    Standardizer, Targets,
 };
 
 /// Settings of an [`MlpModel`]. `Default` = p2 (Sec. 3.1): two hidden layers of 256 units, SGD
@@ -98,12 +98,8 @@ pub struct MlpModel {
     cfg: MlpModelConfig,
     state_dim: usize,
     action_dim: usize,
-    net: Mlp,
-    opt: Opt,
-    in_state: Standardizer,
-    in_action: Standardizer,
-    /// Standardizes `[Δs, r]`.
-    out_norm: Standardizer,
+    /// The network; its targets `[Δs, r]`.
+    learned: Standardized<Network>,
     /// `predict`'s reused input and workspace buffers.
     scratch: PredictScratch,
 }
@@ -131,15 +127,14 @@ impl MlpModel {
             &mut rng_from_seed(cfg.seed),
         )
         .map_err(nn_other)?;
-        let opt = cfg.optimizer.build(net.num_params())?;
         Ok(Self {
             state_dim,
             action_dim,
-            net,
-            opt,
-            in_state: Standardizer::identity(state_dim),
-            in_action: Standardizer::identity(action_dim),
-            out_norm: Standardizer::identity(state_dim + 1),
+            learned: Standardized::new(
+                Network::new(net, &cfg.optimizer)?,
+                [state_dim, action_dim],
+                state_dim + 1,
+            ),
             scratch: PredictScratch::default(),
             cfg,
         })
@@ -152,7 +147,7 @@ impl MlpModel {
 
     /// The network (for checkpoints and inspection).
     pub fn network(&self) -> &Mlp {
-        &self.net
+        &self.learned.trained.net
     }
 }
 
@@ -161,9 +156,9 @@ impl MlpModel {
 /// leaves the model unchanged.
 impl Checkpointable for MlpModel {
     fn save_to(&self, prefix: &str, ckpt: &mut Checkpoint) -> tandem_nn::Result<()> {
-        self.net.save_to(&format!("{prefix}.net"), ckpt)?;
-        self.opt.save_to(&format!("{prefix}.opt"), ckpt)?;
-        let norms = (&self.in_state, &self.in_action, &self.out_norm);
+        let l = &self.learned;
+        l.trained.save_to(prefix, ckpt)?;
+        let norms = (&l.inputs[0], &l.inputs[1], &l.targets);
         ckpt.put_json(&format!("{prefix}.norms"), &norms)
     }
 
@@ -179,21 +174,15 @@ impl Checkpointable for MlpModel {
                 (s, a, s + 1)
             )));
         }
-        let (mut net, mut opt) = (self.net.clone(), self.opt.clone());
-        net.load_from(&format!("{prefix}.net"), ckpt)?;
-        opt.load_from(&format!("{prefix}.opt"), ckpt)?;
-        (self.net, self.opt) = (net, opt);
-        (self.in_state, self.in_action, self.out_norm) = (in_state, in_action, out_norm);
+        self.learned.trained.load_from(prefix, ckpt)?;
+        (self.learned.inputs, self.learned.targets) = ([in_state, in_action], out_norm);
         Ok(())
     }
 }
 
-/// Training data of an [`MlpModel`]: standardized inputs and targets.
+/// p2 eq. (1) over the standardized `[Δs, r]` targets (the reward's term when learned) and the
+/// termination flags.
 struct MlpObjective {
-    din: usize,
-    x: Vec<f32>,
-    /// `[Δs (S), r]` standardized, per row.
-    y: Vec<f32>,
     done: Vec<f32>,
     s: usize,
     reward: bool,
@@ -201,30 +190,19 @@ struct MlpObjective {
 }
 
 impl Objective for MlpObjective {
-    fn in_dim(&self) -> usize {
-        self.din
-    }
-
-    fn inputs(&self, idx: &[usize], buf: &mut [f32]) {
-        for (k, &i) in idx.iter().enumerate() {
-            buf[k * self.din..(k + 1) * self.din]
-                .copy_from_slice(&self.x[i * self.din..(i + 1) * self.din]);
-        }
-    }
-
-    fn loss(&self, idx: &[usize], out: &[f32], mut d_out: Option<&mut [f32]>) -> f64 {
+    fn loss(&self, fit: &FitRows, idx: &[usize], out: &[f32], mut grad: Option<&mut [f32]>) -> f64 {
         let s = self.s;
         let dout = s + usize::from(self.reward) + usize::from(self.term);
         let n = idx.len() as f32;
         let mut total = 0.0f64;
         for (k, &i) in idx.iter().enumerate() {
             let o = &out[k * dout..(k + 1) * dout];
-            let y = &self.y[i * (s + 1)..(i + 1) * (s + 1)];
+            let y = fit.targets(i);
             let regress = s + usize::from(self.reward);
             for j in 0..regress {
                 let e = o[j] - y[j];
                 total += f64::from(e * e);
-                if let Some(d) = d_out.as_deref_mut() {
+                if let Some(d) = grad.as_deref_mut() {
                     d[k * dout + j] = 2.0 * e / n;
                 }
             }
@@ -236,13 +214,13 @@ impl Objective for MlpObjective {
             let z: Vec<f32> = (0..idx.len()).map(|k| out[k * dout + dout - 1]).collect();
             let t: Vec<f32> = idx.iter().map(|&i| self.done[i]).collect();
             let mut g = vec![0.0; idx.len()];
-            let grad = d_out.is_some().then_some(g.as_mut_slice());
-            match bce_with_logits(&z, &t, grad) {
+            let bce_grad = grad.is_some().then_some(g.as_mut_slice());
+            match bce_with_logits(&z, &t, bce_grad) {
                 Ok(l) => total += f64::from(l) * idx.len() as f64,
                 // A non-finite logit: report a non-finite loss, as the sum above would.
                 Err(_) => total = f64::NAN,
             }
-            if let Some(d) = d_out {
+            if let Some(d) = grad {
                 for (k, gk) in g.iter().enumerate() {
                     d[k * dout + dout - 1] = *gk;
                 }
@@ -261,27 +239,21 @@ impl MlpModel {
         x: &mut Vec<f32>,
         ws: &mut tandem_nn::MlpWorkspace,
     ) -> Result<Prediction, ModelError> {
-        standardized_inputs_into(
-            &[
-                (input.states, &self.in_state),
-                (input.actions, &self.in_action),
-            ],
-            b,
-            x,
-        );
-        let out = self.net.forward(x, b, ws).map_err(nn_other)?;
+        let l = &self.learned;
+        l.inputs_into(input.states, input.actions, b, x);
+        let out = l.trained.net.forward(x, b, ws).map_err(nn_other)?;
         let s = self.state_dim;
-        let dout = self.net.output_dim();
+        let dout = l.trained.net.output_dim();
         let mut next = Array2::zeros((b, s));
         let mut rewards = self.cfg.learn_reward.then(|| Array1::zeros(b));
         let mut probs = self.cfg.learn_termination.then(|| Array1::zeros(b));
         for r in 0..b {
             let o = &out[r * dout..(r + 1) * dout];
             for j in 0..s {
-                next[[r, j]] = input.states[[r, j]] + self.out_norm.invert(j, o[j]);
+                next[[r, j]] = input.states[[r, j]] + l.targets.invert(j, o[j]);
             }
             if let Some(rw) = rewards.as_mut() {
-                rw[r] = self.out_norm.invert(s, o[s]);
+                rw[r] = l.targets.invert(s, o[s]);
             }
             if let Some(p) = probs.as_mut() {
                 p[r] = f64::from(sigmoid(o[dout - 1]));
@@ -313,57 +285,27 @@ impl DynamicsModel for MlpModel {
 
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
         data.validate(self.state_dim, self.action_dim)?;
-        let n = data.len();
-        let mut rng = rng_from_seed(cfg.seed);
-        let (train, holdout) = crate::data::holdout_indices(n, cfg.holdout_fraction, &mut rng);
-        let s = self.state_dim;
-        let mut targets = Array2::zeros((n, s + 1));
-        for r in 0..n {
-            for j in 0..s {
-                targets[[r, j]] = data.next_states[[r, j]] - data.states[[r, j]];
-            }
-            targets[[r, s]] = data.rewards[r];
-        }
-        let in_state = Standardizer::fit(data.states.view(), &train);
-        let in_action = Standardizer::fit(data.actions.view(), &train);
-        let out_norm = Standardizer::fit(targets.view(), &train);
+        // The reward column is standardized and kept even when its loss term is off.
+        let spec = FitSpec {
+            second_input: data.actions.view(),
+            targets: Targets::StateChange { reward: true },
+            filter: None,
+        };
         let obj = MlpObjective {
-            din: s + self.action_dim,
-            x: standardized_inputs(
-                &[
-                    (data.states.view(), &in_state),
-                    (data.actions.view(), &in_action),
-                ],
-                n,
-            ),
-            y: standardized_inputs(&[(targets.view(), &out_norm)], n),
             done: data
                 .terminated
                 .iter()
                 .map(|&d| f32::from(u8::from(d)))
                 .collect(),
-            s,
+            s: self.state_dim,
             reward: self.cfg.learn_reward,
             term: self.cfg.learn_termination,
         };
-        let mut net = self.net.clone();
-        let mut opt = self.opt.clone();
-        let report = train_network(
-            &mut net,
-            &mut opt,
-            &obj,
-            &train,
-            &holdout,
-            cfg.epochs,
-            cfg.batch_size,
-            &mut rng,
-        )?;
-        self.net = net;
-        self.opt = opt;
-        self.in_state = in_state;
-        self.in_action = in_action;
-        self.out_norm = out_norm;
-        Ok(report)
+        let mut rng = rng_from_seed(cfg.seed);
+        self.learned
+            .fit(data, cfg, spec, &mut rng, |network, rows, rng| {
+                network.train(&obj, rows, cfg, rng)
+            })
     }
 }
 

@@ -1,7 +1,6 @@
 //! [`ResidualModel`]: a known plant plus a learned difference, `s' = f_idl(s, a) + d_θ(s, a)`
 //! (p0's difference model).
 
-use ndarray::Array2;
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
 use tandem_dynamics::Plant;
@@ -13,7 +12,8 @@ use crate::model::{
 };
 use crate::plant_model::step_rows;
 use crate::train::{
-    nn_other, standardized_inputs, train_network, Objective, Opt, OptimizerConfig, Standardizer,
+    nn_other, FitRows, FitSpec, Network, Objective, OptimizerConfig, Standardized, Standardizer,
+    Targets,
 };
 
 /// Settings of a [`ResidualModel`]. `Default` = p0 (Sec. IV): 3 hidden layers of 400 ReLU
@@ -77,11 +77,8 @@ impl Default for ResidualModelConfig {
 pub struct ResidualModel<P: Plant> {
     plant: P,
     cfg: ResidualModelConfig,
-    net: Mlp,
-    opt: Opt,
-    in_state: Standardizer,
-    in_action: Standardizer,
-    out_norm: Standardizer,
+    /// The difference network; its targets the differences.
+    learned: Standardized<Network>,
     fitted: bool,
 }
 
@@ -89,9 +86,9 @@ pub struct ResidualModel<P: Plant> {
 /// the constructor's. Loading into a model of another architecture is an error naming the tensor.
 impl<P: Plant> Checkpointable for ResidualModel<P> {
     fn save_to(&self, prefix: &str, ckpt: &mut Checkpoint) -> tandem_nn::Result<()> {
-        self.net.save_to(&format!("{prefix}.net"), ckpt)?;
-        self.opt.save_to(&format!("{prefix}.opt"), ckpt)?;
-        let norms = (&self.in_state, &self.in_action, &self.out_norm, self.fitted);
+        let l = &self.learned;
+        l.trained.save_to(prefix, ckpt)?;
+        let norms = (&l.inputs[0], &l.inputs[1], &l.targets, self.fitted);
         ckpt.put_json(&format!("{prefix}.norms"), &norms)
     }
 
@@ -111,11 +108,9 @@ impl<P: Plant> Checkpointable for ResidualModel<P> {
                 (s, a, s)
             )));
         }
-        let (mut net, mut opt) = (self.net.clone(), self.opt.clone());
-        net.load_from(&format!("{prefix}.net"), ckpt)?;
-        opt.load_from(&format!("{prefix}.opt"), ckpt)?;
-        (self.net, self.opt, self.fitted) = (net, opt, fitted);
-        (self.in_state, self.in_action, self.out_norm) = (in_state, in_action, out_norm);
+        self.learned.trained.load_from(prefix, ckpt)?;
+        (self.learned.inputs, self.learned.targets) = ([in_state, in_action], out_norm);
+        self.fitted = fitted;
         Ok(())
     }
 }
@@ -134,15 +129,10 @@ impl<P: Plant> ResidualModel<P> {
             &mut rng_from_seed(cfg.seed),
         )
         .map_err(nn_other)?;
-        let opt = cfg.optimizer.build(net.num_params())?;
         Ok(Self {
-            in_state: Standardizer::identity(s),
-            in_action: Standardizer::identity(a),
-            out_norm: Standardizer::identity(s),
+            learned: Standardized::new(Network::new(net, &cfg.optimizer)?, [s, a], s),
             plant,
             cfg,
-            net,
-            opt,
             fitted: false,
         })
     }
@@ -159,7 +149,7 @@ impl<P: Plant> ResidualModel<P> {
 
     /// The difference network (for checkpoints and inspection).
     pub fn network(&self) -> &Mlp {
-        &self.net
+        &self.learned.trained.net
     }
 
     /// Whether a fit has succeeded; before that, `predict` returns the plant's prediction alone
@@ -169,35 +159,19 @@ impl<P: Plant> ResidualModel<P> {
     }
 }
 
-/// Standardized inputs and standardized differences.
-pub(crate) struct RegressionObjective {
-    pub din: usize,
-    pub dout: usize,
-    pub x: Vec<f32>,
-    pub y: Vec<f32>,
-}
+/// Squared error of the standardized targets, summed over components and averaged over rows.
+struct SquaredError;
 
-impl Objective for RegressionObjective {
-    fn in_dim(&self) -> usize {
-        self.din
-    }
-
-    fn inputs(&self, idx: &[usize], buf: &mut [f32]) {
-        for (k, &i) in idx.iter().enumerate() {
-            buf[k * self.din..(k + 1) * self.din]
-                .copy_from_slice(&self.x[i * self.din..(i + 1) * self.din]);
-        }
-    }
-
-    fn loss(&self, idx: &[usize], out: &[f32], mut d_out: Option<&mut [f32]>) -> f64 {
-        let d = self.dout;
+impl Objective for SquaredError {
+    fn loss(&self, fit: &FitRows, idx: &[usize], out: &[f32], mut grad: Option<&mut [f32]>) -> f64 {
+        let d = fit.dout;
         let n = idx.len() as f32;
         let mut total = 0.0f64;
         for (k, &i) in idx.iter().enumerate() {
             for j in 0..d {
-                let e = out[k * d + j] - self.y[i * d + j];
+                let e = out[k * d + j] - fit.y[i * d + j];
                 total += f64::from(e * e);
-                if let Some(g) = d_out.as_deref_mut() {
+                if let Some(g) = grad.as_deref_mut() {
                     g[k * d + j] = 2.0 * e / n;
                 }
             }
@@ -219,19 +193,16 @@ impl<P: Plant> DynamicsModel for ResidualModel<P> {
         let b = check_input(input, self.state_dim(), self.action_dim(), false)?;
         let mut next = step_rows(&self.plant, input)?;
         if self.fitted {
-            let x = standardized_inputs(
-                &[
-                    (input.states, &self.in_state),
-                    (input.actions, &self.in_action),
-                ],
-                b,
-            );
-            let mut ws = self.net.workspace();
-            let out = self.net.forward(&x, b, &mut ws).map_err(nn_other)?;
+            let l = &self.learned;
+            let mut x = Vec::new();
+            l.inputs_into(input.states, input.actions, b, &mut x);
+            let net = &l.trained.net;
+            let mut ws = net.workspace();
+            let out = net.forward(&x, b, &mut ws).map_err(nn_other)?;
             let s = self.state_dim();
             for (r, mut row) in next.outer_iter_mut().enumerate() {
                 for j in 0..s {
-                    row[j] += self.out_norm.invert(j, out[r * s + j]);
+                    row[j] += l.targets.invert(j, out[r * s + j]);
                 }
             }
         }
@@ -244,48 +215,22 @@ impl<P: Plant> DynamicsModel for ResidualModel<P> {
     }
 
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
-        let (s, a) = (self.state_dim(), self.action_dim());
-        data.validate(s, a)?;
-        let n = data.len();
-        let idl = step_rows(
+        data.validate(self.state_dim(), self.action_dim())?;
+        let idealized = step_rows(
             &self.plant,
             &ModelInput::new(data.states.view(), data.actions.view()),
         )?;
-        let diff: Array2<f64> = &data.next_states - &idl;
-        let mut rng = rng_from_seed(cfg.seed);
-        let (train, holdout) = crate::data::holdout_indices(n, cfg.holdout_fraction, &mut rng);
-        let in_state = Standardizer::fit(data.states.view(), &train);
-        let in_action = Standardizer::fit(data.actions.view(), &train);
-        let out_norm = Standardizer::fit(diff.view(), &train);
-        let obj = RegressionObjective {
-            din: s + a,
-            dout: s,
-            x: standardized_inputs(
-                &[
-                    (data.states.view(), &in_state),
-                    (data.actions.view(), &in_action),
-                ],
-                n,
-            ),
-            y: standardized_inputs(&[(diff.view(), &out_norm)], n),
+        let spec = FitSpec {
+            second_input: data.actions.view(),
+            targets: Targets::ResidualOver(idealized),
+            filter: None,
         };
-        let mut net = self.net.clone();
-        let mut opt = self.opt.clone();
-        let report = train_network(
-            &mut net,
-            &mut opt,
-            &obj,
-            &train,
-            &holdout,
-            cfg.epochs,
-            cfg.batch_size,
-            &mut rng,
-        )?;
-        self.net = net;
-        self.opt = opt;
-        self.in_state = in_state;
-        self.in_action = in_action;
-        self.out_norm = out_norm;
+        let mut rng = rng_from_seed(cfg.seed);
+        let report = self
+            .learned
+            .fit(data, cfg, spec, &mut rng, |network, rows, rng| {
+                network.train(&SquaredError, rows, cfg, rng)
+            })?;
         self.fitted = true;
         Ok(report)
     }

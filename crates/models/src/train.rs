@@ -1,13 +1,15 @@
-//! What the learned models share: optimizer choice, standardization, and the minibatch loop.
+//! What the learned models share: optimizer choice, standardization, the minibatch loop, and the
+//! one fit path ([`Standardized::fit`]).
 
-use ndarray::ArrayView2;
+use ndarray::{Array2, ArrayView2};
 use rand::seq::SliceRandom;
 use tandem_core::Rng;
 use tandem_nn::{
     AdaGrad, AdaGradConfig, Adam, AdamConfig, Mlp, MlpWorkspace, NnError, Optimizer, Sgd, SgdConfig,
 };
 
-use crate::model::ModelError;
+use crate::data::holdout_indices;
+use crate::model::{FitConfig, FitReport, ModelError, Transitions};
 
 /// Which optimizer trains a network, with its settings (serde: `{ adam = { lr = 1e-3, ... } }`).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -161,6 +163,26 @@ impl Standardizer {
         Self { mean, std }
     }
 
+    /// Unshifted (mean 0), scaled by each column's root mean square over the rows `idx`; a
+    /// root mean square below `1e-9` becomes 1.
+    pub(crate) fn root_mean_square(x: ArrayView2<'_, f64>, idx: &[usize]) -> Self {
+        let std = (0..x.ncols())
+            .map(|j| {
+                let v = idx.iter().map(|&i| x[[i, j]] * x[[i, j]]).sum::<f64>() / idx.len() as f64;
+                let r = v.sqrt();
+                if r < 1e-9 {
+                    1.0
+                } else {
+                    r
+                }
+            })
+            .collect();
+        Self {
+            mean: vec![0.0; x.ncols()],
+            std,
+        }
+    }
+
     /// Number of columns.
     pub fn dim(&self) -> usize {
         self.mean.len()
@@ -181,115 +203,320 @@ impl Standardizer {
     }
 }
 
-/// A network's training data: standardized inputs, one row per sample, and a loss over rows.
+/// A network with its optimizer state: what a one-network model trains. Checkpointed as
+/// `{prefix}.net` and `{prefix}.opt`.
+#[derive(Debug, Clone)]
+pub(crate) struct Network {
+    pub net: Mlp,
+    pub opt: Opt,
+}
+
+impl Network {
+    /// `net` with a fresh optimizer of `cfg`.
+    pub(crate) fn new(net: Mlp, cfg: &OptimizerConfig) -> Result<Self, ModelError> {
+        let opt = cfg.build(net.num_params())?;
+        Ok(Self { net, opt })
+    }
+
+    /// Trains for `cfg.epochs` passes over `rows.train` (reshuffled each epoch from `rng`),
+    /// recording the training loss and the loss on `rows.holdout` after each epoch. A non-finite
+    /// loss (or non-finite numbers in the network) is `Diverged`.
+    pub(crate) fn train(
+        &mut self,
+        obj: &dyn Objective,
+        rows: &FitRows,
+        cfg: &FitConfig,
+        rng: &mut Rng,
+    ) -> Result<FitReport, ModelError> {
+        let mut s = Scratch::default();
+        let mut order = rows.train.clone();
+        let mut report = FitReport::default();
+        for epoch in 0..cfg.epochs {
+            order.shuffle(rng);
+            let l = self.run_epoch(obj, rows, &order, cfg.batch_size, rng, epoch, &mut s)?;
+            report.train_loss.push(l);
+            if !rows.holdout.is_empty() {
+                let h = self
+                    .evaluate(obj, rows, &rows.holdout, &mut s)
+                    .map_err(|e| nn_train(e, epoch, 0))?;
+                if !h.is_finite() {
+                    return Err(ModelError::Diverged { epoch, step: 0 });
+                }
+                report.holdout_loss.push(h);
+            }
+        }
+        Ok(report)
+    }
+
+    /// One pass over `order` in minibatches of `batch`: forward (with dropout from `rng` when the
+    /// network has it), loss, backward, optimizer step. Returns the mean training loss.
+    #[allow(clippy::too_many_arguments)]
+    fn run_epoch(
+        &mut self,
+        obj: &dyn Objective,
+        rows: &FitRows,
+        order: &[usize],
+        batch: usize,
+        rng: &mut Rng,
+        epoch: usize,
+        s: &mut Scratch,
+    ) -> Result<f64, ModelError> {
+        let Self { net, opt } = self;
+        let batch = batch.max(1);
+        let dout = net.output_dim();
+        s.grads.resize(net.num_params(), 0.0);
+        let mut total = 0.0;
+        for (step, idx) in order.chunks(batch).enumerate() {
+            let b = idx.len();
+            rows.gather_inputs(idx, &mut s.x);
+            s.d_out.resize(b * dout, 0.0);
+            let out = net
+                .forward_train(&s.x, b, &mut s.ws, Some(rng))
+                .map_err(|e| nn_train(e, epoch, step))?;
+            let loss = obj.loss(rows, idx, out, Some(&mut s.d_out[..b * dout]));
+            if !loss.is_finite() {
+                return Err(ModelError::Diverged { epoch, step });
+            }
+            total += loss * b as f64;
+            net.backward(&mut s.ws, &s.d_out[..b * dout], Some(&mut s.grads), None)
+                .map_err(|e| nn_train(e, epoch, step))?;
+            opt.step(net.params_mut(), &s.grads)
+                .map_err(|e| nn_train(e, epoch, step))?;
+        }
+        Ok(total / order.len().max(1) as f64)
+    }
+
+    /// Mean loss over rows `idx` without dropout (NaN for no rows).
+    fn evaluate(
+        &self,
+        obj: &dyn Objective,
+        rows: &FitRows,
+        idx: &[usize],
+        s: &mut Scratch,
+    ) -> Result<f64, NnError> {
+        if idx.is_empty() {
+            return Ok(f64::NAN);
+        }
+        let mut total = 0.0;
+        for chunk in idx.chunks(1024) {
+            let b = chunk.len();
+            rows.gather_inputs(chunk, &mut s.x);
+            let out = self.net.forward(&s.x, b, &mut s.ws)?;
+            total += obj.loss(rows, chunk, out, None) * b as f64;
+        }
+        Ok(total / idx.len() as f64)
+    }
+}
+
+impl tandem_nn::Checkpointable for Network {
+    fn save_to(&self, prefix: &str, ckpt: &mut tandem_nn::Checkpoint) -> tandem_nn::Result<()> {
+        self.net.save_to(&format!("{prefix}.net"), ckpt)?;
+        self.opt.save_to(&format!("{prefix}.opt"), ckpt)
+    }
+
+    /// Both or neither: a failed load leaves the network as it was.
+    fn load_from(&mut self, prefix: &str, ckpt: &tandem_nn::Checkpoint) -> tandem_nn::Result<()> {
+        let mut n = self.clone();
+        n.net.load_from(&format!("{prefix}.net"), ckpt)?;
+        n.opt.load_from(&format!("{prefix}.opt"), ckpt)?;
+        *self = n;
+        Ok(())
+    }
+}
+
+/// A network's loss over rows of a fit.
 pub(crate) trait Objective {
-    /// Input width.
-    fn in_dim(&self) -> usize;
-    /// Writes the inputs of rows `idx` (`idx.len() x in_dim`) into `buf`.
-    fn inputs(&self, idx: &[usize], buf: &mut [f32]);
-    /// Mean loss over rows `idx` for network outputs `out`; writes `dL/dout` when asked.
-    fn loss(&self, idx: &[usize], out: &[f32], d_out: Option<&mut [f32]>) -> f64;
+    /// Mean loss over rows `idx` of `fit` for network outputs `out`; writes `dL/dout` into `grad`
+    /// when given.
+    fn loss(&self, fit: &FitRows, idx: &[usize], out: &[f32], grad: Option<&mut [f32]>) -> f64;
 }
 
 /// Scratch buffers of a training loop.
 #[derive(Default)]
-pub(crate) struct Scratch {
-    pub ws: MlpWorkspace,
+struct Scratch {
+    ws: MlpWorkspace,
+    x: Vec<f32>,
+    d_out: Vec<f32>,
+    grads: Vec<f32>,
+}
+
+/// One fit's rows: the training and holdout row indices, and every row's standardized inputs
+/// (`din` wide) and targets (`dout` wide), row-major.
+pub(crate) struct FitRows {
+    pub train: Vec<usize>,
+    pub holdout: Vec<usize>,
+    pub din: usize,
     pub x: Vec<f32>,
-    pub d_out: Vec<f32>,
-    pub grads: Vec<f32>,
+    pub dout: usize,
+    pub y: Vec<f32>,
 }
 
-/// One pass over `order` in minibatches of `batch`: forward (with dropout from `rng` when the
-/// network has it), loss, backward, optimizer step. Returns the mean training loss.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn run_epoch(
-    net: &mut Mlp,
-    opt: &mut Opt,
-    obj: &dyn Objective,
-    order: &[usize],
-    batch: usize,
-    rng: &mut Rng,
-    epoch: usize,
-    s: &mut Scratch,
-) -> Result<f64, ModelError> {
-    let batch = batch.max(1);
-    let (din, dout) = (obj.in_dim(), net.output_dim());
-    s.grads.resize(net.num_params(), 0.0);
-    let mut total = 0.0;
-    for (step, idx) in order.chunks(batch).enumerate() {
-        let b = idx.len();
-        s.x.resize(b * din, 0.0);
-        obj.inputs(idx, &mut s.x[..b * din]);
-        s.d_out.resize(b * dout, 0.0);
-        let out = net
-            .forward_train(&s.x[..b * din], b, &mut s.ws, Some(rng))
-            .map_err(|e| nn_train(e, epoch, step))?;
-        let loss = obj.loss(idx, out, Some(&mut s.d_out[..b * dout]));
-        if !loss.is_finite() {
-            return Err(ModelError::Diverged { epoch, step });
+impl FitRows {
+    /// The inputs of rows `idx`, one after the other, into `xb`.
+    pub(crate) fn gather_inputs(&self, idx: &[usize], xb: &mut Vec<f32>) {
+        xb.clear();
+        for &i in idx {
+            xb.extend_from_slice(&self.x[i * self.din..(i + 1) * self.din]);
         }
-        total += loss * b as f64;
-        net.backward(&mut s.ws, &s.d_out[..b * dout], Some(&mut s.grads), None)
-            .map_err(|e| nn_train(e, epoch, step))?;
-        opt.step(net.params_mut(), &s.grads)
-            .map_err(|e| nn_train(e, epoch, step))?;
     }
-    Ok(total / order.len().max(1) as f64)
+
+    /// The targets of rows `idx`, one after the other, into `yb`.
+    pub(crate) fn gather_targets(&self, idx: &[usize], yb: &mut Vec<f32>) {
+        yb.clear();
+        for &i in idx {
+            yb.extend_from_slice(self.targets(i));
+        }
+    }
+
+    /// The standardized targets of row `i`.
+    pub(crate) fn targets(&self, i: usize) -> &[f32] {
+        &self.y[i * self.dout..(i + 1) * self.dout]
+    }
 }
 
-/// Mean loss over rows `idx` without dropout (NaN for no rows).
-pub(crate) fn evaluate(
-    net: &Mlp,
-    obj: &dyn Objective,
-    idx: &[usize],
-    s: &mut Scratch,
-) -> Result<f64, NnError> {
-    if idx.is_empty() {
-        return Ok(f64::NAN);
-    }
-    let din = obj.in_dim();
-    let mut total = 0.0;
-    for chunk in idx.chunks(1024) {
-        let b = chunk.len();
-        s.x.resize(b * din, 0.0);
-        obj.inputs(chunk, &mut s.x[..b * din]);
-        let out = net.forward(&s.x[..b * din], b, &mut s.ws)?;
-        total += obj.loss(chunk, out, None) * b as f64;
-    }
-    Ok(total / idx.len() as f64)
+/// What a model's network regresses on, per row, and how the targets are standardized.
+pub(crate) enum Targets<'a> {
+    /// The state change `s' − s`, then the reward when `reward`; standardized by the training
+    /// rows' means and standard deviations.
+    StateChange { reward: bool },
+    /// The residual `s' − f(s, a)` over a known model's predictions `f(s, a)`; standardized like
+    /// the state change.
+    ResidualOver(Array2<f64>),
+    /// Targets the model builds itself, divided by the root mean square of `rms_of`'s columns
+    /// over the training rows (not shifted).
+    ScaledByRms {
+        values: Array2<f64>,
+        rms_of: ArrayView2<'a, f64>,
+    },
 }
 
-/// Trains one network for `epochs` passes over `train` (reshuffled each epoch from `rng`),
-/// recording the training loss and the loss on `holdout` after each epoch. A non-finite loss (or
-/// non-finite numbers in the network) is `Diverged`.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn train_network(
-    net: &mut Mlp,
-    opt: &mut Opt,
-    obj: &dyn Objective,
-    train: &[usize],
-    holdout: &[usize],
-    epochs: usize,
-    batch: usize,
-    rng: &mut Rng,
-) -> Result<crate::FitReport, ModelError> {
-    let mut s = Scratch::default();
-    let mut order = train.to_vec();
-    let mut report = crate::FitReport::default();
-    for epoch in 0..epochs {
-        order.shuffle(rng);
-        let l = run_epoch(net, opt, obj, &order, batch, rng, epoch, &mut s)?;
-        report.train_loss.push(l);
-        if !holdout.is_empty() {
-            let h = evaluate(net, obj, holdout, &mut s).map_err(|e| nn_train(e, epoch, 0))?;
-            if !h.is_finite() {
-                return Err(ModelError::Diverged { epoch, step: 0 });
+impl Targets<'_> {
+    /// The targets of every row of `data` (validated), and their standardization fitted on the
+    /// rows `train`.
+    fn build(self, data: &Transitions, train: &[usize]) -> (Array2<f64>, Standardizer) {
+        let values = match self {
+            Targets::StateChange { reward } => {
+                let (n, s) = (data.len(), data.state_dim());
+                let mut t = Array2::zeros((n, s + usize::from(reward)));
+                for r in 0..n {
+                    for j in 0..s {
+                        t[[r, j]] = data.next_states[[r, j]] - data.states[[r, j]];
+                    }
+                    if reward {
+                        t[[r, s]] = data.rewards[r];
+                    }
+                }
+                t
             }
-            report.holdout_loss.push(h);
+            Targets::ResidualOver(base) => &data.next_states - &base,
+            Targets::ScaledByRms { values, rms_of } => {
+                let norm = Standardizer::root_mean_square(rms_of, train);
+                return (values, norm);
+            }
+        };
+        let norm = Standardizer::fit(values.view(), train);
+        (values, norm)
+    }
+}
+
+/// Rows a fit keeps of its split: those `keep` marks; `none_kept` is the error when it keeps no
+/// training row.
+pub(crate) struct RowFilter<'a> {
+    pub keep: &'a [bool],
+    pub none_kept: &'a str,
+}
+
+/// What one fit of a transition model learns from: the state and `second_input` (the action, or
+/// the previous action) as inputs, `targets`, and the rows `filter` keeps (all without one).
+pub(crate) struct FitSpec<'a> {
+    pub second_input: ArrayView2<'a, f64>,
+    pub targets: Targets<'a>,
+    pub filter: Option<RowFilter<'a>>,
+}
+
+/// What a transition model learns, `trained` (a network and its optimizer, or an ensemble's
+/// members), with the standardizations of its two input blocks (the state, then the action or
+/// the previous action) and of its targets: the shape of mbrl-lib's `OneDTransitionRewardModel`.
+/// [`Standardized::fit`] is the one fit path of the learned transition models.
+#[derive(Debug, Clone)]
+pub(crate) struct Standardized<T> {
+    pub trained: T,
+    pub inputs: [Standardizer; 2],
+    pub targets: Standardizer,
+}
+
+impl<T: Clone> Standardized<T> {
+    /// `trained` with identity standardizations of the given widths.
+    pub(crate) fn new(trained: T, input_dims: [usize; 2], target_dim: usize) -> Self {
+        Self {
+            trained,
+            inputs: input_dims.map(Standardizer::identity),
+            targets: Standardizer::identity(target_dim),
         }
     }
-    Ok(report)
+
+    /// Fits on `data` (validated): splits its rows into training and holdout rows
+    /// ([`holdout_indices`] from `rng`, then `spec.filter`), builds the targets, fits the input
+    /// and target standardizations on the training rows, standardizes every row, and has `train`
+    /// train a clone of `trained` on them (with `rng` to draw on). The clone and the
+    /// standardizations are kept only when training succeeds, so a failed fit changes nothing.
+    pub(crate) fn fit<'a, R>(
+        &mut self,
+        data: &'a Transitions,
+        cfg: &FitConfig,
+        spec: FitSpec<'a>,
+        rng: &mut Rng,
+        train: impl FnOnce(&mut T, &FitRows, &mut Rng) -> Result<R, ModelError>,
+    ) -> Result<R, ModelError> {
+        let n = data.len();
+        let (mut train_rows, mut holdout) = holdout_indices(n, cfg.holdout_fraction, rng);
+        if let Some(f) = &spec.filter {
+            train_rows.retain(|&i| f.keep[i]);
+            holdout.retain(|&i| f.keep[i]);
+            if train_rows.is_empty() {
+                return Err(ModelError::Other(f.none_kept.into()));
+            }
+        }
+        let inputs = [
+            Standardizer::fit(data.states.view(), &train_rows),
+            Standardizer::fit(spec.second_input, &train_rows),
+        ];
+        let (targets, target_norm) = spec.targets.build(data, &train_rows);
+        let rows = FitRows {
+            din: inputs.iter().map(Standardizer::dim).sum(),
+            x: standardized_inputs(
+                &[
+                    (data.states.view(), &inputs[0]),
+                    (spec.second_input, &inputs[1]),
+                ],
+                n,
+            ),
+            dout: target_norm.dim(),
+            y: standardized_inputs(&[(targets.view(), &target_norm)], n),
+            train: train_rows,
+            holdout,
+        };
+        let mut trained = self.trained.clone();
+        let result = train(&mut trained, &rows, rng)?;
+        *self = Self {
+            trained,
+            inputs,
+            targets: target_norm,
+        };
+        Ok(result)
+    }
+
+    /// The standardized `[first | second]` input rows into `x` (reused).
+    pub(crate) fn inputs_into<'a>(
+        &self,
+        first: ArrayView2<'a, f64>,
+        second: ArrayView2<'a, f64>,
+        rows: usize,
+        x: &mut Vec<f32>,
+    ) {
+        let [a, b] = &self.inputs;
+        standardized_inputs_into(&[(first, a), (second, b)], rows, x);
+    }
 }
 
 /// Rows of `[states | actions]` standardized into one `f32` buffer.

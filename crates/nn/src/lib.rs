@@ -22,6 +22,9 @@
 //!   pass on the CPU), and a per-channel bias add with a fast gradient.
 //! * [`SharedWorkspace`]: a network workspace behind a mutex, for inference through `&self`
 //!   (models' `predict`, agents' batched acting).
+//! * [`RowDealer`]: the rows of several batched passes (an ensemble's members) dealt in equal
+//!   blocks to threads, cut only where a block keeps the numbers of its whole pass;
+//!   [`map_side_by_side`]: independent items (members in training) on threads.
 //! * [`join`]: run two closures on two threads, e.g. SAC's twin critics; on two-thread machines
 //!   the second runs on a helper that stays awake between calls ([`pair`]).
 //! * [`fastmath`]: vectorizable `exp`/`sigmoid`/`tanh` (≤ 5e-7 error) used by the activations.
@@ -121,6 +124,7 @@ pub mod mlp;
 pub mod normalizer;
 pub mod optim;
 pub mod pair;
+pub mod row_deal;
 pub mod shared;
 mod simd;
 
@@ -150,4 +154,5 @@ pub use optim::{
     clip_grad_norm, clip_grad_norm_many, grad_norm, polyak_update, AdaGrad, AdaGradConfig, Adam,
     AdamConfig, Optimizer, Sgd, SgdConfig,
 };
+pub use row_deal::{map_side_by_side, RowBlock, RowDealer};
 pub use shared::SharedWorkspace;
