@@ -36,7 +36,9 @@ enum Command {
     Env(cli::env::EnvCommand),
     /// Train a model-free agent (ddpg, sac, dqn, reinforce) and write a run directory.
     Train(cli::train::TrainArgs),
-    /// Reproduce a paper end to end (p0-pendulum: Table II and Fig. 5 of p0).
+    /// Reproduce a paper end to end: its study over seeds, with tables and figures (p0-pendulum,
+    /// p0-leo, p1, p2-cartpole, p2-maze, p3-leg, p3-mujoco, p4-pusher, p4-door, p4-reacher), or
+    /// merge studies of disjoint seeds.
     #[command(subcommand)]
     Reproduce(cli::reproduce::ReproduceCommand),
     /// Rigid-body dynamics of a URDF robot (inspect its joints; evaluate RNEA/CRBA/ABA/...).

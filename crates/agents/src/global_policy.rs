@@ -60,7 +60,8 @@ impl Default for PolicyConfig {
 /// conditions, fixed `ε`) GPS's precision weighting was mixed with LQR-FLM (final test distance
 /// 0.077 against 0.063 m uniformly weighted on seed 0, 0.048 against 0.065 m on seed 1), worse
 /// with PILQR (0.111 against 0.074 m, seed 0: the steps where a local controller has narrowed its
-/// covariance dominate the fit), and with [`MdgpsStep`]'s rule the regression diverged (seed 0).
+/// covariance dominate the fit), and with MDGPS's step rule (`tandem-algos`' `MdgpsStep`) the
+/// regression diverged (seed 0).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Weighting {

@@ -10,6 +10,7 @@
 //! | [`PixelMazeEnv`] (`PixelMaze-v0`, `PixelMaze-v1`) | p2's crowd-navigation maze as 16×16 RGB images, 5 discrete actions; v1 is the authors' released layout |
 //! | [`DcMotorPendulumEnv`] (`DcMotorPendulum-idealized-v0`, `DcMotorPendulum-real-v0`) | p0's swing-up pair; reward [`dc_motor_pendulum_reward`] |
 //! | [`Leg2REnv`] (`Leg2R-v0`, `Leg2R-real-v0`) | p3's 2R leg on a test rig (URDF, 500 Hz, 3 N m joints) tracking a semi-elliptical foot trajectory; reward (15) [`leg2r_reward`]; idealized/true pair |
+//! | [`LeoEnv`] (`Leo-v0`, `Leo-true-v0`), [`LeoWalkTask`] | p0's Leo-like biped walking: the idealized and true robots, the authors' reward and fall |
 //! | [`make`], [`make_unwrapped`], [`registered`] | the registry |
 //! | [`TimeLimit`], [`SampleCounter`], [`ClipAction`], [`RescaleAction`], [`TransformObservation`] | wrappers |
 //!

@@ -29,7 +29,8 @@
 //!   [`Transitions::validate`], holdout splits.
 //!
 //! Conventions shared by the learned models: inputs and targets are standardized inside the model
-//! (statistics of the latest fit's training rows); networks are `tandem_nn::Mlp` in `f32`, data
+//! (statistics of the latest fit's training rows), through one fit path that every learned
+//! transition model shares (holdout split, targets, standardization, commit on success); networks are `tandem_nn::Mlp` in `f32`, data
 //! and predictions `f64`. Weight initialization comes from the config's `seed`, shuffling,
 //! dropout, bootstraps and the holdout split from [`FitConfig::seed`]: the same seeds give
 //! bit-identical fits. Each fit continues from the current weights and optimizer state. Bad data
@@ -98,9 +99,8 @@
 //! (networks and optimizers), `candle-core`/`candle-nn` (the pixel model's convolutions, transposed
 //! convolutions and autograd, through `tandem_nn::candle_ext::ParamSet`), `ndarray` (batched data), `nalgebra` (plant states and the small
 //! matrices of the TVLG fit and its GMM: at most `2 dX + dU` square, where faer has no advantage,
-//! so faer is not used), `rand`/`rand_distr` (seeded sampling), `rayon` (an ensemble's members
-//! forward and train on both cores; already in the tree through `tandem-nn` and `gemm`), `serde`,
-//! `thiserror`.
+//! so faer is not used), `rand`/`rand_distr` (seeded sampling), `serde`, `thiserror`. An
+//! ensemble's members forward and train side by side through `tandem-nn`'s row dealing.
 
 mod data;
 mod ensemble;

@@ -526,7 +526,7 @@ impl DoorCost {
     }
 }
 
-/// Length of [`DoorTask`]'s observation: the state and the hook's offset from the grasp point.
+/// Length of `DoorTask`'s observation: the state and the hook's offset from the grasp point.
 pub const DOOR_OBS_DIM: usize = DOOR_STATE_DIM + 3;
 
 #[cfg(feature = "mujoco")]

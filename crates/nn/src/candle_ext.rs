@@ -1,7 +1,7 @@
 //! candle for the networks that need general autograd (convolutional Q-networks, p2's pixel
 //! model), made seeded and plugged into this crate's optimizers and checkpoints.
 //!
-//! * [`configure_cpu_threads`]: the start-up settings from `notes/candle-on-cpu.md` (without
+//! * [`configure_cpu_threads`]: the start-up settings candle needs on a CPU (without
 //!   `RAYON_NUM_THREADS`, candle re-reads `/proc/cpuinfo` on every matmul: 7 µs → 94 µs).
 //! * [`ParamSet`]: named candle [`Var`]s created with PyTorch-default initialization drawn from
 //!   our [`Rng`] (candle's CPU generator cannot be seeded), plus [`ParamSet::step`], which runs

@@ -33,7 +33,7 @@ static GEMM_THREADS: AtomicUsize = AtomicUsize::new(1);
 /// Sets how many threads the hand-derived MLP's matrix products use (default 1).
 ///
 /// On the 2-core machines this project targets, one thread per training loop was measured to be
-/// best (`notes/candle-on-cpu.md`: a second thread never helped and collapses when another process
+/// best (a second thread never helped, and it collapses when another process
 /// is busy) for training-sized products; large batched predictions (a planner's population of
 /// 500 through 400-wide layers) can gain from 2. Values above 1 use `gemm`'s rayon parallelism
 /// for products of at least 2^21 multiply-adds. Global to the process.

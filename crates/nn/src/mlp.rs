@@ -1,7 +1,7 @@
 //! A fully connected network with a hand-derived forward and backward pass over `gemm`.
 //!
 //! Why not candle here: on the 2-core CPUs this project targets, candle's per-op allocation and
-//! dispatch dominate RL-sized networks (`notes/candle-on-cpu.md`: critic update 3.9 ms in candle,
+//! dispatch dominate RL-sized networks (measured when this crate was written: critic update 3.9 ms in candle,
 //! 1.0 ms hand-derived). The gradients are checked against candle's autograd in this crate's tests.
 //!
 //! Layout: parameters live in one flat `Vec<f32>`: for each layer `l`, the weight `W_l`
@@ -620,7 +620,7 @@ impl Mlp {
 
     /// Whether an inference pass over a block of `part` rows gives each of them exactly the
     /// numbers of a pass over all `whole` rows: every layer's product takes the same kernel route
-    /// at both sizes (see [`crate::kernels::NtRoute`]; a few hundred rows through 200-wide layers
+    /// at both sizes (see `kernels::NtRoute`; a few hundred rows through 200-wide layers
     /// do, while 64 rows × 4 outputs take a dot-product kernel where 128 take `gemm`'s). A caller
     /// may then cut a batch into such blocks and run them apart, on other threads, without
     /// changing a bit.
