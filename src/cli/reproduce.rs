@@ -138,31 +138,40 @@ pub struct MergeArgs {
     pub overwrite: bool,
 }
 
+impl P3Args {
+    /// The study's options on the task `env`.
+    fn options(&self, env: Option<String>) -> StudyOptions {
+        StudyOptions {
+            env,
+            ablate_elites: self.ablate_elites,
+            oracle: self.oracle,
+        }
+    }
+}
+
 /// Runs a reproduction, or merges some.
 pub fn run(cmd: ReproduceCommand) -> Result<()> {
-    let task = |env| StudyOptions {
+    let on = |env| StudyOptions {
         env,
         ..StudyOptions::default()
     };
-    let p3 = |a: P3Args, env| {
-        let options = StudyOptions {
-            env,
-            ablate_elites: a.ablate_elites,
-            oracle: a.oracle,
-        };
-        (options, a.study)
-    };
-    let (name, (options, args)) = match cmd {
-        ReproduceCommand::P0Pendulum(a) => ("p0-pendulum", (task(None), a.study)),
-        ReproduceCommand::P0Leo(a) => ("p0-leo", (task(None), a.study)),
-        ReproduceCommand::P1(a) => ("p1", (task(a.env), a.study)),
-        ReproduceCommand::P2Cartpole(a) => ("p2-cartpole", (task(a.env), a.study)),
-        ReproduceCommand::P2Maze(a) => ("p2-maze", (task(a.env), a.study)),
-        ReproduceCommand::P3Leg(a) => ("p3-leg", p3(a, None)),
-        ReproduceCommand::P3Mujoco(a) => ("p3-mujoco", p3(a.p3, a.env)),
-        ReproduceCommand::P4Pusher(a) => ("p4-pusher", (task(None), a.study)),
-        ReproduceCommand::P4Door(a) => ("p4-door", (task(None), a.study)),
-        ReproduceCommand::P4Reacher(a) => ("p4-reacher", (task(None), a.study)),
+    let (name, args, options) = match cmd {
+        ReproduceCommand::P0Pendulum(a) => ("p0-pendulum", a.study, on(None)),
+        ReproduceCommand::P0Leo(a) => ("p0-leo", a.study, on(None)),
+        ReproduceCommand::P1(a) => ("p1", a.study, on(a.env)),
+        ReproduceCommand::P2Cartpole(a) => ("p2-cartpole", a.study, on(a.env)),
+        ReproduceCommand::P2Maze(a) => ("p2-maze", a.study, on(a.env)),
+        ReproduceCommand::P3Leg(a) => {
+            let options = a.options(None);
+            ("p3-leg", a.study, options)
+        }
+        ReproduceCommand::P3Mujoco(a) => {
+            let options = a.p3.options(a.env);
+            ("p3-mujoco", a.p3.study, options)
+        }
+        ReproduceCommand::P4Pusher(a) => ("p4-pusher", a.study, on(None)),
+        ReproduceCommand::P4Door(a) => ("p4-door", a.study, on(None)),
+        ReproduceCommand::P4Reacher(a) => ("p4-reacher", a.study, on(None)),
         ReproduceCommand::Merge(a) => {
             return tandem_studies::merge(&a.dirs, a.out.as_deref(), a.overwrite)
         }

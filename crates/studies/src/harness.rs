@@ -54,7 +54,7 @@ pub struct StudyArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Parallel jobs, one thread each.
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..=64))]
+    #[arg(long, default_value_t = DEFAULT_JOBS, value_parser = clap::value_parser!(u64).range(1..=64))]
     pub jobs: u64,
     /// TOML file overriding fields of the study's settings (unknown keys are errors).
     #[arg(long)]
@@ -74,6 +74,9 @@ pub struct StudyArgs {
     pub resume: Option<PathBuf>,
 }
 
+/// Parallel jobs when `--jobs` is not given.
+const DEFAULT_JOBS: u64 = 2;
+
 impl Default for StudyArgs {
     /// The command line's defaults: the study's seeds from 0, full settings, two jobs.
     fn default() -> Self {
@@ -82,7 +85,7 @@ impl Default for StudyArgs {
             first_seed: None,
             quick: false,
             out: None,
-            jobs: 2,
+            jobs: DEFAULT_JOBS,
             config: None,
             quiet: false,
             overwrite: false,
