@@ -1,12 +1,12 @@
 //! The one resumable driver: an algorithm is a value holding its whole state (agent, model,
 //! buffers, generators, counters, the episode in progress) that [`drive`] steps until it is done.
 //! MBPO's loop ([`crate::mbpo::Mbpo`], also M-DeMoRL's and p1's), p2's
-//! ([`crate::imagined_episodes::ImaginedEpisodes`], [`crate::imagined_pixels::PixelDqn`]) and
-//! p0's ([`crate::difference_models::DifferenceModels`]) run on it; GPS and MDGPS, whose runs take
-//! minutes and restart when stopped, keep their own loops. The driver owns the bookkeeping the algorithms share: restoring a saved
-//! run (refusing another run's checkpoint), stop requests, checkpoints when the algorithm says
-//! one is due, and the wall time (summed over every process that ran it, for the algorithms
-//! that ask).
+//! ([`crate::imagined_episodes::ImaginedEpisodes`], [`crate::imagined_pixels::PixelDqn`]) and p0's
+//! ([`crate::difference_models::DifferenceModels`]) run on it; GPS and MDGPS, whose runs take
+//! minutes and restart when stopped, keep their own loops. The driver owns the bookkeeping the
+//! algorithms share: restoring a saved run (refusing another run's checkpoint), stop requests,
+//! checkpoints when the algorithm says one is due, and the wall time (summed over every process
+//! that ran it, for the algorithms that ask).
 //!
 //! An algorithm's [`Algorithm::step`] is then its paper's loop body and nothing else. Equal
 //! runs save equal bytes, and a resumed run gives exactly the numbers of an uninterrupted one:

@@ -3,8 +3,8 @@
 //! imagined by the pixel model ([`PixelModel`]: four frames and the action in, the next frame, the
 //! reward and the termination out).
 //!
-//! The loop is Fig. 3's, as [`super::imagined_episodes::run`] runs it for REINFORCE, here for an off-policy
-//! agent through the shared [`OffPolicyLoop`]:
+//! The loop is Fig. 3's, as [`super::imagined_episodes::run`] runs it for REINFORCE, here for an
+//! off-policy agent through the shared [`OffPolicyLoop`]:
 //!
 //! 1. every real episode is played by the loop (ε-greedy, the schedule's updates after each
 //!    step, transitions into the replay buffer); with the model, its frames are kept

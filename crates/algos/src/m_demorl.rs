@@ -22,9 +22,9 @@
 //!   to the first terminal one, the task says which) join `D_MPC`;
 //! - lines 16–18: `G` SAC updates on minibatches of `D_ENV ∪ D_MPC` (MBPO's real ratio).
 //!
-//! The planner plans in the agent's action space ([`tandem_models::InActions`] turns actions into plant
-//! inputs with the task), so SAC's proposals, the MPC's bounds and the `D_MPC` actions are all
-//! in the units SAC acts in.
+//! The planner plans in the agent's action space ([`tandem_models::InActions`] turns actions into
+//! plant inputs with the task), so SAC's proposals, the MPC's bounds and the `D_MPC` actions are
+//! all in the units SAC acts in.
 //!
 //! [`run`] runs one [`Method`] for one seed; `examples/m_demorl.rs` runs M-DeMoRL on Pendulum-v1.
 

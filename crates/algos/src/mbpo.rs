@@ -21,8 +21,8 @@
 //! is trained; the count is the same.
 //!
 //! The same loop without a model ([`run_sac`]) is the model-free baseline at equal real steps and
-//! equal updates per step, and M-DeMoRL ([`super::m_demorl`]) fills the secondary buffer with DMD-MPC
-//! plans instead of rollouts: both share [`run_with`], which counts real samples exactly (a
+//! equal updates per step, and M-DeMoRL ([`super::m_demorl`]) fills the secondary buffer with
+//! DMD-MPC plans instead of rollouts: both share [`run_with`], which counts real samples exactly (a
 //! [`SampleCounter`] around the real system), evaluates the deterministic policy with
 //! [`evaluate`] on a separate, uncounted copy every [`MbpoConfig::eval_every`] real steps, and
 //! saves itself in a [`Checkpoints`] store every [`MbpoConfig::checkpoint_every`] real steps so a
