@@ -27,7 +27,6 @@ fn filled_buffer(n: usize, od: usize, discrete: Option<usize>, rng: &mut Rng) ->
         b.push(TransitionRef {
             obs: &obs,
             action: &[a],
-            prev_action: &[0.0],
             reward: rng.random_range(-16.0..0.0),
             next_obs: &next,
             terminated: false,

@@ -269,7 +269,6 @@ fn mbpo_rollouts(c: &mut Criterion) {
                 &task,
                 &judges,
                 starts.view(),
-                None,
                 1,
                 &mut policy,
                 &mut rng,
@@ -330,7 +329,7 @@ fn dmd_inner_loop(c: &mut Criterion) {
     g.bench_function("10_plans_m100_h15_ens7x4x200_sac_proposal", |b| {
         b.iter(|| {
             planner
-                .plan_batch_with_proposal(starts.view(), None, &ens, &objective, &proposal)
+                .plan_batch_with_proposal(starts.view(), &ens, &objective, &proposal)
                 .expect("plan")
         })
     });

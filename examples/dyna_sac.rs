@@ -62,7 +62,15 @@ impl<T: Task, A: OffPolicyAgent + BatchPolicy> Imagine<T, A> for MlpRollouts {
     ) -> Result<usize> {
         let model = model.ok_or_else(|| AlgoError::Config("no model to roll out".into()))?;
         let starts = sample_starts(data, ROLLOUTS, rng)?;
-        imagine(lp, &*model, task, &Judges::default(), &starts, HORIZON, rng)
+        imagine(
+            lp,
+            &*model,
+            task,
+            &Judges::default(),
+            starts.view(),
+            HORIZON,
+            rng,
+        )
     }
 }
 

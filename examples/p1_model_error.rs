@@ -50,9 +50,11 @@ fn main() -> Result<(), Box<dyn Error>> {
         return Err(format!("action source {source}: expected iid or smooth").into());
     }
     let largest = SIZES[SIZES.len() - 1];
+    // Rows [s, a_prev] for the incremental model; the MLP sees their first `s` columns.
     let data = collect(&id, &source, largest + HELD_OUT)?;
+    let a = data.actions.ncols();
+    let s = data.states.ncols() - a;
     let held = data.select(&(largest..largest + HELD_OUT).collect::<Vec<_>>());
-    let (s, a) = (data.states.ncols(), data.actions.ncols());
     println!(
         "{id}, {source} actions: one-step error on {HELD_OUT} held-out transitions \
          (RMSE / std of the true change, mean over {s} components)"
@@ -61,6 +63,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     println!("|---|---|---|");
     for n in SIZES {
         let train = data.select(&(0..n).collect::<Vec<_>>());
+        let plain = own_states(&train, s);
         let fit = FitConfig {
             epochs: (GRADIENT_STEPS * BATCH).div_ceil(n),
             batch_size: BATCH,
@@ -77,20 +80,20 @@ fn main() -> Result<(), Box<dyn Error>> {
                 ..MlpModelConfig::default()
             },
         )?;
-        mlp.fit(&train, &fit)?;
+        mlp.fit(&plain, &fit)?;
         let mut inc = IncrementalModel::new(s, a, IncrementalModelConfig::default())?;
         inc.fit(&train, &fit)?;
         println!(
             "| {n} | {:.3} | {:.3} |",
-            relative_error(&mlp, &held)?,
-            relative_error(&inc, &held)?
+            relative_error(&mlp, &own_states(&held, s), s)?,
+            relative_error(&inc, &held, s)?
         );
     }
     Ok(())
 }
 
-/// `n` transitions of `id` in canonical coordinates, episodes ending at termination or after
-/// 1000 steps (the previous action is zero at each episode's start).
+/// `n` transitions of `id` in canonical coordinates, each state followed by the action before it
+/// (zero at an episode's start), episodes ending at termination or after 1000 steps.
 fn collect(id: &str, source: &str, n: usize) -> Result<Transitions, Box<dyn Error>> {
     let task = tandem::mujoco::gym_task(id)?;
     let kind = tandem::mujoco::TaskKind::from_id(id).ok_or("not a MuJoCo task")?;
@@ -101,7 +104,7 @@ fn collect(id: &str, source: &str, n: usize) -> Result<Transitions, Box<dyn Erro
         Space::Discrete { .. } => return Err("a box action space is expected".into()),
     };
     let mut rng: Rng = SeedStream::new(0).rng("data");
-    let mut out = TransitionsBuilder::new(task.state_dim(), dim);
+    let mut out = TransitionsBuilder::with_prev_action(task.state_dim(), dim);
     let mut x = task.initial_state(&mut rng);
     let mut next = vec![0.0; x.len()];
     let mut a = vec![0.0f64; dim];
@@ -139,18 +142,30 @@ fn collect(id: &str, source: &str, n: usize) -> Result<Transitions, Box<dyn Erro
     Ok(out.build())
 }
 
-/// Mean over state components of the held-out RMSE divided by the standard deviation of the true
-/// one-step change.
-fn relative_error(model: &dyn DynamicsModel, held: &Transitions) -> Result<f64, Box<dyn Error>> {
-    let input = ModelInput::new(held.states.view(), held.actions.view())
-        .with_prev_actions(held.prev_actions.view());
+/// `data` without the previous action: the first `s` state columns.
+fn own_states(data: &Transitions, s: usize) -> Transitions {
+    Transitions {
+        states: data.states.slice(ndarray::s![.., ..s]).to_owned(),
+        next_states: data.next_states.slice(ndarray::s![.., ..s]).to_owned(),
+        ..data.clone()
+    }
+}
+
+/// Mean over the first `s` state components of the held-out RMSE divided by the standard
+/// deviation of the true one-step change.
+fn relative_error(
+    model: &dyn DynamicsModel,
+    held: &Transitions,
+    s: usize,
+) -> Result<f64, Box<dyn Error>> {
+    let input = ModelInput::new(held.states.view(), held.actions.view());
     let mut rng: Rng = SeedStream::new(0).rng("predict");
     let error: Array2<f64> = &model.predict(&input, &mut rng)?.next_states - &held.next_states;
     let change = &held.next_states - &held.states;
     let n = held.len() as f64;
     let mut total = 0.0;
     let mut counted = 0;
-    for j in 0..error.ncols() {
+    for j in 0..s {
         let mse = error.column(j).iter().map(|e| e * e).sum::<f64>() / n;
         let mean = change.column(j).sum() / n;
         let var = change

@@ -369,13 +369,18 @@ fn incremental_dyna_makes_one_step_rollouts_and_shares_sac_and_mbpo_with_p3() {
 fn incremental_rollouts_predict_from_the_real_previous_control() {
     use tandem::algos::mbpo::{Imagination, Imagine};
     use tandem::envs::{Action, Task};
-    use tandem::models::{FitConfig, TransitionsBuilder};
+    use tandem::models::FitConfig;
 
     let problem = pendulum_problem();
     let task = &problem.task;
+    let mut p1_cfg = p1_small(&small());
+    p1_cfg.base.rollouts_per_step = 1;
+    p1_cfg.base.model_train_freq = 40;
+    let mut im = incremental_dyna::IncrementalRollouts::of(&p1_cfg);
     let mut env = (problem.env)().unwrap();
     env.reset(Some(1));
-    let mut data = TransitionsBuilder::new(2, 1);
+    // The loop records what the imagination asks for.
+    let mut data = im.new_data(2, 1);
     for t in 0..200 {
         let x = env.state();
         let a = Action::Continuous(vec![2.0 * (t as f64 * 0.37).sin()]);
@@ -384,12 +389,9 @@ fn incremental_rollouts_predict_from_the_real_previous_control() {
             .unwrap();
     }
     let data = data.build();
-    assert!(data.prev_actions.iter().filter(|u| **u != 0.0).count() > 190);
-
-    let mut p1_cfg = p1_small(&small());
-    p1_cfg.base.rollouts_per_step = 1;
-    p1_cfg.base.model_train_freq = 40;
-    let mut im = incremental_dyna::IncrementalRollouts::of(&p1_cfg);
+    // Rows are [θ, ω, u_prev]: the previous control is in the state.
+    assert_eq!(data.state_dim(), 3);
+    assert!(data.states.column(2).iter().filter(|u| **u != 0.0).count() > 190);
     let mut model = im.new_model(&p1_cfg.base, 2, 1, 7).unwrap().unwrap();
     let fit = FitConfig {
         epochs: 5,
@@ -415,6 +417,7 @@ fn incremental_rollouts_predict_from_the_real_previous_control() {
     for k in 0..n {
         let row = buffer.get(k).unwrap();
         // Pendulum observations are (cos θ, sin θ, ω): find the start among the real states.
+        // The rows' previous controls are real (nonzero) ones, and the rollouts keep them.
         let (c, s, w) = (
             f64::from(row.obs[[0, 0]]),
             f64::from(row.obs[[0, 1]]),
@@ -431,16 +434,16 @@ fn incremental_rollouts_predict_from_the_real_previous_control() {
         let u = f64::from(row.actions[[0, 0]]);
         // The rollouts start from the canonical state (the angle wrapped into [-π, π)).
         let mut x = data.states.row(i).to_vec();
-        task.canonicalize(&mut x);
-        let states = ndarray::Array2::from_shape_vec((1, 2), x.clone()).unwrap();
-        let prev = data.prev_actions.slice(ndarray::s![i..i + 1, ..]);
+        task.canonicalize(&mut x[..2]);
+        let states = ndarray::Array2::from_shape_vec((1, 3), x.clone()).unwrap();
         let actions = array![[task.control(&Action::Continuous(vec![u]))[0]]];
-        let input = ModelInput::new(states.view(), actions.view()).with_prev_actions(prev);
+        let input = ModelInput::new(states.view(), actions.view());
         let next = model
             .predict(&input, &mut rng_from_seed(0))
             .unwrap()
             .next_states;
-        let obs = task.observe(next.row(0).as_slice().unwrap());
+        let next = next.row(0).to_vec();
+        let obs = task.observe(&next[..2]);
         for (j, o) in obs.iter().enumerate() {
             let stored = f64::from(row.next_obs[[0, j]]);
             assert!(
@@ -448,7 +451,7 @@ fn incremental_rollouts_predict_from_the_real_previous_control() {
                 "row {k}, component {j}: {stored} vs the model's {o}"
             );
         }
-        let r = task.reward(&x, &[actions[[0, 0]]], next.row(0).as_slice().unwrap());
+        let r = task.reward(&x[..2], &[actions[[0, 0]]], &next[..2]);
         assert!(
             (f64::from(row.rewards[0]) - r).abs() < 1e-3 * r.abs().max(1.0),
             "row {k}"

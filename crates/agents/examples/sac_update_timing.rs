@@ -27,7 +27,6 @@ fn main() {
         buf.push(TransitionRef {
             obs: &o,
             action: &[a],
-            prev_action: &[0.0],
             reward: rng.random_range(-16.0..0.0),
             next_obs: &nx,
             terminated: false,

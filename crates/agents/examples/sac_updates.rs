@@ -30,7 +30,6 @@ fn run(updates: usize) -> f64 {
         buf.push(TransitionRef {
             obs: &o,
             action: &[rng.random_range(-2.0..2.0)],
-            prev_action: &[0.0],
             reward: rng.random_range(-16.0..0.0),
             next_obs: &next,
             terminated: false,

@@ -213,7 +213,6 @@ impl<A: OffPolicyAgent> OffPolicyAgent for Adapted<A> {
             }
         }
         b.actions.assign(&batch.actions);
-        b.prev_actions.assign(&batch.prev_actions);
         b.terminated.assign(&batch.terminated);
         let rs = self.reward_scale as f32;
         b.rewards.zip_mut_with(&batch.rewards, |d, s| *d = s * rs);

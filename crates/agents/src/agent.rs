@@ -191,8 +191,6 @@ pub struct Batch {
     pub obs: Array2<f32>,
     /// Actions `a`, `n x act_dim`.
     pub actions: Array2<f32>,
-    /// The action taken one step before `a` (zeros at an episode's start), `n x act_dim` (p1).
-    pub prev_actions: Array2<f32>,
     /// Rewards `r`, length `n`.
     pub rewards: Array1<f32>,
     /// Next observations `s'`, `n x obs_dim`.
@@ -207,7 +205,6 @@ impl Batch {
         Self {
             obs: Array2::zeros((n, obs_dim)),
             actions: Array2::zeros((n, act_dim)),
-            prev_actions: Array2::zeros((n, act_dim)),
             rewards: Array1::zeros(n),
             next_obs: Array2::zeros((n, obs_dim)),
             terminated: Array1::zeros(n),
@@ -245,11 +242,6 @@ impl Batch {
             ("batch observations", self.obs.dim(), (n, obs_dim)),
             ("batch next observations", self.next_obs.dim(), (n, obs_dim)),
             ("batch actions", self.actions.dim(), (n, act_dim)),
-            (
-                "batch previous actions",
-                self.prev_actions.dim(),
-                (n, act_dim),
-            ),
         ];
         for (what, got, want) in shapes {
             if got.1 != want.1 {

@@ -141,8 +141,6 @@ pub struct StepRecord {
     pub action: Action,
     /// The action as stored (`f32` precision; the index for a discrete action).
     pub action_row: Vec<f64>,
-    /// The action stored one step before (zeros at an episode's start).
-    pub prev_action: Vec<f64>,
     /// The reward.
     pub reward: f64,
     /// The next observation.
@@ -166,8 +164,8 @@ impl StepRecord {
     }
 }
 
-/// One episode in progress on one environment: seeded resets, the previous action, the
-/// running return and length, and the episode limit. Serializable, so a run saved mid-episode
+/// One episode in progress on one environment: seeded resets, the running return and length,
+/// and the episode limit. Serializable, so a run saved mid-episode
 /// resumes with the same numbers (the environment's own state is saved by the caller).
 ///
 /// Episode `k` starts with `env.reset(Some(seed))` for the seed `SeedStream::new(seed)` derives
@@ -178,7 +176,6 @@ pub struct EpisodeRunner {
     prefix: String,
     limit: Option<usize>,
     obs: Option<Vec<f64>>,
-    prev_action: Vec<f64>,
     episode: u64,
     ep_return: f64,
     ep_len: usize,
@@ -192,7 +189,6 @@ impl EpisodeRunner {
             prefix: prefix.to_string(),
             limit: None,
             obs: None,
-            prev_action: Vec::new(),
             episode: 0,
             ep_return: 0.0,
             ep_len: 0,
@@ -230,7 +226,6 @@ impl EpisodeRunner {
         let seed = SeedStream::new(self.seed).derive(&format!("{}{}", self.prefix, self.episode));
         let o = env.reset(Some(seed));
         agent.reset_episode();
-        self.prev_action = vec![0.0; env.action_space().flat_dim()];
         self.ep_return = 0.0;
         self.ep_len = 0;
         o
@@ -252,10 +247,9 @@ impl EpisodeRunner {
         self.ep_return += st.reward;
         let limit = self.limit.or(env.max_episode_steps());
         let truncated = st.truncated || limit.is_some_and(|m| self.ep_len >= m);
-        let mut row = vec![0.0f32; self.prev_action.len()];
+        let mut row = vec![0.0f32; env.action_space().flat_dim()];
         action_row(&action, &mut row);
         let action_row: Vec<f64> = row.iter().map(|v| f64::from(*v)).collect();
-        let prev_action = std::mem::replace(&mut self.prev_action, action_row.clone());
         let done = st.terminated || truncated;
         if done {
             self.episode += 1;
@@ -266,7 +260,6 @@ impl EpisodeRunner {
             obs,
             action,
             action_row,
-            prev_action,
             reward: st.reward,
             next_obs: st.observation,
             terminated: st.terminated,
@@ -453,7 +446,6 @@ impl<A: OffPolicyAgent> OffPolicyLoop<A> {
 
     /// Stores transitions produced elsewhere (a model's imagined rollouts), one per row: `obs`,
     /// `actions` (the index for a discrete action), `rewards`, `next_obs` and `terminated`.
-    /// Their previous actions are stored as zeros.
     pub fn push_rows(
         &mut self,
         store: Store,
@@ -478,7 +470,6 @@ impl<A: OffPolicyAgent> OffPolicyLoop<A> {
                 });
             }
         }
-        let zeros = vec![0.0; self.primary.act_dim()];
         for i in 0..n {
             let (o, a, o1) = (obs.row(i), actions.row(i), next_obs.row(i));
             self.push(
@@ -486,7 +477,6 @@ impl<A: OffPolicyAgent> OffPolicyLoop<A> {
                 TransitionRef {
                     obs: &o.to_vec(),
                     action: &a.to_vec(),
-                    prev_action: &zeros,
                     reward: rewards[i],
                     next_obs: &o1.to_vec(),
                     terminated: terminated[i],
@@ -524,7 +514,6 @@ impl<A: OffPolicyAgent> OffPolicyLoop<A> {
             TransitionRef {
                 obs: &rec.obs,
                 action: &rec.action_row,
-                prev_action: &rec.prev_action,
                 reward: rec.reward,
                 next_obs: &rec.next_obs,
                 terminated: rec.terminated,
@@ -781,12 +770,10 @@ mod tests {
         assert_eq!(done, [false, false, true, false, false, true, false]);
         assert_eq!(runner.episode(), 2);
         assert!(runner.in_episode());
-        // Episode 1 started from the reset seeded by "x1"; its first previous action is zero.
+        // Episode 1 started from the reset seeded by "x1".
         let mut fresh = tandem_envs::make("Pendulum-v1").unwrap();
         fresh.reset(Some(SeedStream::new(7).derive("x1")));
         assert_eq!(recs[3].states.as_ref().unwrap().0, fresh.state());
-        assert_eq!(recs[3].prev_action, vec![0.0]);
-        assert_eq!(recs[4].prev_action, recs[3].action_row);
         assert_eq!(recs[5].episode_len, 3);
         let sum: f64 = recs[3..6].iter().map(|r| r.reward).sum();
         assert!((recs[5].episode_return - sum).abs() < 1e-12);

@@ -20,8 +20,6 @@ pub struct TransitionRef<'a> {
     pub obs: &'a [f64],
     /// Action `a` (a discrete action as a one-element slice holding its index).
     pub action: &'a [f64],
-    /// The previous action `a_{t-1}` (zeros at an episode's start).
-    pub prev_action: &'a [f64],
     /// Reward.
     pub reward: f64,
     /// Next observation `s'`.
@@ -38,7 +36,6 @@ pub struct ReplayBuffer {
     next: usize,
     obs: Array2<f32>,
     actions: Array2<f32>,
-    prev_actions: Array2<f32>,
     rewards: Array1<f32>,
     next_obs: Array2<f32>,
     terminated: Array1<f32>,
@@ -61,7 +58,6 @@ impl ReplayBuffer {
             next: 0,
             obs: Array2::zeros((capacity, obs_dim)),
             actions: Array2::zeros((capacity, act_dim)),
-            prev_actions: Array2::zeros((capacity, act_dim)),
             rewards: Array1::zeros(capacity),
             next_obs: Array2::zeros((capacity, obs_dim)),
             terminated: Array1::zeros(capacity),
@@ -71,9 +67,10 @@ impl ReplayBuffer {
     /// Bytes a buffer of `capacity` transitions allocates (`f32` columns: observation, next
     /// observation, action, previous action, reward, terminated); `None` on overflow.
     pub fn bytes(capacity: usize, obs_dim: usize, act_dim: usize) -> Option<u64> {
+        // Observations, next observations, actions, reward and termination.
         let width = obs_dim
-            .checked_add(act_dim)?
             .checked_mul(2)?
+            .checked_add(act_dim)?
             .checked_add(2)?;
         tandem_nn::budget::f32_bytes(&[capacity, width])
     }
@@ -111,7 +108,6 @@ impl ReplayBuffer {
             ("replay observation", t.obs, od),
             ("replay next observation", t.next_obs, od),
             ("replay action", t.action, ad),
-            ("replay previous action", t.prev_action, ad),
         ] {
             if v.len() != d {
                 return Err(AgentError::Dim {
@@ -138,7 +134,6 @@ impl ReplayBuffer {
         };
         copy(&mut self.obs, t.obs);
         copy(&mut self.actions, t.action);
-        copy(&mut self.prev_actions, t.prev_action);
         copy(&mut self.next_obs, t.next_obs);
         self.rewards[i] = t.reward as f32;
         self.terminated[i] = if t.terminated { 1.0 } else { 0.0 };
@@ -156,9 +151,6 @@ impl ReplayBuffer {
             let src = self.slot(k);
             out.obs.row_mut(dst).assign(&self.obs.row(src));
             out.actions.row_mut(dst).assign(&self.actions.row(src));
-            out.prev_actions
-                .row_mut(dst)
-                .assign(&self.prev_actions.row(src));
             out.next_obs.row_mut(dst).assign(&self.next_obs.row(src));
             out.rewards[dst] = self.rewards[src];
             out.terminated[dst] = self.terminated[src];
@@ -190,9 +182,6 @@ impl ReplayBuffer {
     fn copy_row(&self, src: usize, b: &mut Batch, dst: usize) {
         b.obs.row_mut(dst).assign(&self.obs.row(src));
         b.actions.row_mut(dst).assign(&self.actions.row(src));
-        b.prev_actions
-            .row_mut(dst)
-            .assign(&self.prev_actions.row(src));
         b.next_obs.row_mut(dst).assign(&self.next_obs.row(src));
         b.rewards[dst] = self.rewards[src];
         b.terminated[dst] = self.terminated[src];
@@ -320,11 +309,6 @@ impl ReplayBuffer {
             &rows(&self.actions, ad),
         )?;
         ckpt.put_f32(
-            &format!("{prefix}.prev_actions"),
-            &[n, ad],
-            &rows(&self.prev_actions, ad),
-        )?;
-        ckpt.put_f32(
             &format!("{prefix}.next_obs"),
             &[n, od],
             &rows(&self.next_obs, od),
@@ -361,7 +345,6 @@ impl ReplayBuffer {
         };
         fill(&mut fresh.obs, "obs", od)?;
         fill(&mut fresh.actions, "actions", ad)?;
-        fill(&mut fresh.prev_actions, "prev_actions", ad)?;
         fill(&mut fresh.next_obs, "next_obs", od)?;
         let r = ckpt.get_f32(&format!("{prefix}.rewards"), Some(&[n]))?;
         fresh.rewards.as_slice_mut().expect("contiguous")[..n].copy_from_slice(&r);
@@ -383,7 +366,6 @@ mod tests {
         buf.push(TransitionRef {
             obs: &[k, -k],
             action: &[k * 10.0],
-            prev_action: &[k * 10.0 - 10.0],
             reward: k,
             next_obs: &[k + 1.0, -k - 1.0],
             terminated: k as i64 % 3 == 0,
@@ -403,7 +385,6 @@ mod tests {
             let t = b.get(i).unwrap();
             assert_eq!(t.obs.row(0).to_vec(), vec![k, -k]);
             assert_eq!(t.actions[[0, 0]], k * 10.0);
-            assert_eq!(t.prev_actions[[0, 0]], k * 10.0 - 10.0);
             assert_eq!(t.next_obs.row(0).to_vec(), vec![k + 1.0, -k - 1.0]);
             assert_eq!(t.rewards[0], k);
             assert_eq!(t.terminated[0], if k as i64 % 3 == 0 { 1.0 } else { 0.0 });
@@ -463,7 +444,6 @@ mod tests {
         let bad = TransitionRef {
             obs: &[0.0],
             action: &[0.0],
-            prev_action: &[0.0],
             reward: 0.0,
             next_obs: &[0.0, 0.0],
             terminated: false,

@@ -23,7 +23,6 @@ fn continuous_bandit_buffer(n: usize, seed: u64) -> ReplayBuffer {
         b.push(TransitionRef {
             obs: &[s],
             action: &[a],
-            prev_action: &[0.0],
             reward: -(a - 1.5 * s).powi(2),
             next_obs: &[0.0],
             terminated: true,
@@ -228,7 +227,6 @@ fn dqn_counts_epsilon_and_target_updates_in_env_steps() {
         buf.push(TransitionRef {
             obs: &[f64::from(i) / 100.0],
             action: &[f64::from(i % 2)],
-            prev_action: &[0.0],
             reward: 1.0,
             next_obs: &[0.0],
             terminated: false,
@@ -273,7 +271,6 @@ fn dqn_learns_a_contextual_bandit_and_double_dqn_too() {
             buf.push(TransitionRef {
                 obs: &[s],
                 action: &[a as f64],
-                prev_action: &[0.0],
                 reward: r,
                 next_obs: &[0.0],
                 terminated: true,
@@ -342,7 +339,6 @@ fn conv_dqn_learns_an_image_bandit_and_checkpoints_round_trip() {
         buf.push(TransitionRef {
             obs: &img,
             action: &[a as f64],
-            prev_action: &[0.0],
             reward: if a == right { 1.0 } else { 0.0 },
             next_obs: &img,
             terminated: true,

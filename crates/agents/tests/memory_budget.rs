@@ -56,7 +56,7 @@ fn oversized_networks_and_buffers_are_refused_before_allocation() {
     let pendulum_obs = Space::symmetric(3, 8.0);
     let torque = Space::symmetric(1, 2.0);
 
-    // Issue 19: four hidden layers of 16384 pass the per-layer range check...
+    // Four hidden layers of 16384 pass the per-layer range check...
     let sac = SacConfig {
         hidden: vec![16384; 4],
         ..Default::default()
@@ -69,9 +69,9 @@ fn oversized_networks_and_buffers_are_refused_before_allocation() {
     let critic: u64 = 4 * 16384 + 16384 + 3 * (16384 * 16384 + 16384) + 16384 + 1;
     let params_bytes = 4 * (4 * actor + 2 * 5 * critic);
     // Activations: 3 nets × batch 256 × 65541 widths × 3 buffers × 4 B; the replay buffer:
-    // 10^6 transitions × (2·3 + 2·1 + 2) floats × 4 B; a minibatch of 256 of them.
+    // 10^6 transitions × (2·3 + 1 + 2) floats × 4 B; a minibatch of 256 of them.
     let activations: u64 = 3 * 256 * 65541 * 3 * 4;
-    let replay: u64 = 1_000_000 * 10 * 4 + 256 * 10 * 4;
+    let replay: u64 = 1_000_000 * 9 * 4 + 256 * 9 * 4;
     assert_eq!(
         sac.memory(3, 1).total(),
         Some(params_bytes + activations + replay)

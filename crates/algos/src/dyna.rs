@@ -9,7 +9,7 @@
 //! [`tandem_models::TransitionsBuilder::push_canonical`]. `examples/dyna_sac.rs` is the whole
 //! loop on Pendulum-v1.
 
-use ndarray::{Array2, Axis};
+use ndarray::{Array2, ArrayView2, Axis};
 use rand::Rng as _;
 use tandem_agents::{BatchPolicy, Mode, OffPolicyAgent, OffPolicyLoop, Store};
 use tandem_core::Rng;
@@ -18,38 +18,14 @@ use tandem_models::{branched_rollouts, DynamicsModel, Judges, ModelError, Transi
 
 use super::Result;
 
-/// Where branched rollouts start: real states and the controls applied just before them
-/// ([`Transitions::prev_actions`]: zero at an episode's start), row for row.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Starts {
-    /// `n x S` canonical states.
-    pub states: Array2<f64>,
-    /// `n x U` previous controls (what p1's incremental model conditions on).
-    pub prev_controls: Array2<f64>,
-}
-
-/// `n` rows drawn uniformly (with replacement) from `data`: the starts of branched rollouts. An
-/// error for empty data.
-pub fn sample_starts(data: &Transitions, n: usize, rng: &mut Rng) -> Result<Starts> {
-    let idx = start_rows(data, n, rng)?;
-    Ok(Starts {
-        states: data.states.select(Axis(0), &idx),
-        prev_controls: data.prev_actions.select(Axis(0), &idx),
-    })
-}
-
-/// The states of [`sample_starts`] alone (the same draws).
-pub fn sample_states(data: &Transitions, n: usize, rng: &mut Rng) -> Result<Array2<f64>> {
-    let idx = start_rows(data, n, rng)?;
-    Ok(data.states.select(Axis(0), &idx))
-}
-
-/// `n` row indices of `data` drawn uniformly with replacement; an error for empty data.
-fn start_rows(data: &Transitions, n: usize, rng: &mut Rng) -> Result<Vec<usize>> {
+/// `n` states drawn uniformly (with replacement) from `data`: where branched rollouts start.
+/// An error for empty data.
+pub fn sample_starts(data: &Transitions, n: usize, rng: &mut Rng) -> Result<Array2<f64>> {
     if data.is_empty() {
         return Err(ModelError::Empty.into());
     }
-    Ok((0..n).map(|_| rng.random_range(0..data.len())).collect())
+    let idx: Vec<usize> = (0..n).map(|_| rng.random_range(0..data.len())).collect();
+    Ok(data.states.select(Axis(0), &idx))
 }
 
 /// Rolls `model` under `task` for `horizon` steps from every row of `starts`, acting with the
@@ -61,7 +37,7 @@ pub fn imagine<A, M, T>(
     model: &M,
     task: &T,
     judges: &Judges,
-    starts: &Starts,
+    starts: ArrayView2<'_, f64>,
     horizon: usize,
     rng: &mut Rng,
 ) -> Result<usize>
@@ -76,16 +52,7 @@ where
             .act_batch(obs, Mode::Explore, rng)
             .map_err(|e| ModelError::Other(format!("policy: {e}")))
     };
-    let im = branched_rollouts(
-        model,
-        task,
-        judges,
-        starts.states.view(),
-        Some(starts.prev_controls.view()),
-        horizon,
-        &mut policy,
-        rng,
-    )?;
+    let im = branched_rollouts(model, task, judges, starts, horizon, &mut policy, rng)?;
     lp.push_rows(
         Store::Secondary,
         im.observations.view(),
@@ -135,7 +102,6 @@ mod tests {
         let mut rng = rng_from_seed(2);
         let starts = sample_starts(&data, 5, &mut rng).unwrap();
         assert!(starts
-            .states
             .rows()
             .into_iter()
             .all(|r| r[0] == 0.5 || r[0] == -2.0));
@@ -144,7 +110,7 @@ mod tests {
             &PlantModel::new(plant),
             &task,
             &Judges::default(),
-            &starts,
+            starts.view(),
             3,
             &mut rng,
         )
@@ -170,6 +136,6 @@ mod tests {
             let r = tandem_envs::pendulum_reward(&[s.atan2(c), w], u);
             assert!((f64::from(t.rewards[0]) - r).abs() < 1e-3 * r.abs().max(1.0));
         }
-        assert!(sample_states(&Transitions::default(), 1, &mut rng).is_err());
+        assert!(sample_starts(&Transitions::default(), 1, &mut rng).is_err());
     }
 }

@@ -7,10 +7,12 @@
 //! - line 3: **train `f(θ)` on `D_env`**: here the [`IncrementalModel`] `ŝ_{t+1} = s_t +
 //!   L_θ(s_t, a_{t−1}) (a_t − a_{t−1})` (eqs. 4–6), refit on all real transitions every
 //!   [`MbpoConfig::model_train_freq`] real steps by loss (5) on the one-step-back data (the
-//!   loop's data carry each transition's previous control, zero at an episode's start);
+//!   model's state is `[s_t, a_{t−1}]`: the loop records each state with the control before it,
+//!   zero at an episode's start, [`Imagination::new_data`]);
 //! - line 5: act in the real system with SAC's exploring policy, the transition into `D_env`;
 //! - lines 6–9: **`M` one-step model rollouts** from real states drawn uniformly from `D_env`,
-//!   acted by SAC, each predicted from its real state and the real control before it; the
+//!   acted by SAC, each predicted from its real state and the real control before it (the
+//!   rollouts run under [`WithPrevAction`] of the task, whose state carries that control); the
 //!   reward and termination of the predicted step are the task's ("reward from the task": the
 //!   incremental model predicts states only); the transitions fill `D_model`;
 //! - lines 10–12: `G` SAC updates on minibatches of `D_model` and `D_env` at
@@ -25,9 +27,10 @@
 use serde::{Deserialize, Serialize};
 use tandem_agents::{BatchPolicy, OffPolicyAgent, OffPolicyLoop};
 use tandem_core::{LinearSchedule, Rng};
-use tandem_envs::{Env, EnvError, Task};
+use tandem_envs::{Env, EnvError, Task, WithPrevAction};
 use tandem_models::{
     DynamicsModel, FitConfig, IncrementalModel, IncrementalModelConfig, Judges, Transitions,
+    TransitionsBuilder,
 };
 
 use super::mbpo::{
@@ -133,6 +136,11 @@ impl Imagination for IncrementalRollouts {
         };
         Ok(Some(IncrementalModel::new(state_dim, control_dim, cfg)?))
     }
+
+    /// The incremental model's rows: canonical states and the control applied before them.
+    fn new_data(&self, state_dim: usize, control_dim: usize) -> TransitionsBuilder {
+        TransitionsBuilder::with_prev_action(state_dim, control_dim)
+    }
 }
 
 impl<T: Task, A: OffPolicyAgent + BatchPolicy> Imagine<T, A> for IncrementalRollouts {
@@ -148,7 +156,8 @@ impl<T: Task, A: OffPolicyAgent + BatchPolicy> Imagine<T, A> for IncrementalRoll
     ) -> Result<usize> {
         let model = fitted(model, Method::IncrementalDyna.name())?;
         let r = &self.rollouts;
-        r.through(&*model, &r.judges, lp, task, data, epoch, rng)
+        let task = WithPrevAction::new(task);
+        r.through(&*model, &r.judges, lp, &task, data, epoch, rng)
     }
 }
 
@@ -290,7 +299,7 @@ pub fn fine_tune<T: Task + ?Sized>(
             cfg.increment_weight
         )));
     }
-    let mut data = tandem_models::TransitionsBuilder::new(s_dim, a_dim);
+    let mut data = TransitionsBuilder::with_prev_action(s_dim, a_dim);
     let mut out = Vec::with_capacity(cfg.episodes);
     for ep in 0..cfg.episodes {
         let mut obs = env.reset(Some(seed + ep as u64));
@@ -305,11 +314,14 @@ pub fn fine_tune<T: Task + ?Sized>(
             if residual {
                 let sd = desired(&s);
                 let e: Vec<f64> = s.iter().zip(&sd).map(|(x, d)| x - d).collect();
-                let states = ndarray::Array2::from_shape_vec((1, s_dim), s.clone())
-                    .map_err(|e| super::AlgoError::Config(e.to_string()))?;
-                let prevs = ndarray::Array2::from_shape_vec((1, a_dim), prev.clone())
-                    .map_err(|e| super::AlgoError::Config(e.to_string()))?;
-                let l = model.gain(states.view(), prevs.view())?.remove(0);
+                let z = ndarray::Array2::from_shape_fn((1, s_dim + a_dim), |(_, j)| {
+                    if j < s_dim {
+                        s[j]
+                    } else {
+                        prev[j - s_dim]
+                    }
+                });
+                let l = model.gain(z.view())?.remove(0);
                 if let Some(k) = residual_gain(&l, &q, cfg.increment_weight, cfg.horizon) {
                     let de = k * nalgebra::DVector::from_column_slice(&e);
                     for j in 0..a_dim {

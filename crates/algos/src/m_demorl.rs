@@ -39,7 +39,7 @@ use tandem_envs::{Env, EnvError, Task};
 use tandem_models::{DynamicsModel, InActions, ProbabilisticEnsemble, Propagation, Transitions};
 use tandem_planners::{Bounds, DmdMpc, DmdMpcConfig, Noise, Objective};
 
-use super::dyna::sample_states;
+use super::dyna::sample_starts;
 use super::mbpo::{
     ensemble_of, fitted, observations, run_with, Event, Imagination, Imagine, MbpoConfig, Problem,
     Rollouts, RunRecord,
@@ -311,7 +311,7 @@ impl<T: Task + Clone + Send + Sync + 'static> Imagine<T, Sac> for MpcPlans {
         }
         model.set_propagation(Propagation::FixedMember);
         let h = self.cfg.horizon.at(epoch);
-        let starts = sample_states(data, self.cfg.plans_per_refit(epoch), rng)?;
+        let starts = sample_starts(data, self.cfg.plans_per_refit(epoch), rng)?;
         let (low, high) = super::box_bounds(task.action_space(), "M-DeMoRL plans over")?;
         let half: Vec<f64> = low.iter().zip(&high).map(|(l, u)| 0.5 * (u - l)).collect();
         let mut planner = DmdMpc::new(DmdMpcConfig {
@@ -338,8 +338,7 @@ impl<T: Task + Clone + Send + Sync + 'static> Imagine<T, Sac> for MpcPlans {
                 let batch = starts.slice(ndarray::s![i..(i + chunk).min(starts.nrows()), ..]);
                 model.resample_member_offset(&mut rng.borrow_mut());
                 let m = InActions::new(&*model, task);
-                let plans =
-                    planner.plan_batch_with_proposal(batch, None, &m, &objective, &proposal)?;
+                let plans = planner.plan_batch_with_proposal(batch, &m, &objective, &proposal)?;
                 for plan in &plans {
                     rows.push(task, &plan.transitions());
                 }

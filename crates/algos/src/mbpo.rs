@@ -447,6 +447,11 @@ pub trait Imagination {
         control_dim: usize,
         seed: u64,
     ) -> Result<Option<Self::Model>>;
+    /// An empty record of real transitions as the model learns from them: the task's canonical
+    /// states (the default), or those and the previous control (p1's incremental model).
+    fn new_data(&self, state_dim: usize, control_dim: usize) -> TransitionsBuilder {
+        TransitionsBuilder::new(state_dim, control_dim)
+    }
 }
 
 /// The model of an imagination that fits none ([`OracleRollouts`]): a type without values, so
@@ -624,7 +629,15 @@ impl Rollouts {
     ) -> Result<usize> {
         let n = self.rollouts_per_step * self.per_refit as usize;
         let starts = sample_starts(data, n, rng)?;
-        imagine(lp, model, task, judges, &starts, self.length.at(epoch), rng)
+        imagine(
+            lp,
+            model,
+            task,
+            judges,
+            starts.view(),
+            self.length.at(epoch),
+            rng,
+        )
     }
 }
 
@@ -859,6 +872,10 @@ where
             Some(i) => i.new_model(cfg, s_dim, u_dim, seeds.derive("model"))?,
             None => None,
         };
+        let pending = imagination.as_deref().map_or_else(
+            || TransitionsBuilder::new(s_dim, u_dim),
+            |i| i.new_data(s_dim, u_dim),
+        );
         let (env, count) = SampleCounter::new((problem.env)()?);
         Ok(Self {
             problem,
@@ -872,7 +889,7 @@ where
             count,
             eval_env,
             stored: Transitions::default(),
-            pending: TransitionsBuilder::new(s_dim, u_dim),
+            pending,
             s: State {
                 real_steps: 0,
                 curve: Vec::new(),
@@ -906,19 +923,14 @@ where
         if self.pending.is_empty() {
             return Ok(());
         }
-        let (s, u) = self.stored_dims();
-        let new = std::mem::replace(&mut self.pending, TransitionsBuilder::new(s, u)).build();
+        let fresh = self.pending.empty_like();
+        let new = std::mem::replace(&mut self.pending, fresh).build();
         if self.stored.is_empty() {
             self.stored = new;
         } else {
             self.stored.extend(&new)?;
         }
         Ok(())
-    }
-
-    fn stored_dims(&self) -> (usize, usize) {
-        let task = &self.problem.task;
-        (task.state_dim(), tandem_envs::control_dim(task))
     }
 
     /// Trains the model on `D_env`, then lets the imagination fill `D_model` (MBPO: `M`

@@ -11,6 +11,7 @@
 //! | [`DcMotorPendulumEnv`] (`DcMotorPendulum-idealized-v0`, `DcMotorPendulum-real-v0`) | p0's swing-up pair; reward [`dc_motor_pendulum_reward`] |
 //! | [`Leg2REnv`] (`Leg2R-v0`, `Leg2R-real-v0`) | p3's 2R leg on a test rig (URDF, 500 Hz, 3 N m joints) tracking a semi-elliptical foot trajectory; reward (15) [`leg2r_reward`]; idealized/true pair |
 //! | [`LeoEnv`] (`Leo-v0`, `Leo-true-v0`), [`LeoWalkTask`] | p0's Leo-like biped walking: the idealized and true robots, the authors' reward and fall |
+//! | [`WithPrevAction`] | a task whose state carries the previous control, for models that condition on it |
 //! | [`make`], [`make_unwrapped`], [`registered`] | the registry |
 //! | [`TimeLimit`], [`SampleCounter`], [`ClipAction`], [`RescaleAction`], [`TransformObservation`] | wrappers |
 //!
@@ -24,6 +25,7 @@ mod leg2r;
 mod leo;
 mod pendulum;
 mod pixel_maze;
+mod prev_action;
 mod registry;
 mod task;
 pub mod wrappers;
@@ -47,6 +49,7 @@ pub use pixel_maze::{
     ObstaclePlacement, PixelMazeEnv, PixelMazeLayout, PIXEL_MAZE_GRID, PIXEL_MAZE_OBSTACLES,
     PIXEL_MAZE_PIXELS,
 };
+pub use prev_action::WithPrevAction;
 pub use registry::{make, make_unwrapped, registered, EnvSpec};
 pub use tandem_core::{Action, Space};
 pub use task::{clip_to, control_dim, PlantEnv, Task, TaskEpisodes};

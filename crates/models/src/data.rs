@@ -40,26 +40,15 @@ pub(crate) fn check_array(
     Ok(())
 }
 
-/// Checks a prediction batch against a model's widths (and its previous actions when given, or
-/// when `need_prev`); returns the batch size.
+/// Checks a prediction batch against a model's widths; returns the batch size.
 pub(crate) fn check_input(
     input: &ModelInput<'_>,
     state_dim: usize,
     action_dim: usize,
-    need_prev: bool,
 ) -> Result<usize, ModelError> {
     let b = input.states.nrows();
     check_array("input states", input.states, b, state_dim)?;
     check_array("input actions", input.actions, b, action_dim)?;
-    match input.prev_actions {
-        Some(p) => check_array("input prev_actions", p, b, action_dim)?,
-        None if need_prev => {
-            return Err(ModelError::MissingInput(
-                "previous actions (ModelInput::with_prev_actions)".into(),
-            ))
-        }
-        None => {}
-    }
     Ok(b)
 }
 
@@ -93,7 +82,6 @@ impl tandem_nn::Checkpointable for Transitions {
         let t = Transitions {
             states: matrix("states")?,
             actions: matrix("actions")?,
-            prev_actions: matrix("prev_actions")?,
             next_states: matrix("next_states")?,
             rewards: Array1::from(ckpt.get_f64(&format!("{prefix}.rewards"), None)?),
             terminated: ckpt
@@ -112,11 +100,10 @@ impl tandem_nn::Checkpointable for Transitions {
 }
 
 impl Transitions {
-    fn matrices(&self) -> [(&'static str, &Array2<f64>); 4] {
+    fn matrices(&self) -> [(&'static str, &Array2<f64>); 3] {
         [
             ("states", &self.states),
             ("actions", &self.actions),
-            ("prev_actions", &self.prev_actions),
             ("next_states", &self.next_states),
         ]
     }
@@ -151,7 +138,6 @@ impl Transitions {
         }
         check_array("states", self.states.view(), n, state_dim)?;
         check_array("actions", self.actions.view(), n, action_dim)?;
-        check_array("prev_actions", self.prev_actions.view(), n, action_dim)?;
         check_array("next_states", self.next_states.view(), n, state_dim)?;
         if self.rewards.len() != n {
             return Err(ModelError::Dim {
@@ -178,7 +164,7 @@ impl Transitions {
 
     /// The transitions of one episode: `states` holds `T + 1` states `s_0..s_T`, `actions` the
     /// `T` actions, `rewards` the `T` rewards; `terminated` says whether `s_T` is terminal (only
-    /// the last transition is marked). The previous action of the first transition is zero.
+    /// the last transition is marked).
     pub fn from_episode(
         states: ArrayView2<'_, f64>,
         actions: ArrayView2<'_, f64>,
@@ -218,7 +204,6 @@ impl Transitions {
         Self {
             states: self.states.select(Axis(0), idx),
             actions: self.actions.select(Axis(0), idx),
-            prev_actions: self.prev_actions.select(Axis(0), idx),
             next_states: self.next_states.select(Axis(0), idx),
             rewards: self.rewards.select(Axis(0), idx),
             terminated: self.terminated.select(Axis(0), idx),
@@ -237,7 +222,6 @@ impl Transitions {
         };
         self.states = cat(&self.states, &other.states);
         self.actions = cat(&self.actions, &other.actions);
-        self.prev_actions = cat(&self.prev_actions, &other.prev_actions);
         self.next_states = cat(&self.next_states, &other.next_states);
         self.rewards = ndarray::concatenate(Axis(0), &[self.rewards.view(), other.rewards.view()])
             .expect("1-D");
@@ -270,32 +254,34 @@ pub fn holdout_indices(n: usize, fraction: f64, rng: &mut Rng) -> (Vec<usize>, V
     (idx, hold)
 }
 
-/// Builds [`Transitions`] row by row, keeping track of each row's previous state and action (at
-/// the start of an episode: the state itself and a zero action).
+/// Builds [`Transitions`] row by row. [`TransitionsBuilder::with_prev_action`] records each
+/// state with the action applied before it (zero at an episode's start), for models that
+/// condition on it.
 ///
 /// ```
 /// use tandem_models::TransitionsBuilder;
 ///
-/// let mut b = TransitionsBuilder::new(2, 1);
+/// let mut b = TransitionsBuilder::with_prev_action(2, 1);
 /// b.push(&[0.0, 0.0], &[1.0], &[0.1, 1.0], -1.0, false).unwrap();
 /// b.push(&[0.1, 1.0], &[0.5], &[0.2, 1.5], -1.0, true).unwrap();
-/// b.end_episode();
 /// let data = b.build();
 /// assert_eq!(data.len(), 2);
-/// assert_eq!(data.prev_actions[[0, 0]], 0.0);
-/// assert_eq!(data.prev_actions[[1, 0]], 1.0);
+/// // Rows are [s, a_{t-1}] --a_t--> [s', a_t].
+/// assert_eq!(data.states.row(0).to_vec(), [0.0, 0.0, 0.0]);
+/// assert_eq!(data.states.row(1).to_vec(), [0.1, 1.0, 1.0]);
+/// assert_eq!(data.next_states.row(1).to_vec(), [0.2, 1.5, 0.5]);
 /// ```
 #[derive(Debug, Clone)]
 pub struct TransitionsBuilder {
     state_dim: usize,
     action_dim: usize,
+    /// `Some(a_{t−1})` when states carry the previous action.
+    last_action: Option<Vec<f64>>,
     states: Vec<f64>,
     actions: Vec<f64>,
-    prev_actions: Vec<f64>,
     next_states: Vec<f64>,
     rewards: Vec<f64>,
     terminated: Vec<bool>,
-    last_action: Vec<f64>,
 }
 
 impl TransitionsBuilder {
@@ -304,13 +290,23 @@ impl TransitionsBuilder {
         Self {
             state_dim,
             action_dim,
+            last_action: None,
             states: Vec::new(),
             actions: Vec::new(),
-            prev_actions: Vec::new(),
             next_states: Vec::new(),
             rewards: Vec::new(),
             terminated: Vec::new(),
-            last_action: vec![0.0; action_dim],
+        }
+    }
+
+    /// An empty builder whose rows are `[s, a_{t−1}] --a_t--> [s', a_t]`: pushed states of
+    /// `state_dim` come out `state_dim + action_dim` wide, the previous action of an episode's
+    /// first row (and of a new builder's) zero. This is the data of a model of the state
+    /// extended by the previous action ([`crate::IncrementalModel`]).
+    pub fn with_prev_action(state_dim: usize, action_dim: usize) -> Self {
+        Self {
+            last_action: Some(vec![0.0; action_dim]),
+            ..Self::new(state_dim, action_dim)
         }
     }
 
@@ -324,10 +320,9 @@ impl TransitionsBuilder {
         self.rewards.is_empty()
     }
 
-    /// Appends one transition `(s, a, s', r, terminated)`; its previous action is the action of
-    /// the previous push of this episode. A row with a wrong width or a non-finite value is
-    /// refused (error naming it, with the row it would have been) and nothing is appended. A
-    /// terminated row ends the episode.
+    /// Appends one transition `(s, a, s', r, terminated)`. A row with a wrong width or a
+    /// non-finite value is refused (error naming it, with the row it would have been) and
+    /// nothing is appended. A terminated row ends the episode.
     pub fn push(
         &mut self,
         state: impl AsRef<[f64]>,
@@ -360,11 +355,14 @@ impl TransitionsBuilder {
         }
         self.states.extend_from_slice(state);
         self.actions.extend_from_slice(action);
-        self.prev_actions.extend_from_slice(&self.last_action);
         self.next_states.extend_from_slice(next_state);
+        if let Some(last) = &mut self.last_action {
+            self.states.extend_from_slice(last);
+            self.next_states.extend_from_slice(action);
+            last.copy_from_slice(action);
+        }
         self.rewards.push(reward);
         self.terminated.push(terminated);
-        self.last_action.copy_from_slice(action);
         if terminated {
             self.end_episode();
         }
@@ -374,18 +372,28 @@ impl TransitionsBuilder {
     /// Marks the end of an episode (terminated or truncated): the next row's previous action is
     /// zero.
     pub fn end_episode(&mut self) {
-        self.last_action.iter_mut().for_each(|a| *a = 0.0);
+        if let Some(last) = &mut self.last_action {
+            last.iter_mut().for_each(|a| *a = 0.0);
+        }
+    }
+
+    /// A new builder of the same kind, empty (the previous action starts at zero).
+    pub fn empty_like(&self) -> Self {
+        match self.last_action {
+            Some(_) => Self::with_prev_action(self.state_dim, self.action_dim),
+            None => Self::new(self.state_dim, self.action_dim),
+        }
     }
 
     /// The dataset.
     pub fn build(self) -> Transitions {
         let n = self.rewards.len();
+        let s = self.state_dim + self.last_action.as_ref().map_or(0, Vec::len);
         let m = |v: Vec<f64>, c: usize| Array2::from_shape_vec((n, c), v).expect("sizes kept");
         Transitions {
-            states: m(self.states, self.state_dim),
+            states: m(self.states, s),
             actions: m(self.actions, self.action_dim),
-            prev_actions: m(self.prev_actions, self.action_dim),
-            next_states: m(self.next_states, self.state_dim),
+            next_states: m(self.next_states, s),
             rewards: Array1::from(self.rewards),
             terminated: Array1::from(self.terminated),
         }
@@ -415,12 +423,11 @@ mod tests {
     use tandem_core::seeding::rng_from_seed;
 
     #[test]
-    fn from_episode_sets_previous_actions_and_terminal_flag() {
+    fn from_episode_sets_the_terminal_flag() {
         let s = array![[0.0], [1.0], [2.0], [3.0]];
         let a = array![[0.5], [0.6], [0.7]];
         let d = Transitions::from_episode(s.view(), a.view(), &[1.0, 2.0, 3.0], true).unwrap();
         assert_eq!(d.len(), 3);
-        assert_eq!(d.prev_actions.column(0).to_vec(), vec![0.0, 0.5, 0.6]);
         assert_eq!(d.next_states.column(0).to_vec(), vec![1.0, 2.0, 3.0]);
         assert_eq!(d.terminated.to_vec(), vec![false, false, true]);
         d.validate(1, 1).unwrap();
@@ -428,6 +435,30 @@ mod tests {
             Transitions::from_episode(s.view(), a.view(), &[1.0], true),
             Err(ModelError::Dim { .. })
         ));
+    }
+
+    /// With the previous action in the state, each row carries the action of the row before it
+    /// in its episode: zero after an end (terminated or marked) and in a fresh builder.
+    #[test]
+    fn the_previous_action_restarts_at_each_episode() {
+        let mut b = TransitionsBuilder::with_prev_action(1, 1);
+        b.push([0.0], &[1.0], &[1.0], 0.0, false).unwrap();
+        b.push([1.0], &[2.0], &[2.0], 0.0, true).unwrap();
+        b.push([2.0], &[3.0], &[3.0], 0.0, false).unwrap();
+        b.end_episode();
+        b.push([3.0], &[4.0], &[4.0], 0.0, false).unwrap();
+        b.push([4.0], &[5.0], &[5.0], 0.0, false).unwrap();
+        let mut fresh = b.empty_like();
+        fresh.push([5.0], &[6.0], &[6.0], 0.0, false).unwrap();
+        let d = b.build();
+        assert_eq!(d.states.column(1).to_vec(), [0.0, 1.0, 0.0, 0.0, 4.0]);
+        assert_eq!(d.next_states.column(1).to_vec(), [1.0, 2.0, 3.0, 4.0, 5.0]);
+        assert_eq!(d.states.column(0).to_vec(), [0.0, 1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(fresh.build().states.row(0).to_vec(), [5.0, 0.0]);
+        // Pushed rows keep the task's width: the previous action is the builder's to add.
+        let mut b = TransitionsBuilder::with_prev_action(1, 1);
+        assert!(b.push([0.0, 0.0], &[1.0], &[1.0, 1.0], 0.0, false).is_err());
+        assert!(b.is_empty());
     }
 
     #[test]

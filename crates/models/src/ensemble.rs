@@ -532,7 +532,7 @@ impl DynamicsModel for ProbabilisticEnsemble {
     }
 
     fn predict(&self, input: &ModelInput<'_>, rng: &mut Rng) -> Result<Prediction, ModelError> {
-        let b = check_input(input, self.state_dim, self.action_dim, false)?;
+        let b = check_input(input, self.state_dim, self.action_dim)?;
         let (s, dim) = (self.state_dim, self.out_dim());
         let mut x = Vec::new();
         self.learned
@@ -622,7 +622,7 @@ impl DynamicsModel for ProbabilisticEnsemble {
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
         data.validate(self.state_dim, self.action_dim)?;
         let spec = FitSpec {
-            second_input: data.actions.view(),
+            inputs: [data.states.view(), data.actions.view()],
             targets: Targets::StateChange {
                 reward: self.cfg.learn_reward,
             },

@@ -2,12 +2,12 @@
 //! (eqs. 4–6).
 
 use nalgebra::DMatrix;
-use ndarray::{Array2, ArrayView2};
+use ndarray::{s, Array2, ArrayView2};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
 use tandem_nn::{Activation, Checkpoint, Checkpointable, Mlp, MlpConfig, NnError};
 
-use crate::data::check_input;
+use crate::data::{check_array, check_input};
 use crate::model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
@@ -73,9 +73,12 @@ impl Default for IncrementalModelConfig {
 /// the network maps it to `L_t`. The prediction is linear in `a_t`, which makes the model an
 /// error-evolution model for linear MPC/LQR (p1 eq. 9; [`IncrementalModel::gain`] gives `L_t`).
 ///
-/// **Previous actions** are required: pass them with [`ModelInput::with_prev_actions`]
-/// ([`Transitions::prev_actions`] holds them for data; zero at episode starts). Without them
-/// `predict` returns [`ModelError::MissingInput`].
+/// **The previous action is part of its state.** The model's state is `z_t = [s_t, a_{t−1}]`
+/// (`S + A` wide, [`DynamicsModel::state_dim`]) and it predicts `z_{t+1} = [ŝ_{t+1}, a_t]`, so
+/// planners, rollouts and linearizations need nothing beyond `(z, a)`.
+/// [`crate::TransitionsBuilder::with_prev_action`] records such rows (the previous action zero
+/// at an episode's start), and [`tandem_envs::WithPrevAction`] is the task over them. The fit
+/// learns from the first `S` columns of the next state only: the rest is `a_t` by definition.
 ///
 /// **Δa = 0.** The prediction is then `s_t` whatever `L_t` is (p1 keeps `L_t = L_{t−1}` there to
 /// avoid the singularity of its definition); such transitions give no information about `L`
@@ -94,16 +97,19 @@ impl Default for IncrementalModelConfig {
 ///
 /// let cfg = IncrementalModelConfig { prior_gain: Some(vec![0.5, 2.0]), ..Default::default() };
 /// let m = IncrementalModel::new(2, 1, cfg).unwrap();
-/// let (s, a, prev) = (array![[1.0, 1.0]], array![[0.3]], array![[0.1]]);
-/// let input = ModelInput::new(s.view(), a.view()).with_prev_actions(prev.view());
-/// let p = m.predict(&input, &mut rng_from_seed(0)).unwrap();
-/// // Unfitted: s + L0 (a - a_prev) = [1 + 0.5 * 0.2, 1 + 2 * 0.2].
+/// assert_eq!(m.state_dim(), 3);
+/// // z = [s, a_prev] = [1, 1, 0.1], a = 0.3.
+/// let (z, a) = (array![[1.0, 1.0, 0.1]], array![[0.3]]);
+/// let p = m.predict(&ModelInput::new(z.view(), a.view()), &mut rng_from_seed(0)).unwrap();
+/// // Unfitted: [s + L0 (a - a_prev), a] = [1 + 0.5 * 0.2, 1 + 2 * 0.2, 0.3].
 /// assert!((p.next_states[[0, 0]] - 1.1).abs() < 1e-12);
 /// assert!((p.next_states[[0, 1]] - 1.4).abs() < 1e-12);
+/// assert_eq!(p.next_states[[0, 2]], 0.3);
 /// ```
 #[derive(Debug, Clone)]
 pub struct IncrementalModel {
     cfg: IncrementalModelConfig,
+    /// `S`, the state without the previous action.
     state_dim: usize,
     action_dim: usize,
     /// The network giving `M`, its inputs `(s_t, a_{t−1})`; its targets' scales are the RMS of
@@ -116,8 +122,9 @@ pub struct IncrementalModel {
 }
 
 impl IncrementalModel {
-    /// A model for the given widths; errors if `Diagonal` is asked with `S != A` or the prior
-    /// has the wrong length or non-finite entries.
+    /// A model of `S = state_dim` states and `A = action_dim` actions, whose own state is the
+    /// `S + A` wide `[s, a_{t−1}]`; errors if `Diagonal` is asked with `S != A` or the prior has
+    /// the wrong length or non-finite entries.
     pub fn new(
         state_dim: usize,
         action_dim: usize,
@@ -197,26 +204,20 @@ impl IncrementalModel {
         &self.learned.trained.net
     }
 
-    /// `L_t = L_θ(s_t, a_{t−1})` for each row, `S x A` each.
-    pub fn gain<'a>(
-        &self,
-        states: ArrayView2<'a, f64>,
-        prev_actions: ArrayView2<'a, f64>,
-    ) -> Result<Vec<DMatrix<f64>>, ModelError> {
-        let input = ModelInput::new(states, prev_actions).with_prev_actions(prev_actions);
-        let b = check_input(&input, self.state_dim, self.action_dim, true)?;
-        let out = self.raw_outputs(states, prev_actions, b)?;
+    /// `L_t = L_θ(s_t, a_{t−1})` for each row `[s_t, a_{t−1}]` of `states` (`B x (S + A)`),
+    /// `S x A` each.
+    pub fn gain(&self, states: ArrayView2<'_, f64>) -> Result<Vec<DMatrix<f64>>, ModelError> {
+        let b = states.nrows();
+        check_array("states", states, b, self.state_dim + self.action_dim)?;
+        let out = self.raw_outputs(states, b)?;
         Ok((0..b).map(|r| self.gain_of(&out, r)).collect())
     }
 
-    fn raw_outputs<'a>(
-        &self,
-        states: ArrayView2<'a, f64>,
-        prev: ArrayView2<'a, f64>,
-        b: usize,
-    ) -> Result<Vec<f32>, ModelError> {
+    /// The network's outputs at the rows `[s, a_{t−1}]` of `states`.
+    fn raw_outputs(&self, states: ArrayView2<'_, f64>, b: usize) -> Result<Vec<f32>, ModelError> {
+        let (s, prev) = states.split_at(ndarray::Axis(1), self.state_dim);
         let mut x = Vec::new();
-        self.learned.inputs_into(states, prev, b, &mut x);
+        self.learned.inputs_into(s, prev, b, &mut x);
         let net = &self.learned.trained.net;
         let mut ws = net.workspace();
         Ok(net.forward(&x, b, &mut ws).map_err(nn_other)?.to_vec())
@@ -281,42 +282,38 @@ impl Objective for IncrementalObjective {
 }
 
 impl DynamicsModel for IncrementalModel {
+    /// `S + A`: the state and the previous action.
     fn state_dim(&self) -> usize {
-        self.state_dim
+        self.state_dim + self.action_dim
     }
 
     fn action_dim(&self) -> usize {
         self.action_dim
     }
 
-    /// `true`: the prediction conditions on the previous action.
-    fn uses_prev_actions(&self) -> bool {
-        true
-    }
-
     fn predict(&self, input: &ModelInput<'_>, _rng: &mut Rng) -> Result<Prediction, ModelError> {
-        let b = check_input(input, self.state_dim, self.action_dim, true)?;
-        let prev = input.prev_actions.expect("checked");
-        let out = self.raw_outputs(input.states, prev, b)?;
         let (s, a) = (self.state_dim, self.action_dim);
+        let b = check_input(input, s + a, a)?;
+        let out = self.raw_outputs(input.states, b)?;
         let mut next = input.states.to_owned();
         for r in 0..b {
             let l = self.gain_of(&out, r);
+            let (u, prev) = (input.actions.row(r), input.states.slice(s![r, s..]));
             for i in 0..s {
-                next[[r, i]] += (0..a)
-                    .map(|j| l[(i, j)] * (input.actions[[r, j]] - prev[[r, j]]))
-                    .sum::<f64>();
+                next[[r, i]] += (0..a).map(|j| l[(i, j)] * (u[j] - prev[j])).sum::<f64>();
             }
+            next.slice_mut(s![r, s..]).assign(&u);
         }
         Ok(Prediction::deterministic(next))
     }
 
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
         let (s, a) = (self.state_dim, self.action_dim);
-        data.validate(s, a)?;
+        data.validate(s + a, a)?;
         let n = data.len();
-        let da: Array2<f64> = &data.actions - &data.prev_actions;
-        let ds: Array2<f64> = &data.next_states - &data.states;
+        let (states, prev) = data.states.view().split_at(ndarray::Axis(1), s);
+        let da: Array2<f64> = &data.actions - &prev;
+        let ds: Array2<f64> = &data.next_states.slice(s![.., ..s]) - &states;
         let informative: Vec<bool> = da
             .outer_iter()
             .map(|r| r.iter().any(|v| v.abs() > self.cfg.min_action_change))
@@ -330,7 +327,7 @@ impl DynamicsModel for IncrementalModel {
             }
         }
         let spec = FitSpec {
-            second_input: data.prev_actions.view(),
+            inputs: [states, prev],
             targets: Targets::ScaledByRms {
                 values: residual,
                 rms_of: ds.view(),
@@ -423,7 +420,8 @@ mod tests {
 
     /// Trajectories of `x_{t+1} = B u_t + c` (a linear system with `A = 0`, for which the
     /// incremental form is exact with `L = B`): `episodes` of `len` steps, actions uniform in
-    /// [-1, 1], with a fraction of steps repeating the previous action (Δa = 0).
+    /// [-1, 1], with a fraction of steps repeating the previous action (Δa = 0); rows
+    /// `[x, u_prev] --u--> [x', u]`.
     fn static_linear_data(
         b: &DMatrix<f64>,
         c: &[f64],
@@ -435,10 +433,9 @@ mod tests {
         let mut rng = rng_from_seed(seed);
         let n = episodes * len;
         let mut t = Transitions {
-            states: Array2::zeros((n, s)),
+            states: Array2::zeros((n, s + a)),
             actions: Array2::zeros((n, a)),
-            prev_actions: Array2::zeros((n, a)),
-            next_states: Array2::zeros((n, s)),
+            next_states: Array2::zeros((n, s + a)),
             rewards: Array1::zeros(n),
             terminated: Array1::from_elem(n, false),
         };
@@ -464,7 +461,8 @@ mod tests {
                 }
                 for j in 0..a {
                     t.actions[[row, j]] = u[j];
-                    t.prev_actions[[row, j]] = prev[j];
+                    t.states[[row, s + j]] = prev[j];
+                    t.next_states[[row, s + j]] = u[j];
                 }
                 row += 1;
                 x = next;
@@ -497,9 +495,7 @@ mod tests {
         };
         m.fit(&data, &fit).unwrap();
         let test = static_linear_data(&b, &[0.1, -0.2, 0.3], 10, 10, 2);
-        let gains = m
-            .gain(test.states.view(), test.prev_actions.view())
-            .unwrap();
+        let gains = m.gain(test.states.view()).unwrap();
         let worst = gains
             .iter()
             .map(|l| (l - &b).abs().max())
@@ -524,8 +520,7 @@ mod tests {
         m.fit(&data, &fit).unwrap();
         let mut ckpt = Checkpoint::new();
         m.save_to("m", &mut ckpt).unwrap();
-        let input = ModelInput::new(data.states.view(), data.actions.view())
-            .with_prev_actions(data.prev_actions.view());
+        let input = ModelInput::new(data.states.view(), data.actions.view());
         let predict = |m: &IncrementalModel| m.predict(&input, &mut rng_from_seed(0)).unwrap();
         // A fresh model (L = 0 before a fit) predicts otherwise until it loads the checkpoint.
         let mut back = IncrementalModel::new(3, 2, fast(GainStructure::Full, None)).unwrap();
@@ -588,10 +583,9 @@ mod tests {
         let to_data = |rows: &[(DVector<f64>, DVector<f64>, DVector<f64>)]| {
             let n = rows.len();
             let mut t = Transitions {
-                states: Array2::zeros((n, 4)),
+                states: Array2::zeros((n, 6)),
                 actions: Array2::zeros((n, 2)),
-                prev_actions: Array2::zeros((n, 2)),
-                next_states: Array2::zeros((n, 4)),
+                next_states: Array2::zeros((n, 6)),
                 rewards: Array1::zeros(n),
                 terminated: Array1::from_elem(n, false),
             };
@@ -602,8 +596,9 @@ mod tests {
                     t.next_states[[r, i]] = s1[i];
                 }
                 for j in 0..2 {
-                    t.prev_actions[[r, j]] = up[j];
+                    t.states[[r, 4 + j]] = up[j];
                     t.actions[[r, j]] = u[j];
+                    t.next_states[[r, 4 + j]] = u[j];
                 }
             }
             t
@@ -625,9 +620,7 @@ mod tests {
             seed: 0,
         };
         m.fit(&train, &fit).unwrap();
-        let gains = m
-            .gain(test.states.view(), test.prev_actions.view())
-            .unwrap();
+        let gains = m.gain(test.states.view()).unwrap();
         let mut worst = 0.0f64;
         for ((x, up, _), l) in test_rows.iter().zip(&gains) {
             let (_, b) = plant.linearize(x, up);
@@ -656,9 +649,7 @@ mod tests {
         let mut m =
             IncrementalModel::new(2, 2, fast(GainStructure::Diagonal, Some(prior))).unwrap();
         // Remark 4: before any fit, L = L0 exactly.
-        let l = m
-            .gain(data.states.view(), data.prev_actions.view())
-            .unwrap();
+        let l = m.gain(data.states.view()).unwrap();
         assert_eq!(l[0], DMatrix::from_diagonal(&nalgebra::dvector![0.6, -1.0]));
         let fit = FitConfig {
             epochs: 40,
@@ -668,67 +659,64 @@ mod tests {
         };
         let rep = m.fit(&data, &fit).unwrap();
         assert!(rep.holdout_loss.last().unwrap() < &1e-3, "{rep:?}");
-        let l = m
-            .gain(data.states.view(), data.prev_actions.view())
-            .unwrap();
+        let l = m.gain(data.states.view()).unwrap();
         assert!((&l[5] - &b).abs().max() < 0.02, "{}", l[5]);
         assert_eq!((l[5][(0, 1)], l[5][(1, 0)]), (0.0, 0.0));
     }
 
-    /// With a known `L` (the prior of an unfitted model) the model is `x + L (u − u_prev)`: the
-    /// default finite-difference linearization gives `A = I`, `B = L`, `B_prev = −L`.
+    /// With a known `L` (the prior of an unfitted model) the model is
+    /// `[x, u_prev] → [x + L (u − u_prev), u]`: the default finite-difference linearization gives
+    /// `A = [[I, −L], [0, 0]]` and `B = [[L], [I]]`.
     #[test]
     fn linearization_of_a_known_gain() {
         let l0 = [0.5, -2.0, 0.25, 1.5];
         let m = IncrementalModel::new(2, 2, fast(GainStructure::Full, Some(l0.to_vec()))).unwrap();
-        assert!(m.uses_prev_actions());
-        let s = ndarray::array![[1.0, -3.0], [0.2, 40.0]];
+        let z = ndarray::array![[1.0, -3.0, 0.0, 0.3], [0.2, 40.0, 7.0, -2.0]];
         let a = ndarray::array![[0.5, 0.1], [-1.0, 2.0]];
-        let p = ndarray::array![[0.0, 0.3], [7.0, -2.0]];
         let lin = m
-            .linearize(
-                &ModelInput::new(s.view(), a.view()).with_prev_actions(p.view()),
-                &mut rng_from_seed(0),
-            )
+            .linearize(&ModelInput::new(z.view(), a.view()), &mut rng_from_seed(0))
             .unwrap();
         let l = DMatrix::from_row_slice(2, 2, &l0);
+        let mut want_a = DMatrix::zeros(4, 4);
+        want_a.view_mut((0, 0), (2, 2)).fill_with_identity();
+        want_a.view_mut((0, 2), (2, 2)).copy_from(&(-&l));
+        let mut want_b = DMatrix::zeros(4, 2);
+        want_b.view_mut((0, 0), (2, 2)).copy_from(&l);
+        want_b.view_mut((2, 0), (2, 2)).fill_with_identity();
         for li in lin {
-            assert!((li.a - DMatrix::<f64>::identity(2, 2)).abs().max() < 1e-8);
-            assert!((li.b - &l).abs().max() < 1e-8);
-            assert!((li.b_prev.unwrap() + &l).abs().max() < 1e-8);
+            assert!((li.a - &want_a).abs().max() < 1e-8);
+            assert!((li.b - &want_b).abs().max() < 1e-8);
         }
-        // Without previous actions the model cannot predict, so it cannot be linearized.
-        assert!(matches!(
-            m.linearize(&ModelInput::new(s.view(), a.view()), &mut rng_from_seed(0)),
-            Err(ModelError::MissingInput(_))
-        ));
     }
 
     #[test]
-    fn zero_action_change_and_missing_previous_actions() {
+    fn zero_action_change_and_bad_widths() {
         let m =
             IncrementalModel::new(2, 1, fast(GainStructure::Full, Some(vec![1.0, 2.0]))).unwrap();
-        let s = ndarray::array![[0.3, -0.4]];
         let a = ndarray::array![[0.7]];
         let mut rng = rng_from_seed(0);
+        // A state without its previous action is refused, naming the width.
+        let s = ndarray::array![[0.3, -0.4]];
         assert!(matches!(
             m.predict(&ModelInput::new(s.view(), a.view()), &mut rng),
-            Err(ModelError::MissingInput(_))
+            Err(ModelError::Dim {
+                expected: 3,
+                got: 2,
+                ..
+            })
         ));
+        // Repeating the previous action leaves the state where it is.
+        let z = ndarray::array![[0.3, -0.4, 0.7]];
         let p = m
-            .predict(
-                &ModelInput::new(s.view(), a.view()).with_prev_actions(a.view()),
-                &mut rng,
-            )
+            .predict(&ModelInput::new(z.view(), a.view()), &mut rng)
             .unwrap();
-        assert_eq!(p.next_states, s);
+        assert_eq!(p.next_states, z);
         // Data where the action never changes cannot inform L.
         let mut m = m;
         let data = Transitions {
-            states: ndarray::array![[0.0, 0.0], [0.1, 0.1]],
+            states: ndarray::array![[0.0, 0.0, 0.5], [0.1, 0.1, 0.5]],
             actions: ndarray::array![[0.5], [0.5]],
-            prev_actions: ndarray::array![[0.5], [0.5]],
-            next_states: ndarray::array![[0.1, 0.1], [0.2, 0.2]],
+            next_states: ndarray::array![[0.1, 0.1, 0.5], [0.2, 0.2, 0.5]],
             rewards: ndarray::array![0.0, 0.0],
             terminated: ndarray::array![false, false],
         };

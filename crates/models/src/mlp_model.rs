@@ -278,7 +278,7 @@ impl DynamicsModel for MlpModel {
     }
 
     fn predict(&self, input: &ModelInput<'_>, _rng: &mut Rng) -> Result<Prediction, ModelError> {
-        let b = check_input(input, self.state_dim, self.action_dim, false)?;
+        let b = check_input(input, self.state_dim, self.action_dim)?;
         self.scratch
             .with(|x, ws| self.predict_with(input, b, x, ws))
     }
@@ -287,7 +287,7 @@ impl DynamicsModel for MlpModel {
         data.validate(self.state_dim, self.action_dim)?;
         // The reward column is standardized and kept even when its loss term is off.
         let spec = FitSpec {
-            second_input: data.actions.view(),
+            inputs: [data.states.view(), data.actions.view()],
             targets: Targets::StateChange { reward: true },
             filter: None,
         };

@@ -38,7 +38,8 @@ pub enum ModelError {
         /// Optimizer step within the epoch.
         step: usize,
     },
-    /// An input the model needs was not given (the incremental model needs previous actions).
+    /// Something the caller needs was not given or not predicted (a reward from a model that
+    /// learns none).
     #[error("missing input: {0}")]
     MissingInput(String),
     /// Anything else, with a message.
@@ -46,17 +47,15 @@ pub enum ModelError {
     Other(String),
 }
 
-/// Transitions `(s, a, s', r, terminated)` with the previous action of each (p1 learns from the
-/// one-step-back data `{a_{t-1}, s_t, a_t, s_{t+1}}`: its model conditions on `a_{t-1}`, and its
-/// unknown-part estimate `ĥ_t = s_t − L a_{t−1}` needs no previous state), one row per transition.
+/// Transitions `(s, a, s', r, terminated)`, one row per transition. A model that conditions on
+/// more than the state (p1's incremental model reads the previous action) finds it in the state:
+/// [`crate::TransitionsBuilder::with_prev_control`] records `[s, a_{t−1}]` rows.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Transitions {
     /// States `s_t`, `N x S`.
     pub states: Array2<f64>,
     /// Actions `a_t`, `N x A`.
     pub actions: Array2<f64>,
-    /// Previous actions `a_{t-1}` (zeros at the start of an episode), `N x A`.
-    pub prev_actions: Array2<f64>,
     /// Next states `s_{t+1}`, `N x S`.
     pub next_states: Array2<f64>,
     /// Rewards `r_t`, length `N`.
@@ -65,32 +64,19 @@ pub struct Transitions {
     pub terminated: Array1<bool>,
 }
 
-/// A batch to predict from: `B` states and actions (and previous actions for models that use
-/// them).
+/// A batch to predict from: `B` states and actions.
 #[derive(Debug, Clone)]
 pub struct ModelInput<'a> {
     /// States, `B x S`.
     pub states: ArrayView2<'a, f64>,
     /// Actions, `B x A`.
     pub actions: ArrayView2<'a, f64>,
-    /// Previous actions, `B x A`, for models that condition on them.
-    pub prev_actions: Option<ArrayView2<'a, f64>>,
 }
 
 impl<'a> ModelInput<'a> {
     /// A batch of states and actions.
     pub fn new(states: ArrayView2<'a, f64>, actions: ArrayView2<'a, f64>) -> Self {
-        Self {
-            states,
-            actions,
-            prev_actions: None,
-        }
-    }
-
-    /// Adds previous actions.
-    pub fn with_prev_actions(mut self, prev_actions: ArrayView2<'a, f64>) -> Self {
-        self.prev_actions = Some(prev_actions);
-        self
+        Self { states, actions }
     }
 }
 
@@ -154,25 +140,22 @@ pub struct FitReport {
     pub holdout_loss: Vec<f64>,
 }
 
-/// The Jacobians of a model's next state (its mean) at one point `(x, u)` (and `u_prev`):
-/// `x' ≈ x̄' + A δx + B δu + B_prev δu_prev`.
+/// The Jacobians of a model's next state (its mean) at one point `(x, u)`:
+/// `x' ≈ x̄' + A δx + B δu`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Linearization {
     /// `A = ∂x'/∂x`, `S x S`.
     pub a: DMatrix<f64>,
     /// `B = ∂x'/∂u`, `S x A`.
     pub b: DMatrix<f64>,
-    /// `B_prev = ∂x'/∂u_prev`, `S x A`, when the point had a previous action (a model that does
-    /// not read it has zeros here).
-    pub b_prev: Option<DMatrix<f64>>,
 }
 
 /// A dynamics model: batched prediction of the next state (and, where learned, its variance,
 /// the reward and termination), fitted on transitions.
 ///
-/// * Rows of a [`ModelInput`] are independent samples (a planner's population); a model that
-///   needs the previous action (the incremental model) reads [`ModelInput::prev_actions`] and
-///   returns [`ModelError::MissingInput`] without it; others ignore it.
+/// * Rows of a [`ModelInput`] are independent samples (a planner's population). What a model
+///   conditions on besides the action is in its state: p1's incremental model, which reads the
+///   previous action, is a model of `[s, a_{t−1}]` (see [`crate::IncrementalModel`]).
 /// * Stochastic behaviour (the ensemble's member choice and sampling) draws from the `rng`
 ///   argument only; its mode is a setting of the model
 ///   (`ProbabilisticEnsemble::set_propagation`), so planners stay model-agnostic.
@@ -195,14 +178,8 @@ pub trait DynamicsModel {
     /// Fits the model on `data`. On error the model is left as it was.
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError>;
 
-    /// Whether `predict` reads [`ModelInput::prev_actions`] (the incremental model); planners
-    /// then treat the previous action as part of the state (iLQR differentiates through it).
-    fn uses_prev_actions(&self) -> bool {
-        false
-    }
-
     /// Jacobians of the predicted next state at each row of `input` (`B` points, one
-    /// [`Linearization`] each; `b_prev` is given where `input` has previous actions).
+    /// [`Linearization`] each).
     ///
     /// The default takes central differences of [`DynamicsModel::predict`] with step
     /// `1e-6·max(1, |z_i|)` per coordinate, all `2B(S + 2A)` perturbed points in one batched
@@ -226,23 +203,19 @@ pub fn linearize_fd<M: DynamicsModel + ?Sized>(
     rng: &mut Rng,
 ) -> Result<Vec<Linearization>, ModelError> {
     let (n, m) = (model.state_dim(), model.action_dim());
-    let t_len = check_input(input, n, m, false)?;
-    let prev = input.prev_actions;
-    // Coordinates perturbed per point: x, u, then u_prev when given.
-    let d = n + m + if prev.is_some() { m } else { 0 };
+    let t_len = check_input(input, n, m)?;
+    // Coordinates perturbed per point: x, then u.
+    let d = n + m;
     let rows = t_len * 2 * d;
     let mut xs = Array2::zeros((rows, n));
     let mut us = Array2::zeros((rows, m));
-    let mut ps = Array2::zeros((rows, m));
     let mut hs = vec![0.0; t_len * d];
     for t in 0..t_len {
         for k in 0..d {
             let z = if k < n {
                 input.states[(t, k)]
-            } else if k < n + m {
-                input.actions[(t, k - n)]
             } else {
-                prev.expect("d counts u_prev only when given")[(t, k - n - m)]
+                input.actions[(t, k - n)]
             };
             let h = 1e-6 * z.abs().max(1.0);
             hs[t * d + k] = h;
@@ -250,24 +223,17 @@ pub fn linearize_fd<M: DynamicsModel + ?Sized>(
                 let r = (t * d + k) * 2 + s;
                 xs.row_mut(r).assign(&input.states.row(t));
                 us.row_mut(r).assign(&input.actions.row(t));
-                if let Some(p) = prev {
-                    ps.row_mut(r).assign(&p.row(t));
-                }
                 if k < n {
                     xs[(r, k)] += sign * h;
-                } else if k < n + m {
-                    us[(r, k - n)] += sign * h;
                 } else {
-                    ps[(r, k - n - m)] += sign * h;
+                    us[(r, k - n)] += sign * h;
                 }
             }
         }
     }
-    let mut fd_input = ModelInput::new(xs.view(), us.view());
-    if prev.is_some() {
-        fd_input = fd_input.with_prev_actions(ps.view());
-    }
-    let f = model.predict(&fd_input, rng)?.next_states;
+    let f = model
+        .predict(&ModelInput::new(xs.view(), us.view()), rng)?
+        .next_states;
     if f.dim() != (rows, n) {
         return Err(ModelError::Dim {
             what: "predicted next states for finite differences (rows x columns)".into(),
@@ -288,15 +254,12 @@ pub fn linearize_fd<M: DynamicsModel + ?Sized>(
         out.push(Linearization {
             a: jac.columns(0, n).into_owned(),
             b: jac.columns(n, m).into_owned(),
-            b_prev: prev.map(|_| jac.columns(n + m, m).into_owned()),
         });
     }
-    if let Some(row) = out.iter().position(|l| {
-        l.a.iter()
-            .chain(l.b.iter())
-            .chain(l.b_prev.iter().flatten())
-            .any(|v| !v.is_finite())
-    }) {
+    if let Some(row) = out
+        .iter()
+        .position(|l| l.a.iter().chain(l.b.iter()).any(|v| !v.is_finite()))
+    {
         return Err(ModelError::NonFinite {
             what: "model Jacobians".into(),
             row,
@@ -320,10 +283,6 @@ impl<M: DynamicsModel + ?Sized> DynamicsModel for Box<M> {
 
     fn fit(&mut self, data: &Transitions, cfg: &FitConfig) -> Result<FitReport, ModelError> {
         (**self).fit(data, cfg)
-    }
-
-    fn uses_prev_actions(&self) -> bool {
-        (**self).uses_prev_actions()
     }
 
     fn linearize(

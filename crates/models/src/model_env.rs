@@ -206,7 +206,6 @@ pub struct ModelEnv<M, T> {
     episodes: TaskEpisodes<T>,
     judges: Judges,
     state: Vec<f64>,
-    prev_u: Vec<f64>,
     elapsed: usize,
     running: bool,
 }
@@ -224,7 +223,7 @@ impl<M: DynamicsModel, T: Task> ModelEnv<M, T> {
             env: task.id().to_string(),
             reason: e.to_string(),
         };
-        let m = check_pair(&model, &task).map_err(unsupported)?;
+        check_pair(&model, &task).map_err(unsupported)?;
         judges.validate().map_err(unsupported)?;
         let n = task.state_dim();
         Ok(Self {
@@ -232,7 +231,6 @@ impl<M: DynamicsModel, T: Task> ModelEnv<M, T> {
             episodes: TaskEpisodes::new(task),
             judges,
             state: vec![0.0; n],
-            prev_u: vec![0.0; m],
             elapsed: 0,
             running: false,
         })
@@ -256,7 +254,6 @@ impl<M: DynamicsModel, T: Task> ModelEnv<M, T> {
     fn start(&mut self) -> Vec<f64> {
         let task = self.episodes.task();
         task.canonicalize(&mut self.state);
-        self.prev_u.iter_mut().for_each(|u| *u = 0.0);
         self.elapsed = 0;
         self.running = true;
         task.observe(&self.state)
@@ -297,13 +294,9 @@ impl<M: DynamicsModel, T: Task> Env for ModelEnv<M, T> {
         }
         let u = self.episodes.control(action)?;
         let row = |v: &[f64]| Array2::from_shape_vec((1, v.len()), v.to_vec());
-        let (s, a, p) = (row(&self.state), row(&u), row(&self.prev_u));
-        let (s, a, p) = (
-            s.expect("one row"),
-            a.expect("one row"),
-            p.expect("one row"),
-        );
-        let input = ModelInput::new(s.view(), a.view()).with_prev_actions(p.view());
+        let (s, a) = (row(&self.state), row(&u));
+        let (s, a) = (s.expect("one row"), a.expect("one row"));
+        let input = ModelInput::new(s.view(), a.view());
         let pred = self.model.predict(&input, self.episodes.rng_mut());
         let task = self.episodes.task();
         let id = task.id();
@@ -321,7 +314,6 @@ impl<M: DynamicsModel, T: Task> Env for ModelEnv<M, T> {
             .map_err(model_failure(id))?;
         task.canonicalize(&mut next);
         self.state = next;
-        self.prev_u = u;
         self.elapsed += 1;
         let truncated = task.max_episode_steps().is_some_and(|m| self.elapsed >= m);
         self.running = !(terminated || truncated);
@@ -391,9 +383,8 @@ pub type RolloutPolicy<'a> =
     dyn FnMut(ArrayView2<'_, f64>, &mut Rng) -> Result<Array2<f64>, ModelError> + 'a;
 
 /// Rolls `horizon` steps of `model` under `task` from every row of `starts` at once (MBPO's
-/// branched rollouts; `horizon = 1` is p1's one-step Dyna). `prev_controls` are the plant inputs
-/// applied just before each start (zeros when `None`). Each step asks `policy` for the actions
-/// of the rollouts still running, makes one `predict` call for all of them, and judges reward
+/// branched rollouts; `horizon = 1` is p1's one-step Dyna). Each step asks `policy` for the
+/// actions of the rollouts still running, makes one `predict` call for all of them, and judges reward
 /// and termination as `judges` say; a rollout that terminates stops. The model draws from
 /// `rng`, and so does the policy.
 ///
@@ -406,7 +397,6 @@ pub fn branched_rollouts<M, T>(
     task: &T,
     judges: &Judges,
     starts: ArrayView2<'_, f64>,
-    prev_controls: Option<ArrayView2<'_, f64>>,
     horizon: usize,
     policy: &mut RolloutPolicy<'_>,
     rng: &mut Rng,
@@ -423,13 +413,6 @@ where
     for mut r in state.rows_mut() {
         task.canonicalize(r.as_slice_mut().expect("row-major"));
     }
-    let mut prev = match prev_controls {
-        Some(p) => {
-            crate::data::check_array("previous controls", p, b, m)?;
-            p.to_owned()
-        }
-        None => Array2::zeros((b, m)),
-    };
     let a_dim = match task.action_space() {
         Space::Discrete { .. } => 1,
         Space::Box { low, .. } => low.len(),
@@ -463,7 +446,7 @@ where
                 .row_mut(i)
                 .assign(&Array1::from(task.control(&action)));
         }
-        let input = ModelInput::new(state.view(), controls.view()).with_prev_actions(prev.view());
+        let input = ModelInput::new(state.view(), controls.view());
         let mut pred = model.predict(&input, rng)?;
         crate::data::check_array("predicted next states", pred.next_states.view(), k, n)?;
         // The judges read the predicted reward and termination, not the next states.
@@ -493,7 +476,6 @@ where
         }
         alive = keep.iter().map(|&i| alive[i]).collect();
         state = next.select(ndarray::Axis(0), &keep);
-        prev = controls.select(ndarray::Axis(0), &keep);
     }
     Ok(out.finish(o_dim, a_dim, m, n))
 }
@@ -665,7 +647,6 @@ mod tests {
             &task,
             &Judges::default(),
             starts.view(),
-            None,
             h,
             &mut policy,
             &mut rng_from_seed(0),
@@ -774,7 +755,6 @@ mod tests {
                 &task,
                 &Judges::default(),
                 starts,
-                None,
                 2,
                 policy,
                 &mut rng_from_seed(0),

@@ -74,7 +74,7 @@ pub(crate) fn step_rows<P: Plant + ?Sized>(
     input: &ModelInput<'_>,
 ) -> Result<Array2<f64>, ModelError> {
     let (sd, ad) = (plant.state_dim(), plant.action_dim());
-    let b = check_input(input, sd, ad, false)?;
+    let b = check_input(input, sd, ad)?;
     let mut out = Array2::zeros((b, sd));
     let mut x = DVector::zeros(sd);
     let mut u = DVector::zeros(ad);
@@ -117,15 +117,14 @@ impl<P: Plant> DynamicsModel for PlantModel<P> {
         Ok(Prediction::deterministic(step_rows(&self.plant, input)?))
     }
 
-    /// [`Plant::linearize`] at every row; previous actions, if given, get zero Jacobians (a plant
-    /// does not read them).
+    /// [`Plant::linearize`] at every row.
     fn linearize(
         &self,
         input: &ModelInput<'_>,
         _rng: &mut Rng,
     ) -> Result<Vec<Linearization>, ModelError> {
         let (sd, ad) = (self.plant.state_dim(), self.plant.action_dim());
-        let b = check_input(input, sd, ad, false)?;
+        let b = check_input(input, sd, ad)?;
         (0..b)
             .map(|i| {
                 let x = DVector::from_iterator(sd, input.states.row(i).iter().copied());
@@ -144,11 +143,7 @@ impl<P: Plant> DynamicsModel for PlantModel<P> {
                         row: i,
                     });
                 }
-                Ok(Linearization {
-                    a,
-                    b: bm,
-                    b_prev: input.prev_actions.map(|_| nalgebra::DMatrix::zeros(sd, ad)),
-                })
+                Ok(Linearization { a, b: bm })
             })
             .collect()
     }
@@ -267,8 +262,7 @@ mod tests {
             [-1.2, 0.0, 0.0, -2.5]
         ];
         let a = array![[1.0, -2.0], [0.0, 0.5], [-4.0, 3.0]];
-        let prev = array![[0.0, 0.0], [1.0, 1.0], [2.0, -2.0]];
-        let input = ModelInput::new(s.view(), a.view()).with_prev_actions(prev.view());
+        let input = ModelInput::new(s.view(), a.view());
         let mut rng = rng_from_seed(0);
         let analytic = model.linearize(&input, &mut rng).unwrap();
         let fd = crate::linearize_fd(&model, &input, &mut rng).unwrap();
@@ -280,9 +274,6 @@ mod tests {
             assert!((&an.a - DMatrix::<f64>::identity(4, 4)).abs().max() > 1e-2);
             assert!((&an.a - &fd.a).abs().max() < 1e-6, "{}", &an.a - &fd.a);
             assert!((&an.b - &fd.b).abs().max() < 1e-6, "{}", &an.b - &fd.b);
-            // The plant does not read the previous action: zero both ways.
-            assert_eq!(an.b_prev, Some(DMatrix::zeros(4, 2)));
-            assert_eq!(fd.b_prev, Some(DMatrix::zeros(4, 2)));
         }
     }
 

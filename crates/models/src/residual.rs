@@ -190,7 +190,7 @@ impl<P: Plant> DynamicsModel for ResidualModel<P> {
     }
 
     fn predict(&self, input: &ModelInput<'_>, _rng: &mut Rng) -> Result<Prediction, ModelError> {
-        let b = check_input(input, self.state_dim(), self.action_dim(), false)?;
+        let b = check_input(input, self.state_dim(), self.action_dim())?;
         let mut next = step_rows(&self.plant, input)?;
         if self.fitted {
             let l = &self.learned;
@@ -221,7 +221,7 @@ impl<P: Plant> DynamicsModel for ResidualModel<P> {
             &ModelInput::new(data.states.view(), data.actions.view()),
         )?;
         let spec = FitSpec {
-            second_input: data.actions.view(),
+            inputs: [data.states.view(), data.actions.view()],
             targets: Targets::ResidualOver(idealized),
             filter: None,
         };

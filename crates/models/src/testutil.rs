@@ -58,8 +58,7 @@ pub(crate) fn cartpole_data(n: usize, seed: u64) -> Transitions {
 
 /// Root mean squared one-step error of `model` on `data`.
 pub(crate) fn rmse(model: &dyn DynamicsModel, data: &Transitions) -> f64 {
-    let input = ModelInput::new(data.states.view(), data.actions.view())
-        .with_prev_actions(data.prev_actions.view());
+    let input = ModelInput::new(data.states.view(), data.actions.view());
     let p = model.predict(&input, &mut rng_from_seed(0)).unwrap();
     let e = &p.next_states - &data.next_states;
     (e.mapv(|v| v * v).sum() / e.len() as f64).sqrt()

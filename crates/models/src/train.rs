@@ -426,17 +426,18 @@ pub(crate) struct RowFilter<'a> {
     pub none_kept: &'a str,
 }
 
-/// What one fit of a transition model learns from: the state and `second_input` (the action, or
-/// the previous action) as inputs, `targets`, and the rows `filter` keeps (all without one).
+/// What one fit of a transition model learns from: two input blocks (the state and the action;
+/// the incremental model's are the state and the previous action), `targets`, and the rows
+/// `filter` keeps (all without one).
 pub(crate) struct FitSpec<'a> {
-    pub second_input: ArrayView2<'a, f64>,
+    pub inputs: [ArrayView2<'a, f64>; 2],
     pub targets: Targets<'a>,
     pub filter: Option<RowFilter<'a>>,
 }
 
 /// What a transition model learns, `trained` (a network and its optimizer, or an ensemble's
-/// members), with the standardizations of its two input blocks (the state, then the action or
-/// the previous action) and of its targets: the shape of mbrl-lib's `OneDTransitionRewardModel`.
+/// members), with the standardizations of its two input blocks (see [`FitSpec`]) and of its
+/// targets: the shape of mbrl-lib's `OneDTransitionRewardModel`.
 /// [`Standardized::fit`] is the one fit path of the learned transition models.
 #[derive(Debug, Clone)]
 pub(crate) struct Standardized<T> {
@@ -477,20 +478,15 @@ impl<T: Clone> Standardized<T> {
                 return Err(ModelError::Other(f.none_kept.into()));
             }
         }
+        let [first, second] = spec.inputs;
         let inputs = [
-            Standardizer::fit(data.states.view(), &train_rows),
-            Standardizer::fit(spec.second_input, &train_rows),
+            Standardizer::fit(first, &train_rows),
+            Standardizer::fit(second, &train_rows),
         ];
         let (targets, target_norm) = spec.targets.build(data, &train_rows);
         let rows = FitRows {
             din: inputs.iter().map(Standardizer::dim).sum(),
-            x: standardized_inputs(
-                &[
-                    (data.states.view(), &inputs[0]),
-                    (spec.second_input, &inputs[1]),
-                ],
-                n,
-            ),
+            x: standardized_inputs(&[(first, &inputs[0]), (second, &inputs[1])], n),
             dout: target_norm.dim(),
             y: standardized_inputs(&[(targets.view(), &target_norm)], n),
             train: train_rows,

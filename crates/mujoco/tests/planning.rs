@@ -46,7 +46,6 @@ fn ilqr_through_mujoco_matches_riccati() {
             &model,
             &objective,
             x0.as_slice(),
-            None,
             &Array2::zeros((horizon, 1)),
         )
         .unwrap();

@@ -140,14 +140,13 @@ impl Cem {
 }
 
 impl Planner for Cem {
-    fn plan_with_prev_action(
+    fn plan(
         &mut self,
         x0: &[f64],
-        prev_action: Option<&[f64]>,
         model: &dyn DynamicsModel,
         objective: &Objective,
     ) -> Result<Plan> {
-        let (_, a) = check_problem(x0, prev_action, model, objective)?;
+        let (_, a) = check_problem(x0, model, objective)?;
         if let Some(b) = &self.cfg.bounds {
             b.validate(a)?;
         }
@@ -176,7 +175,6 @@ impl Planner for Cem {
             }
             let (costs, _) = rollout_population(
                 x0,
-                prev_action,
                 model,
                 objective,
                 &mut self.rng,
@@ -208,7 +206,7 @@ impl Planner for Cem {
             Some((_, seq)) if !self.cfg.return_mean => seq,
             _ => mean.clone(),
         };
-        let plan = plan_from_actions(x0, prev_action, model, objective, &mut self.rng, &chosen)?;
+        let plan = plan_from_actions(x0, model, objective, &mut self.rng, &chosen)?;
         self.mean = Some(mean);
         Ok(plan)
     }

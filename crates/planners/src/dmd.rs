@@ -176,52 +176,36 @@ impl DmdMpc {
         &self.cfg
     }
 
-    /// One call with an explicit proposal (borrowed for this call only), ignoring any stored one;
-    /// `prev_action` as in [`Planner::plan_with_prev_action`].
+    /// One call with an explicit proposal (borrowed for this call only), ignoring any stored one.
     pub fn plan_with_proposal(
         &mut self,
         x0: &[f64],
-        prev_action: Option<&[f64]>,
         model: &dyn DynamicsModel,
         objective: &Objective,
         proposal: ProposalFn<'_>,
     ) -> Result<Plan> {
-        self.plan_one(x0, prev_action, model, objective, Some(proposal))
+        self.plan_one(x0, model, objective, Some(proposal))
     }
 
     /// Plans from every row of `starts` (`P x S`) at once, as `P` independent calls of
     /// [`DmdMpc::plan_with_proposal`] would, each with its own samples, but in one population of
     /// `P × samples` rows: each model, proposal and terminal-value call is one batch for all
     /// starts instead of one per start (the plans differ from sequential calls only in the
-    /// random numbers drawn). `prev_actions`, when given, is `P x A`. The plans neither use nor
-    /// replace the stored warm start, which belongs to one state: without a proposal each
+    /// random numbers drawn). The plans neither use nor replace the stored warm start, which belongs to one state: without a proposal each
     /// start's first centre is the middle of the bounds (zero without bounds).
     pub fn plan_batch_with_proposal(
         &mut self,
         starts: ArrayView2<'_, f64>,
-        prev_actions: Option<ArrayView2<'_, f64>>,
         model: &dyn DynamicsModel,
         objective: &Objective,
         proposal: ProposalFn<'_>,
     ) -> Result<Vec<Plan>> {
         let (h, a) = (self.cfg.horizon, model.action_dim());
-        if let Some(pa) = &prev_actions {
-            check_len("previous actions (rows)", starts.nrows(), pa.nrows())?;
-        }
-        for (i, x0) in starts.rows().into_iter().enumerate() {
-            let x0 = x0.to_vec();
-            let prev = prev_actions.map(|pa| pa.row(i).to_vec());
-            check_problem(&x0, prev.as_deref(), model, objective)?;
+        for x0 in starts.rows() {
+            check_problem(&x0.to_vec(), model, objective)?;
         }
         let means = vec![warm_start(None, h, a, self.cfg.bounds.as_ref()); starts.nrows()];
-        let (plans, _) = self.plan_impl(
-            starts,
-            prev_actions,
-            model,
-            objective,
-            Some(proposal),
-            means,
-        )?;
+        let (plans, _) = self.plan_impl(starts, model, objective, Some(proposal), means)?;
         Ok(plans)
     }
 
@@ -229,26 +213,19 @@ impl DmdMpc {
     fn plan_one(
         &mut self,
         x0: &[f64],
-        prev_action: Option<&[f64]>,
         model: &dyn DynamicsModel,
         objective: &Objective,
         proposal: Option<ProposalFn<'_>>,
     ) -> Result<Plan> {
-        let (_, a) = check_problem(x0, prev_action, model, objective)?;
+        let (_, a) = check_problem(x0, model, objective)?;
         let mean = warm_start(
             self.mean.take(),
             self.cfg.horizon,
             a,
             self.cfg.bounds.as_ref(),
         );
-        let (mut plans, mut means) = self.plan_impl(
-            one_row(x0),
-            prev_action.map(one_row),
-            model,
-            objective,
-            proposal,
-            vec![mean],
-        )?;
+        let (mut plans, mut means) =
+            self.plan_impl(one_row(x0), model, objective, proposal, vec![mean])?;
         self.mean = means.pop();
         Ok(plans.pop().expect("one start, one plan"))
     }
@@ -258,7 +235,6 @@ impl DmdMpc {
     fn plan_impl(
         &mut self,
         starts: ArrayView2<'_, f64>,
-        prev_actions: Option<ArrayView2<'_, f64>>,
         model: &dyn DynamicsModel,
         objective: &Objective,
         proposal: Option<ProposalFn<'_>>,
@@ -321,7 +297,6 @@ impl DmdMpc {
             };
             let (costs, _) = rollout_starts(
                 starts,
-                prev_actions,
                 model,
                 objective,
                 &mut self.rng,
@@ -358,14 +333,7 @@ impl DmdMpc {
             clamp_opt(&self.cfg.bounds, mean.view_mut());
             chosen.index_axis_mut(Axis(1), k).assign(mean);
         }
-        let plans = plans_from_actions(
-            starts,
-            prev_actions,
-            model,
-            objective,
-            &mut self.rng,
-            chosen,
-        )?;
+        let plans = plans_from_actions(starts, model, objective, &mut self.rng, chosen)?;
         Ok((plans, means))
     }
 
@@ -421,17 +389,15 @@ impl DmdMpc {
 }
 
 impl Planner for DmdMpc {
-    fn plan_with_prev_action(
+    fn plan(
         &mut self,
         x0: &[f64],
-        prev_action: Option<&[f64]>,
         model: &dyn DynamicsModel,
         objective: &Objective,
     ) -> Result<Plan> {
         let proposal = self.proposal.take();
         let r = self.plan_one(
             x0,
-            prev_action,
             model,
             objective,
             proposal

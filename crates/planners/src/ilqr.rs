@@ -17,11 +17,9 @@
 //!    least `c₁` times the predicted one;
 //! 4. **stop** when the relative decrease falls below `tolerance`.
 //!
-//! **Models that read the previous action** (p1's incremental model,
-//! [`DynamicsModel::uses_prev_actions`]): the previous action is part of the state,
-//! `z_t = [x_t; u_{t−1}]`, `z_{t+1} = [f(x_t, u_t, u_{t−1}); u_t]`, so the backward pass sees
-//! `A = [[f_x, f_{u_prev}], [0, 0]]`, `B = [[f_u], [I]]` and the feedback acts on both parts
-//! ([`IlqrSolution::prev_gains`]). The action applied before `x0` is an input of the solve.
+//! A model that reads the previous action (p1's incremental model) has it in its state,
+//! `z_t = [x_t; u_{t−1}]`: its Jacobians are `A = [[f_x, f_{u_prev}], [0, 0]]`,
+//! `B = [[f_u], [I]]`, and the feedback acts on both parts, with nothing special here.
 
 use nalgebra::{DMatrix, DVector};
 use ndarray::{s, Array1, Array2, ArrayView2};
@@ -95,11 +93,8 @@ pub struct IlqrSolution {
     pub states: Array2<f64>,
     /// Nominal actions `ū_0 .. ū_{T−1}`, `T x A`.
     pub actions: Array2<f64>,
-    /// Feedback gains `K_t` (`A x S`) of the last backward pass, on the state.
+    /// Feedback gains `K_t` (`A x S`) of the last backward pass.
     pub gains: Vec<DMatrix<f64>>,
-    /// Feedback gains (`A x A`) on the previous action, `u_t − ū_t ∋ K^prev_t (u_{t−1} − ū_{t−1})`,
-    /// for models that read it (see the module docs); empty otherwise.
-    pub prev_gains: Vec<DMatrix<f64>>,
     /// Objective value of the nominal trajectory.
     pub cost: f64,
     /// Cost after each accepted iteration (first entry: the initial guess).
@@ -111,8 +106,7 @@ pub struct IlqrSolution {
 }
 
 impl IlqrSolution {
-    /// The feedback law at step `t`: `ū_t + K_t (x − x̄_t)`, clamped into `bounds` (the state part
-    /// only; with [`IlqrSolution::prev_gains`] add `K^prev_t (u_{t−1} − ū_{t−1})`).
+    /// The feedback law at step `t`: `ū_t + K_t (x − x̄_t)`, clamped into `bounds`.
     pub fn control(&self, t: usize, x: &[f64], bounds: Option<&Bounds>) -> Vec<f64> {
         let n = self.states.ncols();
         let dx = DVector::from_iterator(
@@ -188,25 +182,22 @@ impl Ilqr {
         &self.cfg
     }
 
-    /// Optimizes the action sequence `init` (`T x A`) from `x0` through `model`. `prev_action` is
-    /// the action applied before `x0`, needed by models that read it (see the module docs). A
-    /// stochastic model is evaluated with a generator restarted from the configured seed at every
+    /// Optimizes the action sequence `init` (`T x A`) from `x0` through `model`. A stochastic
+    /// model is evaluated with a generator restarted from the configured seed at every
     /// step, so repeated evaluations agree.
     pub fn solve(
         &self,
         model: &dyn DynamicsModel,
         objective: &Objective,
         x0: &[f64],
-        prev_action: Option<&[f64]>,
         init: &Array2<f64>,
     ) -> Result<IlqrSolution> {
-        let (n, m) = check_problem(x0, prev_action, model, objective)?;
+        let (_, m) = check_problem(x0, model, objective)?;
         check_len("initial actions (columns)", m, init.ncols())?;
         nonzero("horizon of the initial guess", init.nrows())?;
         let dynamics = System {
             model,
             seed: self.cfg.seed,
-            prev0: prev_action.filter(|_| model.uses_prev_actions()),
         };
         if init.iter().any(|v| !v.is_finite()) {
             return Err(PlanError::NonFinite("initial actions".into()));
@@ -239,7 +230,7 @@ impl Ilqr {
             iterations += 1;
             // 1. Linearize.
             let jac = dynamics.jacobians(xs.slice(s![..-1, ..]), &us)?;
-            let quad = dynamics.augment_cost(expand_cost(objective, &xs, &us)?);
+            let quad = expand_cost(objective, &xs, &us)?;
             // 2. Backward pass, raising μ until Q_uu is positive definite.
             let bp = loop {
                 match backward_pass(&jac, &quad, &us, mu, cfg.bounds.as_ref()) {
@@ -318,17 +309,10 @@ impl Ilqr {
                 }
             }
         }
-        let prev_gains = if dynamics.prev0.is_some() {
-            gains.iter().map(|g| g.columns(n, m).into_owned()).collect()
-        } else {
-            Vec::new()
-        };
-        let gains = gains.iter().map(|g| g.columns(0, n).into_owned()).collect();
         Ok(IlqrSolution {
             states: xs,
             actions: us,
             gains,
-            prev_gains,
             cost,
             cost_history: history,
             iterations,
@@ -338,65 +322,35 @@ impl Ilqr {
 }
 
 /// The model as iLQR sees it: batched steps with the generator restarted from `seed` at every
-/// call, Jacobians, and, for a model that reads the previous action (`prev0` given), the state
-/// augmented with it.
+/// call, and Jacobians.
 struct System<'a> {
     model: &'a dyn DynamicsModel,
     seed: u64,
-    /// The action applied before `x0`, for a model that reads it; `None` otherwise.
-    prev0: Option<&'a [f64]>,
 }
 
 impl System<'_> {
-    /// Width of the backward pass's state: `S`, or `S + A` with the previous action.
-    fn aug_dim(&self, n: usize, m: usize) -> usize {
-        n + if self.prev0.is_some() { m } else { 0 }
-    }
-
-    /// One step of a batch; `prev` are the previous actions (`B x A`, read only when the model
-    /// uses them).
+    /// One step of a batch.
     fn step_batch<'v>(
         &self,
         states: ArrayView2<'v, f64>,
         actions: ArrayView2<'v, f64>,
-        prev: Option<ArrayView2<'v, f64>>,
     ) -> Result<Array2<f64>> {
         if states.iter().chain(actions.iter()).any(|v| !v.is_finite()) {
             return Err(PlanError::NonFinite(
                 "states or actions given to the model".into(),
             ));
         }
-        let mut input = ModelInput::new(states, actions);
-        if let (Some(p), Some(_)) = (prev, self.prev0) {
-            input = input.with_prev_actions(p);
-        }
+        let input = ModelInput::new(states, actions);
         Ok(crate::mpc::predict(self.model, &input, &mut rng_from_seed(self.seed))?.next_states)
     }
 
-    /// The previous actions along `us` (`T x A`): the one before `x0`, then `u_0 .. u_{T−2}`.
-    fn prev_actions(&self, us: &Array2<f64>) -> Option<Array2<f64>> {
-        self.prev0.map(|p0| {
-            let mut prev = Array2::zeros(us.dim());
-            prev.row_mut(0).assign(&ndarray::ArrayView1::from(p0));
-            let t_len = us.nrows();
-            prev.slice_mut(s![1.., ..])
-                .assign(&us.slice(s![..t_len - 1, ..]));
-            prev
-        })
-    }
-
-    /// `(A_t, B_t)` of the backward pass along `(xs, us)`: the model's Jacobians, augmented with
-    /// the previous action when the model reads it.
+    /// `(A_t, B_t)` of the backward pass along `(xs, us)`: the model's Jacobians.
     fn jacobians(
         &self,
         xs: ArrayView2<'_, f64>,
         us: &Array2<f64>,
     ) -> Result<Vec<(DMatrix<f64>, DMatrix<f64>)>> {
-        let prev = self.prev_actions(us);
-        let mut input = ModelInput::new(xs.view(), us.view());
-        if let Some(p) = &prev {
-            input = input.with_prev_actions(p.view());
-        }
+        let input = ModelInput::new(xs.view(), us.view());
         let lin = self
             .model
             .linearize(&input, &mut rng_from_seed(self.seed))?;
@@ -406,53 +360,7 @@ impl System<'_> {
             .map(|l| {
                 check_len("Jacobian A entries", n * n, l.a.len())?;
                 check_len("Jacobian B entries", n * m, l.b.len())?;
-                match (&l.b_prev, prev.is_some()) {
-                    (Some(bp), true) => {
-                        check_len("Jacobian B_prev entries", n * m, bp.len())?;
-                        let mut a = DMatrix::zeros(n + m, n + m);
-                        a.view_mut((0, 0), (n, n)).copy_from(&l.a);
-                        a.view_mut((0, n), (n, m)).copy_from(bp);
-                        let mut b = DMatrix::zeros(n + m, m);
-                        b.view_mut((0, 0), (n, m)).copy_from(&l.b);
-                        b.view_mut((n, 0), (m, m)).fill_with_identity();
-                        Ok((a, b))
-                    }
-                    (None, true) => Err(PlanError::Config(
-                        "the model gave no Jacobian in the previous action".into(),
-                    )),
-                    _ => Ok((l.a, l.b)),
-                }
-            })
-            .collect()
-    }
-
-    /// Pads cost expansions in `x` with zeros for the previous action (the cost does not read
-    /// it) when the state is augmented.
-    fn augment_cost(
-        &self,
-        quad: Vec<crate::objective::QuadCost>,
-    ) -> Vec<crate::objective::QuadCost> {
-        if self.prev0.is_none() {
-            return quad;
-        }
-        quad.into_iter()
-            .map(|q| {
-                let (n, k) = (q.cx.len(), q.cu.len());
-                let m = self.prev0.map_or(0, <[f64]>::len);
-                let mut cx = DVector::zeros(n + m);
-                cx.rows_mut(0, n).copy_from(&q.cx);
-                let mut cxx = DMatrix::zeros(n + m, n + m);
-                cxx.view_mut((0, 0), (n, n)).copy_from(&q.cxx);
-                let mut cux = DMatrix::zeros(k, n + m);
-                cux.view_mut((0, 0), (k, n)).copy_from(&q.cux);
-                crate::objective::QuadCost {
-                    c: q.c,
-                    cx,
-                    cu: q.cu,
-                    cxx,
-                    cuu: q.cuu,
-                    cux,
-                }
+                Ok((l.a, l.b))
             })
             .collect()
     }
@@ -471,7 +379,7 @@ fn rollout(
     let xs = Array2::zeros((t_len + 1, n));
     let bp = BackwardPass {
         k: vec![DVector::zeros(m); t_len],
-        gains: vec![DMatrix::zeros(m, dynamics.aug_dim(n, m)); t_len],
+        gains: vec![DMatrix::zeros(m, n); t_len],
         d1: 0.0,
         d2: 0.0,
     };
@@ -600,8 +508,7 @@ pub fn backward_pass(
 type Candidates = (Vec<Array2<f64>>, Vec<Array2<f64>>, Vec<f64>);
 
 /// Rolls out `u = clamp(ū + α k + K (x − x̄))` for every `α` at once (one batched step per time
-/// step; with the previous action in the state, `K` also acts on `u_{t−1} − ū_{t−1}`); returns
-/// the candidates' states, actions and objective values.
+/// step); returns the candidates' states, actions and objective values.
 #[allow(clippy::too_many_arguments)]
 fn forward_batch(
     dynamics: &System<'_>,
@@ -624,11 +531,6 @@ fn forward_batch(
         r.assign(&ndarray::ArrayView1::from(x0));
     }
     let mut act = Array2::zeros((nb, m));
-    // Each candidate's previous action and the nominal one (only with the augmented state).
-    let nominal_prev = dynamics.prev_actions(us);
-    let mut prev = nominal_prev
-        .as_ref()
-        .map(|p| Array2::from_shape_fn((nb, m), |(_, j)| p[(0, j)]));
     let mut step_cost = vec![0.0; nb];
     let g = objective.discount();
     let mut w = 1.0;
@@ -640,11 +542,6 @@ fn forward_batch(
                 for i in 0..n {
                     v += bp.gains[t][(j, i)] * (cur[(b, i)] - xs[(t, i)]);
                 }
-                if let (Some(p), Some(pn)) = (&prev, &nominal_prev) {
-                    for i in 0..m {
-                        v += bp.gains[t][(j, n + i)] * (p[(b, i)] - pn[(t, i)]);
-                    }
-                }
                 act[(b, j)] = v;
             }
             if let Some(bd) = bounds {
@@ -654,10 +551,7 @@ fn forward_batch(
         }
         objective.running_batch(cur.view(), act.view(), t, &mut step_cost)?;
         cost.zip_mut_with(&Array1::from(step_cost.clone()), |c, s| *c += w * s);
-        cur = dynamics.step_batch(cur.view(), act.view(), prev.as_ref().map(|p| p.view()))?;
-        if let Some(p) = prev.as_mut() {
-            p.assign(&act);
-        }
+        cur = dynamics.step_batch(cur.view(), act.view())?;
         w *= g;
     }
     for b in 0..nb {
@@ -674,14 +568,13 @@ fn forward_batch(
 }
 
 impl Planner for Ilqr {
-    fn plan_with_prev_action(
+    fn plan(
         &mut self,
         x0: &[f64],
-        prev_action: Option<&[f64]>,
         model: &dyn DynamicsModel,
         objective: &Objective,
     ) -> Result<Plan> {
-        let (_, a) = check_problem(x0, prev_action, model, objective)?;
+        let (_, a) = check_problem(x0, model, objective)?;
         let h = self.cfg.horizon;
         let cold = !matches!(&self.warm, Some(w) if w.dim() == (h, a));
         let mut init = warm_start(self.warm.take(), h, a, self.cfg.bounds.as_ref());
@@ -692,16 +585,9 @@ impl Planner for Ilqr {
             z *= self.cfg.init_std;
             init += &z;
         }
-        let sol = self.solve(model, objective, x0, prev_action, &init)?;
+        let sol = self.solve(model, objective, x0, &init)?;
         let mut rng = rng_from_seed(self.cfg.seed);
-        let plan = crate::mpc::plan_from_actions(
-            x0,
-            prev_action,
-            model,
-            objective,
-            &mut rng,
-            &sol.actions,
-        )?;
+        let plan = crate::mpc::plan_from_actions(x0, model, objective, &mut rng, &sol.actions)?;
         self.warm = Some(sol.actions);
         Ok(plan)
     }

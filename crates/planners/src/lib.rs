@@ -11,8 +11,8 @@
 //!   the model's own `linearize` (a `PlantModel`: the plant's Jacobians, analytic for rigid
 //!   bodies; otherwise finite differences of one batched `predict`); the one model trait every
 //!   planner here takes, so there is no planner-side dynamics trait or adapter;
-//! - planning through models that read the previous action (p1's incremental model): the action
-//!   applied before `x0` is an input of the plan ([`Planner::plan_with_prev_action`]);
+//! - planning through models that read the previous action (p1's incremental model) with no
+//!   extra input: such a model carries it in its state, `x0 = [s, a_{t−1}]`;
 //! - TVLG controllers ([`TvlgController`], sampled with stored noise) and their optimizers
 //!   [`LqrFlm`], [`pi2_update`] and [`Pilqr`] (p4), on dynamics fitted by
 //!   `tandem_models::TvlgFit`, with a quadratic cost per time step that the caller may supply

@@ -5,12 +5,9 @@
 //! one time step are one contiguous `N x A` block: a rollout makes exactly one
 //! [`DynamicsModel::predict`] call per time step for the whole population.
 //!
-//! **The previous action.** A model that conditions on the action applied before the current
-//! one (p1's incremental model, [`DynamicsModel::uses_prev_actions`]) needs, at `h = 0`, the
-//! action applied before `x0`: it is an input of the plan,
-//! [`Planner::plan_with_prev_action`], and the rollout gives every sample that action at `h = 0`
-//! and its own previous action after. [`Planner::plan`] is the same call without one (models that
-//! do not read it); planning through a model that needs it without one is an error.
+//! A model that conditions on more than the state and the action carries it in its state: p1's
+//! incremental model plans from `x0 = [s, a_{t−1}]` (`tandem_models::IncrementalModel`), so a
+//! planner needs only `(x0, model, objective)`.
 
 use nalgebra::DMatrix;
 use ndarray::{s, Array1, Array2, Array3, ArrayView2, ArrayViewMut2, Axis};
@@ -35,9 +32,6 @@ pub struct Plan {
     pub terminal_cost: f64,
     /// The objective value `Σ γ^h c_h + γ^H c_H` of the plan.
     pub total_cost: f64,
-    /// The action applied before `x0`, when the plan was given one
-    /// ([`Planner::plan_with_prev_action`]).
-    pub prev_action: Option<Vec<f64>>,
 }
 
 impl Plan {
@@ -52,26 +46,12 @@ impl Plan {
     }
 
     /// The planned transitions `(x_h, u_h, r_h = −c_h, x_{h+1})` as a dataset a pipeline can add to
-    /// a replay buffer (p3 Algorithm 1, lines 14–15). Previous actions are the plan's own; at
-    /// `h = 0` the action applied before `x0` if the plan had one, else zero (an episode start).
-    /// Nothing is terminal.
+    /// a replay buffer (p3 Algorithm 1, lines 14–15). Nothing is terminal.
     pub fn transitions(&self) -> Transitions {
         let h = self.horizon();
-        let a = self.actions.ncols();
-        let states = self.states.slice(s![..h, ..]).to_owned();
-        // Row t of the previous actions is row t - 1 of the plan.
-        let mut prev = Array2::zeros((h, a));
-        if let Some(p) = &self.prev_action {
-            prev.row_mut(0).assign(&ndarray::ArrayView1::from(&p[..]));
-        }
-        if h > 1 {
-            prev.slice_mut(s![1.., ..])
-                .assign(&self.actions.slice(s![..h - 1, ..]));
-        }
         Transitions {
-            states,
+            states: self.states.slice(s![..h, ..]).to_owned(),
             actions: self.actions.clone(),
-            prev_actions: prev,
             next_states: self.states.slice(s![1.., ..]).to_owned(),
             rewards: self.costs.mapv(|c| -c),
             terminated: Array1::from_elem(h, false),
@@ -82,27 +62,15 @@ impl Plan {
 /// A receding-horizon planner: plans through any [`DynamicsModel`] (a plant, a learned network,
 /// an ensemble, an incremental model) and keeps its warm start between calls.
 pub trait Planner {
-    /// Plans from state `x0`, given the action applied just before `x0` (`None` at an episode
-    /// start or for models that do not read it; see the module docs). The caller applies
-    /// [`Plan::first_action`] and calls again at the next state with that action as
-    /// `prev_action`. The warm start is the previous plan shifted by one step.
-    fn plan_with_prev_action(
-        &mut self,
-        x0: &[f64],
-        prev_action: Option<&[f64]>,
-        model: &dyn DynamicsModel,
-        objective: &Objective,
-    ) -> Result<Plan>;
-
-    /// [`Planner::plan_with_prev_action`] without a previous action.
+    /// Plans from state `x0` through `model` under `objective`. The caller applies
+    /// [`Plan::first_action`] and calls again at the next state; the warm start is the previous
+    /// plan shifted by one step.
     fn plan(
         &mut self,
         x0: &[f64],
         model: &dyn DynamicsModel,
         objective: &Objective,
-    ) -> Result<Plan> {
-        self.plan_with_prev_action(x0, None, model, objective)
-    }
+    ) -> Result<Plan>;
 
     /// Forgets the warm start and restarts the random stream from the configured seed (call at the
     /// start of an episode).
@@ -259,11 +227,10 @@ pub(crate) fn fraction(what: &str, v: f64) -> Result<()> {
     }
 }
 
-/// Checks that the model, the objective, `x0` and the previous action agree on dimensions and are
-/// finite, and that a model that reads the previous action gets one; returns `(S, A)`.
+/// Checks that the model, the objective and `x0` agree on dimensions and that `x0` is finite;
+/// returns `(S, A)`.
 pub(crate) fn check_problem(
     x0: &[f64],
-    prev_action: Option<&[f64]>,
     model: &dyn DynamicsModel,
     objective: &Objective,
 ) -> Result<(usize, usize)> {
@@ -280,20 +247,6 @@ pub(crate) fn check_problem(
     )?;
     check_len("initial state", s, x0.len())?;
     check_finite("initial state", x0)?;
-    match prev_action {
-        Some(p) => {
-            check_len("previous action", a, p.len())?;
-            check_finite("previous action", p)?;
-        }
-        None if model.uses_prev_actions() => {
-            return Err(PlanError::Model(tandem_models::ModelError::MissingInput(
-                "the model conditions on the previous action: give the action applied before x0 \
-                 (Planner::plan_with_prev_action)"
-                    .into(),
-            )))
-        }
-        None => {}
-    }
     Ok((s, a))
 }
 
@@ -503,14 +456,12 @@ pub(crate) fn predict(
 /// Rolls a population out through `model`, one `predict` per step, and returns each sample's
 /// objective value `Σ γ^h c(x_h, u_h) + γ^H c_H(x_H)`.
 ///
-/// `actions` is `H x N x A`; `prev_action` is the action applied before `x0` (every sample's
-/// previous action at `h = 0`). Before step `h` the callback `act(h, states, actions_h)` may write
+/// `actions` is `H x N x A`. Before step `h` the callback `act(h, states, actions_h)` may write
 /// the actions of that step from the current states (a policy proposal); pass a no-op for
 /// open-loop sequences. `states_out`, when given (`(H+1) x N x S`), records the states.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn rollout_population(
     x0: &[f64],
-    prev_action: Option<&[f64]>,
     model: &dyn DynamicsModel,
     objective: &Objective,
     rng: &mut Rng,
@@ -521,7 +472,6 @@ pub(crate) fn rollout_population(
 ) -> Result<(Array1<f64>, Vec<f64>)> {
     rollout_starts(
         one_row(x0),
-        prev_action.map(one_row),
         model,
         objective,
         rng,
@@ -537,13 +487,11 @@ pub(crate) fn one_row(x: &[f64]) -> ArrayView2<'_, f64> {
     ArrayView2::from_shape((1, x.len()), x).expect("a slice is one row")
 }
 
-/// [`rollout_population`] from `P` start states at once (`starts`, `P x S`, and the actions
-/// applied before them, `P x A`): the `N` samples of `actions` (`H x N x A`, `N` a multiple of
+/// [`rollout_population`] from `P` start states at once (`starts`, `P x S`): the `N` samples of `actions` (`H x N x A`, `N` a multiple of
 /// `P`) are start-major, rows `p·N/P .. (p+1)·N/P` starting at `starts[p]`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn rollout_starts(
     starts: ArrayView2<'_, f64>,
-    prev_actions: Option<ArrayView2<'_, f64>>,
     model: &dyn DynamicsModel,
     objective: &Objective,
     rng: &mut Rng,
@@ -552,7 +500,7 @@ pub(crate) fn rollout_starts(
     mut states_out: Option<&mut Array3<f64>>,
     running_out: Option<&mut Array2<f64>>,
 ) -> Result<(Array1<f64>, Vec<f64>)> {
-    let (h_len, n, a_dim) = actions.dim();
+    let (h_len, n, _) = actions.dim();
     let (p, s_dim) = starts.dim();
     if p == 0 || n % p != 0 {
         return Err(PlanError::Config(format!(
@@ -566,7 +514,6 @@ pub(crate) fn rollout_starts(
     let gamma = objective.discount();
     let mut disc = 1.0;
     let mut running_out = running_out;
-    let prev0 = prev_actions.map(|pa| Array2::from_shape_fn((n, a_dim), |(i, j)| pa[(i / per, j)]));
     if let Some(so) = states_out.as_deref_mut() {
         so.slice_mut(s![0, .., ..]).assign(&states);
     }
@@ -574,13 +521,7 @@ pub(crate) fn rollout_starts(
         act(h, states.view(), actions.slice_mut(s![h, .., ..]))?;
         let u = actions.slice(s![h, .., ..]);
         objective.running_batch(states.view(), u, h, &mut step_cost)?;
-        let mut input = ModelInput::new(states.view(), u);
-        if h > 0 {
-            input = input.with_prev_actions(actions.slice(s![h - 1, .., ..]));
-        } else if let Some(p) = &prev0 {
-            input = input.with_prev_actions(p.view());
-        }
-        let pred = predict(model, &input, rng)?;
+        let pred = predict(model, &ModelInput::new(states.view(), u), rng)?;
         if objective.uses_model_reward() {
             let r = pred.rewards.as_ref().ok_or_else(|| {
                 PlanError::Config(
@@ -626,7 +567,6 @@ pub(crate) fn rollout_starts(
 /// Rolls out one action sequence (`H x A`) and packages it as a [`Plan`].
 pub(crate) fn plan_from_actions(
     x0: &[f64],
-    prev_action: Option<&[f64]>,
     model: &dyn DynamicsModel,
     objective: &Objective,
     rng: &mut Rng,
@@ -637,14 +577,7 @@ pub(crate) fn plan_from_actions(
         .clone()
         .into_shape_with_order((h, 1, a))
         .expect("same size");
-    let mut plans = plans_from_actions(
-        one_row(x0),
-        prev_action.map(one_row),
-        model,
-        objective,
-        rng,
-        acts,
-    )?;
+    let mut plans = plans_from_actions(one_row(x0), model, objective, rng, acts)?;
     Ok(plans.pop().expect("one start, one plan"))
 }
 
@@ -652,7 +585,6 @@ pub(crate) fn plan_from_actions(
 /// one population and packages each as a [`Plan`].
 pub(crate) fn plans_from_actions(
     starts: ArrayView2<'_, f64>,
-    prev_actions: Option<ArrayView2<'_, f64>>,
     model: &dyn DynamicsModel,
     objective: &Objective,
     rng: &mut Rng,
@@ -663,7 +595,6 @@ pub(crate) fn plans_from_actions(
     let mut running = Array2::zeros((h, p));
     let (total, term) = rollout_starts(
         starts,
-        prev_actions,
         model,
         objective,
         rng,
@@ -679,7 +610,6 @@ pub(crate) fn plans_from_actions(
             costs: running.column(i).to_owned(),
             terminal_cost: term[i],
             total_cost: total[i],
-            prev_action: prev_actions.map(|pa| pa.row(i).to_vec()),
         })
         .collect())
 }

@@ -172,14 +172,13 @@ impl Mppi {
 }
 
 impl Planner for Mppi {
-    fn plan_with_prev_action(
+    fn plan(
         &mut self,
         x0: &[f64],
-        prev_action: Option<&[f64]>,
         model: &dyn DynamicsModel,
         objective: &Objective,
     ) -> Result<Plan> {
-        let (_, a) = check_problem(x0, prev_action, model, objective)?;
+        let (_, a) = check_problem(x0, model, objective)?;
         if let Some(b) = &self.cfg.bounds {
             b.validate(a)?;
         }
@@ -212,7 +211,6 @@ impl Planner for Mppi {
             }
             let (mut costs, _) = rollout_population(
                 x0,
-                prev_action,
                 model,
                 objective,
                 &mut self.rng,
@@ -253,7 +251,7 @@ impl Planner for Mppi {
             mean = new_mean;
         }
         clamp_opt(&self.cfg.bounds, mean.view_mut());
-        let plan = plan_from_actions(x0, prev_action, model, objective, &mut self.rng, &mean)?;
+        let plan = plan_from_actions(x0, model, objective, &mut self.rng, &mean)?;
         self.mean = Some(mean);
         Ok(plan)
     }

@@ -222,8 +222,7 @@ impl Default for SampleConfig {
 
 /// Runs `controller` on `system` from `x0` (`N` trajectories batched, one `predict` call per time
 /// step), storing the noise of every action. `rng` draws the noise and drives a stochastic
-/// system. A model that reads the previous action ([`DynamicsModel::uses_prev_actions`]) is
-/// refused: no action precedes `x0` here.
+/// system.
 pub fn sample_trajectories(
     controller: &TvlgController,
     system: &dyn DynamicsModel,
@@ -249,13 +248,6 @@ pub fn sample_trajectories(
     )?;
     check_len("initial state", n, x0.len())?;
     crate::mpc::nonzero("samples", cfg.samples)?;
-    if system.uses_prev_actions() {
-        return Err(PlanError::Config(
-            "sampling TVLG controllers through a model that reads the previous action is not \
-             supported (no action precedes x0)"
-                .into(),
-        ));
-    }
     let ns = cfg.samples;
     let mut noise = Array3::zeros((ns, t_len, m));
     fill_normal(rng, noise.as_slice_mut().expect("standard layout"));

@@ -28,7 +28,7 @@ fn linear_quadratic_is_solved_exactly_with_riccati_gains() {
     let jstar = (x0.transpose() * &p0 * &x0)[0];
     let ilqr = Ilqr::new(IlqrConfig::default()).unwrap();
     let sol = ilqr
-        .solve(&m, &obj, x0.as_slice(), None, &Array2::zeros((T, 1)))
+        .solve(&m, &obj, x0.as_slice(), &Array2::zeros((T, 1)))
         .unwrap();
     assert!(
         (sol.cost - jstar).abs() < 1e-6 * jstar,
@@ -70,7 +70,6 @@ fn finite_difference_jacobians_of_a_model() {
     for l in lin {
         assert!((l.a - &m.a).abs().max() < 1e-7);
         assert!((l.b - &m.b).abs().max() < 1e-7);
-        assert!(l.b_prev.is_none());
     }
 }
 
@@ -80,7 +79,7 @@ fn bounds_hold_and_beat_clamping_the_unbounded_solution() {
     let x0 = [3.0, 0.0];
     let free = Ilqr::new(IlqrConfig::default())
         .unwrap()
-        .solve(&m, &obj, &x0, None, &Array2::zeros((T, 1)))
+        .solve(&m, &obj, &x0, &Array2::zeros((T, 1)))
         .unwrap();
     let b = Bounds::symmetric(1, 2.0);
     let bounded = Ilqr::new(IlqrConfig {
@@ -88,7 +87,7 @@ fn bounds_hold_and_beat_clamping_the_unbounded_solution() {
         ..Default::default()
     })
     .unwrap()
-    .solve(&m, &obj, &x0, None, &Array2::zeros((T, 1)))
+    .solve(&m, &obj, &x0, &Array2::zeros((T, 1)))
     .unwrap();
     assert!(
         free.actions.iter().any(|u| u.abs() > 2.5),
@@ -191,26 +190,20 @@ fn seeds_and_errors() {
     ));
     let ilqr = Ilqr::new(IlqrConfig::default()).unwrap();
     assert!(matches!(
-        ilqr.solve(&m, &obj, &[1.0], None, &Array2::zeros((5, 1))),
+        ilqr.solve(&m, &obj, &[1.0], &Array2::zeros((5, 1))),
         Err(PlanError::Dim { .. })
     ));
     assert!(matches!(
-        ilqr.solve(&m, &obj, &[1.0, 0.0], None, &Array2::zeros((5, 2))),
+        ilqr.solve(&m, &obj, &[1.0, 0.0], &Array2::zeros((5, 2))),
         Err(PlanError::Dim { .. })
     ));
     assert!(matches!(
-        ilqr.solve(&m, &obj, &[1.0, 0.0], None, &Array2::zeros((0, 1))),
+        ilqr.solve(&m, &obj, &[1.0, 0.0], &Array2::zeros((0, 1))),
         Err(PlanError::Config(_))
     ));
     let nan = Objective::new(2, 1, |x, _| if x[0] < 0.99 { f64::NAN } else { 0.0 });
     assert!(matches!(
-        ilqr.solve(
-            &m,
-            &nan,
-            &[1.0, 0.0],
-            None,
-            &Array2::from_elem((5, 1), -1.0)
-        ),
+        ilqr.solve(&m, &nan, &[1.0, 0.0], &Array2::from_elem((5, 1), -1.0)),
         Err(PlanError::NonFiniteCost { .. })
     ));
 }
@@ -252,7 +245,7 @@ fn time_varying_tracking_cost_matches_the_affine_riccati_recursion() {
     let x0 = [0.5, 0.0];
     let sol = Ilqr::new(IlqrConfig::default())
         .unwrap()
-        .solve(&m, &obj, &x0, None, &Array2::zeros((T, 1)))
+        .solve(&m, &obj, &x0, &Array2::zeros((T, 1)))
         .unwrap();
     let mut x = DVector::from_row_slice(&x0);
     let mut moved = 0.0f64;
@@ -275,7 +268,7 @@ fn time_varying_tracking_cost_matches_the_affine_riccati_recursion() {
     });
     let other = Ilqr::new(IlqrConfig::default())
         .unwrap()
-        .solve(&m, &frozen, &x0, None, &Array2::zeros((T, 1)))
+        .solve(&m, &frozen, &x0, &Array2::zeros((T, 1)))
         .unwrap();
     assert!((other.actions[(3, 0)] - sol.actions[(3, 0)]).abs() > 1e-2);
 }

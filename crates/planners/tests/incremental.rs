@@ -1,7 +1,7 @@
-//! Planning through p1's incremental model `x' = x + L (u − u_prev)`: with a known `L` (the
-//! prior of an unfitted model, exactly `L0`) the model is the plain linear system on the state
-//! augmented with the previous action, so every planner must give the same plan through either,
-//! and iLQR must reach the augmented system's Riccati optimum.
+//! Planning through p1's incremental model, a model of `y = [x; u_prev]`:
+//! `y' = [x + L (u − u_prev); u]`. With a known `L` (the prior of an unfitted model, exactly `L0`)
+//! it is a linear system, so every planner must give the same plan through it as through that
+//! system written by hand, and iLQR must reach the system's Riccati optimum.
 #![allow(clippy::needless_range_loop)]
 
 mod common;
@@ -40,8 +40,8 @@ fn incremental() -> IncrementalModel {
     .unwrap()
 }
 
-/// The same system as a plain model on `y = [x; u_prev]`: `y' = [x + L (u − y₂); u]`, computed
-/// in the incremental model's order of operations so that rollouts agree bit for bit.
+/// The same system written by hand: `y' = [x + L (u − y₂); u]`, computed in the incremental
+/// model's order of operations so that rollouts agree bit for bit.
 struct Augmented;
 
 impl DynamicsModel for Augmented {
@@ -69,16 +69,13 @@ impl DynamicsModel for Augmented {
     }
 }
 
-/// The quadratic cost on `x`, and the same cost on `y = [x; u_prev]` (blind to `u_prev`),
-/// evaluated alike (`common::quadratic_objective`'s arithmetic).
-fn objectives() -> (Objective, Objective) {
+/// The quadratic cost on `x`, as a cost on `y = [x; u_prev]` (blind to `u_prev`).
+fn objective() -> Objective {
     let (q, r, qf) = lq_weights();
-    let plain = quadratic_objective(&q, &r, &qf);
     let full = quadratic_objective(&q, &r, &qf);
     let full_t = quadratic_objective(&q, &r, &qf);
-    let aug = Objective::new(3, 1, move |y, u| full.running_cost(&y[..2], u, 0).unwrap())
-        .with_terminal(move |y| full_t.terminal_cost(&y[..2]).unwrap());
-    (plain, aug)
+    Objective::new(3, 1, move |y, u| full.running_cost(&y[..2], u, 0).unwrap())
+        .with_terminal(move |y| full_t.terminal_cost(&y[..2]).unwrap())
 }
 
 fn planners() -> Vec<(&'static str, Box<dyn Planner>)> {
@@ -138,31 +135,17 @@ fn planners() -> Vec<(&'static str, Box<dyn Planner>)> {
 }
 
 #[test]
-fn every_planner_plans_through_the_incremental_model_as_through_the_augmented_plain_model() {
+fn every_planner_plans_through_the_incremental_model_as_through_the_system_by_hand() {
     let inc = incremental();
-    let (obj, aug_obj) = objectives();
-    let (x0, p0) = ([1.0, -0.5], 0.7);
-    let inc_plans: Vec<_> = planners()
-        .into_iter()
-        .map(|(name, mut p)| {
-            // Three receding-horizon calls: the warm start and the previous action move on.
-            let (mut x, mut prev) = (x0.to_vec(), p0);
-            let mut plans = Vec::new();
-            for _ in 0..3 {
-                let plan = p
-                    .plan_with_prev_action(&x, Some(&[prev]), &inc, &obj)
-                    .unwrap();
-                prev = plan.actions[(0, 0)];
-                x = plan.states.row(1).to_vec();
-                plans.push(plan);
-            }
-            (name, plans)
-        })
-        .collect();
-    for ((name, mut p), (_, inc_plans)) in planners().into_iter().zip(&inc_plans) {
-        let mut y = vec![x0[0], x0[1], p0];
-        for (call, ip) in inc_plans.iter().enumerate() {
-            let plan = p.plan(&y, &Augmented, &aug_obj).unwrap();
+    assert_eq!(inc.state_dim(), 3);
+    let obj = objective();
+    let y0 = [1.0, -0.5, 0.7];
+    for ((name, mut p), (_, mut q)) in planners().into_iter().zip(planners()) {
+        // Three receding-horizon calls: the warm start and the previous action move on.
+        let mut y = y0.to_vec();
+        for call in 0..3 {
+            let ip = p.plan(&y, &inc, &obj).unwrap();
+            let plan = q.plan(&y, &Augmented, &obj).unwrap();
             // iLQR's finite-difference Jacobians differ in rounding between the two models (and
             // its stopping test acts on that difference); the sampling planners see identical
             // rollouts.
@@ -174,20 +157,21 @@ fn every_planner_plans_through_the_incremental_model_as_through_the_augmented_pl
                     let d = (plan.states[(h + 1, i)] - ip.states[(h + 1, i)]).abs();
                     assert!(d <= tol.max(1e-12), "{name}, call {call}, state {h}: {d}");
                 }
+                // The state carries the action just applied.
+                assert_eq!(ip.states[(h + 1, 2)], ip.actions[(h, 0)]);
             }
             assert!((plan.total_cost - ip.total_cost).abs() <= tol.max(1e-12) * ip.total_cost);
-            assert_eq!(ip.prev_action.as_deref(), Some(&y[2..]));
-            assert_eq!(ip.transitions().prev_actions[(0, 0)], y[2]);
+            assert_eq!(ip.transitions().states[(0, 2)], y[2]);
             // The next call starts where the incremental planner's loop went.
-            y = vec![ip.states[(1, 0)], ip.states[(1, 1)], ip.actions[(0, 0)]];
+            y = ip.states.row(1).to_vec();
         }
     }
 }
 
 #[test]
-fn ilqr_through_the_incremental_model_reaches_the_augmented_riccati_optimum() {
+fn ilqr_through_the_incremental_model_reaches_the_riccati_optimum() {
     let inc = incremental();
-    let (obj, _) = objectives();
+    let obj = objective();
     let (q, r, qf) = lq_weights();
     let l = gain();
     // y' = A y + B u with y = [x; u_prev].
@@ -199,12 +183,11 @@ fn ilqr_through_the_incremental_model_reaches_the_augmented_riccati_optimum() {
         p
     };
     let (p, k) = riccati(&a, &b, &pad(&q), &r, &pad(&qf), H);
-    let (x0, p0) = ([1.0, -0.5], 0.7);
-    let y0 = DVector::from_vec(vec![x0[0], x0[1], p0]);
+    let y0 = DVector::from_vec(vec![1.0, -0.5, 0.7]);
     let jstar = (y0.transpose() * &p[0] * &y0)[0];
     let sol = Ilqr::new(IlqrConfig::default())
         .unwrap()
-        .solve(&inc, &obj, &x0, Some(&[p0]), &Array2::zeros((H, 1)))
+        .solve(&inc, &obj, y0.as_slice(), &Array2::zeros((H, 1)))
         .unwrap();
     assert!(
         (sol.cost - jstar).abs() < 1e-7 * jstar,
@@ -212,44 +195,34 @@ fn ilqr_through_the_incremental_model_reaches_the_augmented_riccati_optimum() {
         sol.cost
     );
     // The optimal actions u_t = −K_t y_t, and the feedback on both parts of the state.
-    let mut y = y0;
+    let mut y = y0.clone();
     for t in 0..H {
         let u = -(&k[t] * &y)[0];
         assert!((sol.actions[(t, 0)] - u).abs() < 1e-5, "step {t}");
-        for j in 0..2 {
+        for j in 0..3 {
             assert!(
                 (sol.gains[t][(0, j)] + k[t][(0, j)]).abs() < 1e-4 * (1.0 + k[t][(0, j)].abs())
             );
         }
-        assert!(
-            (sol.prev_gains[t][(0, 0)] + k[t][(0, 2)]).abs() < 1e-4 * (1.0 + k[t][(0, 2)].abs())
-        );
         y = &a * &y + &b * u;
     }
     // Ignoring the previous action (planning as if it were zero) gives another, worse plan.
     let zero = Ilqr::new(IlqrConfig::default())
         .unwrap()
-        .solve(&inc, &obj, &x0, Some(&[0.0]), &Array2::zeros((H, 1)))
+        .solve(&inc, &obj, &[1.0, -0.5, 0.0], &Array2::zeros((H, 1)))
         .unwrap();
     assert!((zero.actions[(0, 0)] - sol.actions[(0, 0)]).abs() > 1e-3);
 }
 
 #[test]
-fn a_model_that_needs_the_previous_action_without_one_is_an_error() {
+fn a_start_without_its_previous_action_is_an_error() {
     let inc = incremental();
-    let (obj, _) = objectives();
+    let obj = objective();
     for (name, mut p) in planners() {
         let err = p.plan(&[1.0, 0.0], &inc, &obj).unwrap_err();
-        assert!(
-            matches!(err, PlanError::Model(ModelError::MissingInput(_))),
-            "{name}: {err:?}"
-        );
+        assert!(matches!(err, PlanError::Dim { .. }), "{name}: {err:?}");
         assert!(matches!(
-            p.plan_with_prev_action(&[1.0, 0.0], Some(&[0.0, 1.0]), &inc, &obj),
-            Err(PlanError::Dim { .. })
-        ));
-        assert!(matches!(
-            p.plan_with_prev_action(&[1.0, 0.0], Some(&[f64::NAN]), &inc, &obj),
+            p.plan(&[1.0, 0.0, f64::NAN], &inc, &obj),
             Err(PlanError::NonFinite(_))
         ));
     }

@@ -472,9 +472,6 @@ fn dmd_policy_proposal_and_transitions() {
             .running_cost(xs.as_slice(), &[tr.actions[(h, 0)]], h)
             .unwrap();
         assert!((tr.rewards[h] + c).abs() < 1e-12);
-        // One-step-back data: the previous row's action (zero at h = 0: the plan was given none).
-        let pa = if h == 0 { 0.0 } else { tr.actions[(h - 1, 0)] };
-        assert_eq!(tr.prev_actions[(h, 0)], pa);
     }
 
     // A full step with the exponential utility improves on the policy.
@@ -491,17 +488,14 @@ fn dmd_policy_proposal_and_transitions() {
     let pol_cost = plan.total_cost;
     let k3 = kinf.clone();
     let better = p
-        .plan_with_proposal(
-            &[1.0, 0.0],
-            None,
-            &m,
-            &obj,
-            &move |s: ndarray::ArrayView2<'_, f64>| {
-                Array2::from_shape_fn((s.nrows(), 1), |(i, _)| {
-                    -(k3[(0, 0)] * s[(i, 0)] + k3[(0, 1)] * s[(i, 1)])
-                })
-            },
-        )
+        .plan_with_proposal(&[1.0, 0.0], &m, &obj, &move |s: ndarray::ArrayView2<
+            '_,
+            f64,
+        >| {
+            Array2::from_shape_fn((s.nrows(), 1), |(i, _)| {
+                -(k3[(0, 0)] * s[(i, 0)] + k3[(0, 1)] * s[(i, 1)])
+            })
+        })
         .unwrap();
     assert!(better.total_cost <= pol_cost + 1e-12 && better.total_cost >= jstar - 1e-9);
 }
@@ -532,10 +526,10 @@ fn dmd_batch_plans_are_independent_plans() {
     let starts = ndarray::arr2(&[[1.0, 0.0], [-0.5, 0.3], [0.2, -1.0]]);
 
     let one = planner(0.8, 4)
-        .plan_with_proposal(&[-0.5, 0.3], None, &m, &obj, &policy)
+        .plan_with_proposal(&[-0.5, 0.3], &m, &obj, &policy)
         .unwrap();
     let batch = planner(0.8, 4)
-        .plan_batch_with_proposal(starts.slice(ndarray::s![1..2, ..]), None, &m, &obj, &policy)
+        .plan_batch_with_proposal(starts.slice(ndarray::s![1..2, ..]), &m, &obj, &policy)
         .unwrap();
     assert_eq!(batch.len(), 1);
     assert_eq!(batch[0].actions, one.actions);
@@ -543,10 +537,10 @@ fn dmd_batch_plans_are_independent_plans() {
     assert_eq!(batch[0].total_cost, one.total_cost);
 
     let tiny = planner(1e-9, 5)
-        .plan_batch_with_proposal(starts.view(), None, &m, &obj, &policy)
+        .plan_batch_with_proposal(starts.view(), &m, &obj, &policy)
         .unwrap();
     let full = planner(1.0, 6)
-        .plan_batch_with_proposal(starts.view(), None, &m, &obj, &policy)
+        .plan_batch_with_proposal(starts.view(), &m, &obj, &policy)
         .unwrap();
     assert_eq!((tiny.len(), full.len()), (3, 3));
     for (k, x0) in starts.rows().into_iter().enumerate() {
@@ -568,7 +562,7 @@ fn dmd_batch_plans_are_independent_plans() {
             tiny[k].total_cost
         );
         let single = planner(1.0, 6)
-            .plan_with_proposal(&x0.to_vec(), None, &m, &obj, &policy)
+            .plan_with_proposal(&x0.to_vec(), &m, &obj, &policy)
             .unwrap();
         assert!(single.total_cost < tiny[k].total_cost);
     }
@@ -576,11 +570,7 @@ fn dmd_batch_plans_are_independent_plans() {
     // Bad shapes are errors, not panics.
     let bad = ndarray::arr2(&[[1.0, 0.0, 0.0]]);
     assert!(planner(0.8, 4)
-        .plan_batch_with_proposal(bad.view(), None, &m, &obj, &policy)
-        .is_err());
-    let prev = ndarray::arr2(&[[0.0]]);
-    assert!(planner(0.8, 4)
-        .plan_batch_with_proposal(starts.view(), Some(prev.view()), &m, &obj, &policy)
+        .plan_batch_with_proposal(bad.view(), &m, &obj, &policy)
         .is_err());
 }
 
