@@ -34,7 +34,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &cfg,
         &[Method::Difference],
         seed,
-        &|m, s| ddpg_agent(&cfg, &problem.task, m, s),
+        &|m, s| ddpg_agent(&cfg, &problem.real.task, m, s),
         &mut Ephemeral,
         &mut |tick| {
             if matches!(tick, Tick::True(..)) && !pretrained {

@@ -49,7 +49,7 @@ fn run_with(cfg: &P0Config, seed: u64, store: &mut dyn Checkpoints) -> Result<Ve
         cfg,
         &Method::ALL,
         seed,
-        &|m, s| ddpg_agent(cfg, &problem.task, m, s),
+        &|m, s| ddpg_agent(cfg, &problem.real.task, m, s),
         store,
         &mut |_| {},
     )
@@ -158,12 +158,12 @@ fn collected_transitions_are_true_plant_steps_from_wrapped_states() {
         dt: 1.0,
     };
     let problem = pendulum_problem();
-    let agent = ddpg_agent(&cfg, &problem.task, Method::Cold, 0).unwrap();
-    let (obs, act) = agent_spaces(&problem.task);
+    let agent = ddpg_agent(&cfg, &problem.real.task, Method::Cold, 0).unwrap();
+    let (obs, act) = agent_spaces(&problem.real.task);
     let rng = tandem::core::seeding::rng_from_seed(0);
     let mut lp = p0_loop(agent, &cfg.ddpg, &obs, &act, rng).unwrap();
     let (mut env, count) = SampleCounter::new(make("DcMotorPendulum-real-v0").unwrap());
-    let data = collect(&mut lp, &mut env, &problem.task, 900, 5, &mut || {}).unwrap();
+    let data = collect(&mut lp, &mut env, &problem.real.task, 900, 5, &mut || {}).unwrap();
     // Collecting neither stores nor learns.
     assert_eq!((lp.primary().len(), lp.counts().updates), (0, 0));
     assert_eq!(lp.counts().real_steps, 900);
@@ -446,16 +446,17 @@ fn tiny_leo() -> P0Config {
 #[test]
 fn p0_leo_runs_the_authors_task_on_both_bipeds() {
     let problem = leo_problem().unwrap();
-    let mut true_env = (problem.true_env)().unwrap();
+    let mut true_env = (problem.real.env)().unwrap();
     let bounded = Space::symmetric(6, LEO_VOLTAGE_LIMIT);
-    assert_eq!(problem.task.action_space(), &bounded);
+    assert_eq!(problem.real.task.action_space(), &bounded);
     assert_eq!(true_env.action_space(), &bounded);
     // Both start mid-step, the right foot in the air: with the motors off the true biped
     // topples (a fall ends the episode) well before the 667-step limit.
     let start = problem
+        .real
         .task
         .initial_state(&mut tandem::core::seeding::rng_from_seed(0));
-    assert_eq!(true_env.reset(Some(1)), problem.task.observe(&start));
+    assert_eq!(true_env.reset(Some(1)), problem.real.task.observe(&start));
     let mut steps = 0;
     loop {
         let s = true_env.step(&Action::Continuous(vec![0.0; 6])).unwrap();
@@ -481,7 +482,7 @@ fn leo_runs_measure_their_first_and_last_policy_on_the_same_episode_as_the_curve
         &cfg,
         &cfg.methods(),
         3,
-        &|m, s| ddpg_agent(&cfg, &problem.task, m, s),
+        &|m, s| ddpg_agent(&cfg, &problem.real.task, m, s),
         &mut Ephemeral,
         &mut |_| {},
     )

@@ -45,7 +45,7 @@ use tandem_nn::{Checkpoint, Checkpointable};
 
 use tandem_agents::adapter::{feature_dim, Adapted, Feature};
 
-pub use super::{AlgoError, Checkpoints, Ephemeral, MakeEnv, Result};
+pub use super::{AlgoError, Checkpoints, Ephemeral, MakeEnv, Problem, Result};
 use crate::driver::{drive, Algorithm};
 
 /// One of the three methods of p0's Table II.
@@ -280,15 +280,13 @@ impl P0Config {
     }
 }
 
-/// A problem p0 applies to: an idealized plant, the task over it, and a way to build the true
-/// system.
-pub struct Problem<P, T, F> {
+/// What p0 applies to: the true system as a [`Problem`] (its task is shared by all
+/// environments, the idealized plant's included), and an idealized plant of it.
+pub struct SimToReal<P, T, F = MakeEnv> {
+    /// The task and the true system.
+    pub real: Problem<T, F>,
     /// The idealized model `f_idl`.
     pub idealized: P,
-    /// Start, observation, reward, termination and episode length, shared by all environments.
-    pub task: T,
-    /// Builds a fresh true system (with its episode limit).
-    pub true_env: F,
     /// What a run reports of its first and last policy besides the return (p0's walked
     /// distance and work per metre for Leo); `None` for the return alone.
     pub measures: Option<Measures<T>>,
@@ -578,7 +576,7 @@ struct MethodProgress {
 /// the last evaluation) when `store` asks.
 pub fn run_method<A, P, T, F>(
     method: Method,
-    problem: &Problem<P, T, F>,
+    problem: &SimToReal<P, T, F>,
     cfg: &P0Config,
     start: OffPolicyLoop<A>,
     seed: u64,
@@ -603,7 +601,7 @@ where
 /// plant plus the model). Its events are the true samples so far, after every true step.
 pub struct DifferenceModels<'a, A, P: Plant, T, F> {
     method: Method,
-    problem: &'a Problem<P, T, F>,
+    problem: &'a SimToReal<P, T, F>,
     cfg: &'a P0Config,
     lp: OffPolicyLoop<A>,
     seeds: SeedStream,
@@ -630,14 +628,14 @@ where
     /// pre-trained one otherwise).
     pub fn new(
         method: Method,
-        problem: &'a Problem<P, T, F>,
+        problem: &'a SimToReal<P, T, F>,
         cfg: &'a P0Config,
         mut start: OffPolicyLoop<A>,
         seed: u64,
     ) -> Result<Self> {
         cfg.validate()?;
         let seeds = SeedStream::new(seed);
-        let eval_env = (problem.true_env)()?;
+        let eval_env = (problem.real.env)()?;
         // Warm start and the difference method fine-tune the pre-trained agent.
         match cfg.fine_tune_learning_starts {
             Some(n) if method != Method::Cold => {
@@ -655,11 +653,11 @@ where
         let model_env = match batch {
             Some(_) => Some(ModelEnv::new(
                 ResidualModel::new(problem.idealized.clone(), cfg.residual.clone())?,
-                problem.task.clone(),
+                problem.real.task.clone(),
             )?),
             None => None,
         };
-        let (env, count) = SampleCounter::new((problem.true_env)()?);
+        let (env, count) = SampleCounter::new((problem.real.env)()?);
         let episodes = if batch.is_some() {
             "model-episodes"
         } else {
@@ -710,7 +708,12 @@ where
             return Ok(None);
         };
         let (agent, env) = (&mut self.lp.agent, self.eval_env.as_mut());
-        Ok(Some(measured_episode(agent, env, &self.problem.task, m)?))
+        Ok(Some(measured_episode(
+            agent,
+            env,
+            &self.problem.real.task,
+            m,
+        )?))
     }
 
     /// Cold or warm start: an evaluation interval of true samples, then an evaluation.
@@ -753,7 +756,7 @@ where
         let batch = collect_or_stop(
             &mut self.lp,
             &mut self.env,
-            &self.problem.task,
+            &self.problem.real.task,
             real_batch,
             self.seeds.derive(&format!("collect-{k}")),
             stop,
@@ -864,7 +867,7 @@ where
             self.all = Some(t);
         }
         (self.env, self.count) =
-            SampleCounter::starting_at((self.problem.true_env)()?, self.p.true_samples);
+            SampleCounter::starting_at((self.problem.real.env)()?, self.p.true_samples);
         // The environment the training episodes run on, put back into a saved episode.
         if let Some(state) = &self.p.env_state {
             match self.model_env.as_mut() {
@@ -906,7 +909,7 @@ pub fn agent_spaces<T: Task>(task: &T) -> (Space, Space) {
 /// saved in `store` (key `pretrained`) and each method saves itself there (see [`run_method`]),
 /// so a stopped or killed run resumes from the latest checkpoints.
 pub fn run_seed<A, P, T, F>(
-    problem: &Problem<P, T, F>,
+    problem: &SimToReal<P, T, F>,
     cfg: &P0Config,
     methods: &[Method],
     seed: u64,
@@ -922,7 +925,7 @@ where
 {
     cfg.validate()?;
     let seeds = SeedStream::new(seed);
-    let (od, ad) = agent_spaces(&problem.task);
+    let (od, ad) = agent_spaces(&problem.real.task);
     let trainee = |m: Method| -> Result<OffPolicyLoop<A>> {
         let agent = make_agent(m, seeds.derive("agent"))?;
         p0_loop(agent, &cfg.ddpg, &od, &ad, seeds.rng("minibatches"))
@@ -951,7 +954,7 @@ where
 /// The agent pre-trained on the idealized plant, from `store` (key `pretrained`) or trained
 /// now and saved there.
 fn pretrained_loop<A, P, T, F>(
-    problem: &Problem<P, T, F>,
+    problem: &SimToReal<P, T, F>,
     cfg: &P0Config,
     seed: u64,
     trainee: &dyn Fn(Method) -> Result<OffPolicyLoop<A>>,
@@ -974,7 +977,7 @@ where
     pretrain_or_stop(
         &mut t,
         problem.idealized.clone(),
-        problem.task.clone(),
+        problem.real.task.clone(),
         cfg.pretrain_steps,
         SeedStream::new(seed).derive("idealized-episodes"),
         store,
@@ -1003,12 +1006,14 @@ pub enum Tick {
 
 /// p0's pendulum (Sec. IV-A, Table I): the idealized DC-motor pendulum (m = 0.055 kg) as the
 /// plant, the swing-up task, and `DcMotorPendulum-real-v0` (m = 0.090 kg) as the true system.
-pub fn pendulum_problem() -> Problem<DcMotorPendulum, DcMotorPendulumTask, MakeEnv> {
+pub fn pendulum_problem() -> SimToReal<DcMotorPendulum, DcMotorPendulumTask> {
     let params = DcMotorPendulumParams::idealized();
-    Problem {
+    SimToReal {
+        real: Problem {
+            task: DcMotorPendulumTask::new(DcMotorPendulumEnv::ID_IDEALIZED, &params),
+            env: Box::new(|| tandem_envs::make(DcMotorPendulumEnv::ID_REAL)),
+        },
         idealized: DcMotorPendulum::new(params),
-        task: DcMotorPendulumTask::new(DcMotorPendulumEnv::ID_IDEALIZED, &params),
-        true_env: || tandem_envs::make(DcMotorPendulumEnv::ID_REAL),
         measures: None,
     }
 }
@@ -1017,16 +1022,18 @@ pub fn pendulum_problem() -> Problem<DcMotorPendulum, DcMotorPendulumTask, MakeE
 /// walking task as [`leo_task`] sets it up, and the true biped (torso 1.25 kg, viscous joint
 /// friction 0.03) with the same task as the true system; each run reports its first and last
 /// policy's walked distance and work per metre ([`leo_measures`]).
-pub fn leo_problem() -> Result<Problem<RigidBodyPlant, LeoWalkTask, MakeEnv>> {
+pub fn leo_problem() -> Result<SimToReal<RigidBodyPlant, LeoWalkTask>> {
     let (idealized, task) = leo_task(LeoModel::Idealized)?;
-    Ok(Problem {
-        idealized,
-        task,
-        true_env: || {
-            let (plant, task) = leo_task(LeoModel::True)?;
-            let env = PlantEnv::from_parts(plant, task)?;
-            Ok(Box::new(TimeLimit::new(env, LEO_STEPS)))
+    Ok(SimToReal {
+        real: Problem {
+            task,
+            env: Box::new(|| {
+                let (plant, task) = leo_task(LeoModel::True)?;
+                let env = PlantEnv::from_parts(plant, task)?;
+                Ok(Box::new(TimeLimit::new(env, LEO_STEPS)) as Box<dyn Env>)
+            }),
         },
+        idealized,
         measures: Some(leo_measures()),
     })
 }

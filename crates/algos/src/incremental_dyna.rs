@@ -33,10 +33,8 @@ use tandem_models::{
     TransitionsBuilder,
 };
 
-use super::mbpo::{
-    fitted, run_with, Event, Imagination, Imagine, MbpoConfig, Problem, Rollouts, RunRecord,
-};
-use super::{Checkpoints, Result};
+use super::mbpo::{fitted, run_with, Event, Imagination, Imagine, MbpoConfig, Rollouts, RunRecord};
+use super::{Checkpoints, Problem, Result};
 
 /// One of the three methods p1's Fig. 1 compares here (MnM is not built).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

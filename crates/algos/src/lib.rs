@@ -15,6 +15,10 @@
 //! | [`mdgps`] | Montgomery and Levine, MDGPS (p4 §IV) | a neural global policy regressed onto the local controllers, each updated under a KL bound to the linearized global policy |
 //! | [`manipulation`] | p4's tasks | the gripper pusher's, the door's and the reacher's conditions and costs on MuJoCo for [`gps`] and [`mdgps`]; DDPG on the reacher, measured on the same test targets |
 //!
+//! The loops that act in a real system take a [`Problem`]: the task the real system and its
+//! models share, and a [`MakeEnv`] that builds a fresh real system (p0's [`difference_models`]
+//! adds the idealized plant, `SimToReal`).
+//!
 //! A long run saves itself in a [`Checkpoints`] store and polls it for stop requests: the
 //! `tandem` program keeps checkpoints as files, [`InMemory`] keeps them in memory, [`Ephemeral`]
 //! keeps none. A resumed run gives exactly the numbers of an uninterrupted one.
@@ -100,12 +104,19 @@ impl From<NnError> for AlgoError {
     }
 }
 
-/// A constructor of a real (or true) system, with its episode limit.
-pub type MakeEnv = fn() -> std::result::Result<Box<dyn tandem_envs::Env>, EnvError>;
-
-/// A constructor of a real system that carries its settings.
-pub type MakeEnvWith =
+/// A constructor of a real (or true) system with its episode limit, carrying its settings.
+pub type MakeEnv =
     Box<dyn Fn() -> std::result::Result<Box<dyn tandem_envs::Env>, EnvError> + Send + Sync>;
+
+/// What an algorithm learns to act in: the task (start, observation, control, reward,
+/// termination and episode length, shared by the real system and any model of it) and a way
+/// to build a fresh real system.
+pub struct Problem<T, F = MakeEnv> {
+    /// The task.
+    pub task: T,
+    /// Builds a fresh real system with its episode limit.
+    pub env: F,
+}
 
 /// Result of the algorithms.
 pub type Result<T> = std::result::Result<T, AlgoError>;

@@ -41,10 +41,10 @@ use tandem_planners::{Bounds, DmdMpc, DmdMpcConfig, Noise, Objective};
 
 use super::dyna::sample_starts;
 use super::mbpo::{
-    ensemble_of, fitted, observations, run_with, Event, Imagination, Imagine, MbpoConfig, Problem,
-    Rollouts, RunRecord,
+    ensemble_of, fitted, observations, run_with, Event, Imagination, Imagine, MbpoConfig, Rollouts,
+    RunRecord,
 };
-use super::{AlgoError, Checkpoints, Result};
+use super::{AlgoError, Checkpoints, Problem, Result};
 
 /// One of the three methods p3 compares.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -49,7 +49,7 @@ use tandem_nn::{Checkpoint, Checkpointable};
 
 use super::driver::{drive, timed, Algorithm};
 use super::dyna::{imagine, sample_starts};
-use super::{AlgoError, Checkpoints, MakeEnv, MakeEnvWith, Result};
+use super::{AlgoError, Checkpoints, MakeEnv, Problem, Result};
 
 /// The gymnasium MuJoCo tasks [`MbpoConfig::mujoco`] has settings for.
 pub const MUJOCO_TASKS: [&str; 4] = [
@@ -287,20 +287,11 @@ impl MbpoConfig {
     }
 }
 
-/// A real system and the task that describes it to a model: its observations, the plant input
-/// of an action, canonical states, reward and termination (the same the real system uses).
-pub struct Problem<T, F> {
-    /// The task (shared by the real system and the model's rollouts).
-    pub task: T,
-    /// Builds a fresh real system with its episode limit.
-    pub env: F,
-}
-
 /// Pendulum-v1 with its own rules as the task.
 pub fn pendulum_problem() -> Problem<PendulumTask, MakeEnv> {
     Problem {
         task: PendulumTask::new(&GymPendulumParams::default()),
-        env: || tandem_envs::make("Pendulum-v1"),
+        env: Box::new(|| tandem_envs::make("Pendulum-v1")),
     }
 }
 
@@ -310,7 +301,7 @@ pub fn pendulum_problem() -> Problem<PendulumTask, MakeEnv> {
 pub fn leg2r_problem() -> Problem<Leg2RTask, MakeEnv> {
     Problem {
         task: Leg2REnv::new(Leg2RModel::Idealized).task().clone(),
-        env: || tandem_envs::make(Leg2REnv::ID),
+        env: Box::new(|| tandem_envs::make(Leg2REnv::ID)),
     }
 }
 
@@ -320,7 +311,7 @@ pub fn leg2r_problem() -> Problem<Leg2RTask, MakeEnv> {
 pub fn leg2r_problem_with(
     id: &str,
     config: &tandem_envs::Leg2RConfig,
-) -> Result<Problem<Leg2RTask, MakeEnvWith>> {
+) -> Result<Problem<Leg2RTask, MakeEnv>> {
     let env = Leg2REnv::with_config(id, config.clone())?;
     let task = env.task().clone();
     let (id, config) = (id.to_string(), config.clone());
@@ -337,7 +328,7 @@ pub fn leg2r_problem_with(
 /// A gymnasium MuJoCo task (`HalfCheetah-v5`, `Hopper-v5`, `Walker2d-v5`,
 /// `InvertedPendulum-v5`) with [`tandem_mujoco::GymTask`] as its task, its model's `qpos0` read
 /// from the MJCF. Needs the feature `mujoco`; without it, an error saying so.
-pub fn mujoco_problem(id: &str) -> Result<Problem<tandem_mujoco::GymTask, MakeEnvWith>> {
+pub fn mujoco_problem(id: &str) -> Result<Problem<tandem_mujoco::GymTask, MakeEnv>> {
     #[cfg(feature = "mujoco")]
     {
         let task = tandem_mujoco::gym_task(id)?;

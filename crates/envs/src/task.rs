@@ -74,77 +74,48 @@ pub trait Task {
     fn max_episode_steps(&self) -> Option<usize>;
 }
 
-impl<T: Task + ?Sized> Task for Box<T> {
-    fn id(&self) -> &str {
-        (**self).id()
-    }
-    fn observation_space(&self) -> &Space {
-        (**self).observation_space()
-    }
-    fn action_space(&self) -> &Space {
-        (**self).action_space()
-    }
-    fn state_dim(&self) -> usize {
-        (**self).state_dim()
-    }
-    fn control(&self, action: &Action) -> Vec<f64> {
-        (**self).control(action)
-    }
-    fn initial_state(&self, rng: &mut Rng) -> Vec<f64> {
-        (**self).initial_state(rng)
-    }
-    fn observe(&self, state: &[f64]) -> Vec<f64> {
-        (**self).observe(state)
-    }
-    fn canonicalize(&self, state: &mut [f64]) {
-        (**self).canonicalize(state)
-    }
-    fn reward(&self, state: &[f64], u: &[f64], next: &[f64]) -> f64 {
-        (**self).reward(state, u, next)
-    }
-    fn terminated(&self, next: &[f64]) -> bool {
-        (**self).terminated(next)
-    }
-    fn max_episode_steps(&self) -> Option<usize> {
-        (**self).max_episode_steps()
-    }
+/// `Task` through a pointer: a boxed task and a borrowed one are tasks.
+macro_rules! forward_task {
+    ($($ptr:ty),*) => {$(
+        impl<T: Task + ?Sized> Task for $ptr {
+            fn id(&self) -> &str {
+                (**self).id()
+            }
+            fn observation_space(&self) -> &Space {
+                (**self).observation_space()
+            }
+            fn action_space(&self) -> &Space {
+                (**self).action_space()
+            }
+            fn state_dim(&self) -> usize {
+                (**self).state_dim()
+            }
+            fn control(&self, action: &Action) -> Vec<f64> {
+                (**self).control(action)
+            }
+            fn initial_state(&self, rng: &mut Rng) -> Vec<f64> {
+                (**self).initial_state(rng)
+            }
+            fn observe(&self, state: &[f64]) -> Vec<f64> {
+                (**self).observe(state)
+            }
+            fn canonicalize(&self, state: &mut [f64]) {
+                (**self).canonicalize(state)
+            }
+            fn reward(&self, state: &[f64], u: &[f64], next: &[f64]) -> f64 {
+                (**self).reward(state, u, next)
+            }
+            fn terminated(&self, next: &[f64]) -> bool {
+                (**self).terminated(next)
+            }
+            fn max_episode_steps(&self) -> Option<usize> {
+                (**self).max_episode_steps()
+            }
+        }
+    )*};
 }
 
-impl<T: Task + ?Sized> Task for &T {
-    fn id(&self) -> &str {
-        (**self).id()
-    }
-    fn observation_space(&self) -> &Space {
-        (**self).observation_space()
-    }
-    fn action_space(&self) -> &Space {
-        (**self).action_space()
-    }
-    fn state_dim(&self) -> usize {
-        (**self).state_dim()
-    }
-    fn control(&self, action: &Action) -> Vec<f64> {
-        (**self).control(action)
-    }
-    fn initial_state(&self, rng: &mut Rng) -> Vec<f64> {
-        (**self).initial_state(rng)
-    }
-    fn observe(&self, state: &[f64]) -> Vec<f64> {
-        (**self).observe(state)
-    }
-    fn canonicalize(&self, state: &mut [f64]) {
-        (**self).canonicalize(state)
-    }
-    fn reward(&self, state: &[f64], u: &[f64], next: &[f64]) -> f64 {
-        (**self).reward(state, u, next)
-    }
-    fn terminated(&self, next: &[f64]) -> bool {
-        (**self).terminated(next)
-    }
-    fn max_episode_steps(&self) -> Option<usize> {
-        (**self).max_episode_steps()
-    }
-}
+forward_task!(Box<T>, &T);
 
 /// Clips a continuous action into a box space's bounds (infinite bounds leave it as it is); the
 /// usual [`Task::control`] of a continuous task.

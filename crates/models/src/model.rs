@@ -49,7 +49,7 @@ pub enum ModelError {
 
 /// Transitions `(s, a, s', r, terminated)`, one row per transition. A model that conditions on
 /// more than the state (p1's incremental model reads the previous action) finds it in the state:
-/// [`crate::TransitionsBuilder::with_prev_control`] records `[s, a_{t−1}]` rows.
+/// [`crate::TransitionsBuilder::with_prev_action`] records `[s, a_{t−1}]` rows.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Transitions {
     /// States `s_t`, `N x S`.

@@ -44,8 +44,8 @@ use crate::report::{
 use crate::run::RunDir;
 use serde::{Deserialize, Serialize};
 use tandem_algos::difference_models::{
-    ddpg_agent, leo_problem, pendulum_problem, run_seed, Method, P0Config, PolicyEval, Problem,
-    RunRecord, Tick, LEO_MEASURES,
+    ddpg_agent, leo_problem, pendulum_problem, run_seed, Method, P0Config, PolicyEval, RunRecord,
+    SimToReal, Tick, LEO_MEASURES,
 };
 use tandem_algos::Checkpoints;
 use tandem_dynamics::biped::{leo_plant, skeleton};
@@ -507,7 +507,7 @@ pub fn gait_svg(records: &[RunRecord]) -> Result<String> {
 
 /// Runs `run` of `problem` for `seed` (the harness's job body, for either problem).
 fn run_problem<P, T, F>(
-    problem: &Problem<P, T, F>,
+    problem: &SimToReal<P, T, F>,
     cfg: &P0Config,
     run: &str,
     seed: u64,
@@ -525,7 +525,7 @@ where
         cfg,
         &[m],
         seed,
-        &|m, s| ddpg_agent(cfg, &problem.task, m, s),
+        &|m, s| ddpg_agent(cfg, &problem.real.task, m, s),
         store,
         &mut |t| {
             if let Tick::True(_, n) = t {

@@ -20,10 +20,9 @@ use crate::run::RunDir;
 use serde::{Deserialize, Serialize};
 use tandem_algos::m_demorl::{run, Method, P3Config};
 use tandem_algos::mbpo::{
-    leg2r_problem_with, mujoco_problem, run_oracle, Event, MbpoConfig, Problem, RunRecord,
-    MUJOCO_TASKS,
+    leg2r_problem_with, mujoco_problem, run_oracle, Event, MbpoConfig, RunRecord, MUJOCO_TASKS,
 };
-use tandem_algos::Checkpoints;
+use tandem_algos::{Checkpoints, Problem};
 use tandem_core::LinearSchedule;
 use tandem_envs::{Env, EnvError, Leg2RConfig, Leg2REnv, Leg2RModel, Task};
 use tandem_models::PlantModel;
