@@ -19,25 +19,14 @@ use tandem::models::IncrementalModelConfig;
 use tandem::models::{DynamicsModel, InActions, ModelInput, PlantModel};
 use tandem_nn::Checkpoint;
 
-/// 600 real steps in epochs of 200, a refit every 100 from step 100 (after 100 random steps),
-/// 2 rollouts per step of length 1 → 3 over epochs 0–2, 2 SAC updates per step, evaluations
-/// every 200 steps, tiny networks. M-DeMoRL: H 2 → 4 over epochs 0–2, 40 MPC transitions an
-/// epoch, 8 sampled sequences.
+/// The toy loop ([`MbpoConfig::toy`]) in epochs of 200: 600 real steps, a refit every 100 from
+/// step 100 (after 100 random steps), 2 rollouts per step of length 1 → 3 over epochs 0–2,
+/// 2 SAC updates per step, a checkpoint every 200 steps. M-DeMoRL: H 2 → 4 over epochs 0–2,
+/// 40 MPC transitions an epoch, 8 sampled sequences.
 fn small() -> P3Config {
     let mut c = P3Config::pendulum();
+    c.base = c.base.toy(200);
     let b = &mut c.base;
-    b.sac.hidden = vec![16, 16];
-    b.sac.batch_size = 32;
-    b.sac.learning_starts = 100;
-    b.ensemble.members = 3;
-    b.ensemble.elites = 2;
-    b.ensemble.hidden = vec![16, 16];
-    b.model_fit.epochs = 2;
-    b.model_min_updates = 4;
-    b.epoch_length = 200;
-    b.real_steps = 600;
-    b.model_train_freq = 100;
-    b.rollouts_per_step = 2;
     b.rollout_length = LinearSchedule {
         from_epoch: 0,
         to_epoch: 2,
@@ -45,8 +34,6 @@ fn small() -> P3Config {
         end: 3,
     };
     b.updates_per_step = 2;
-    b.eval_every = 200;
-    b.eval_episodes = 1;
     b.checkpoint_every = 200;
     c.horizon = LinearSchedule {
         from_epoch: 0,

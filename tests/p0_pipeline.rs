@@ -15,18 +15,9 @@ use tandem::algos::difference_models::{
 use tandem::algos::{AlgoError, Checkpoints, Ephemeral, Result};
 use tandem::nn::Checkpoint;
 
-/// `c` with one hidden layer of 16 in every network and a small replay buffer.
-fn tiny_networks(mut c: P0Config) -> P0Config {
-    c.ddpg.actor_hidden = vec![16];
-    c.ddpg.critic_hidden = vec![16];
-    c.ddpg.buffer_size = 5000;
-    c.residual.hidden = vec![16];
-    c
-}
-
 /// A configuration small enough for a test: tiny networks and budgets.
 fn tiny() -> P0Config {
-    let mut c = tiny_networks(P0Config::default());
+    let mut c = P0Config::default().with_networks(&[16], 5000);
     c.pretrain_steps = 300;
     c.real_batch = 250;
     c.real_budget = 500;
@@ -430,7 +421,7 @@ fn seeds_run_apart_and_merged_equal_one_run_of_all_seeds() {
 
 /// A tiny Leo configuration: p0's Leo settings with small networks and budgets.
 fn tiny_leo() -> P0Config {
-    let mut c = tiny_networks(P0Config::leo());
+    let mut c = P0Config::leo().with_networks(&[16], 5000);
     c.pretrain_steps = 300;
     c.real_batch = 300;
     c.real_budget = 600;

@@ -193,6 +193,16 @@ impl Default for P0Config {
 }
 
 impl P0Config {
+    /// These settings with smaller networks, for smoke runs and tests: `hidden` for DDPG's actor
+    /// and critic and for the difference network, and a replay buffer of `buffer` transitions.
+    pub fn with_networks(mut self, hidden: &[usize], buffer: usize) -> Self {
+        self.ddpg.actor_hidden = hidden.to_vec();
+        self.ddpg.critic_hidden = hidden.to_vec();
+        self.ddpg.buffer_size = buffer;
+        self.residual.hidden = hidden.to_vec();
+        self
+    }
+
     /// Settings for p0's Leo (Sec. IV-B, IV-C): the same DDPG, difference network and batch of
     /// 3750 true samples as the pendulum, Table IV's budget of 33750 true samples, and what p0's
     /// authors' published code sets that the paper does not say (with [`leo_problem`]'s task):

@@ -223,6 +223,31 @@ impl MbpoConfig {
         Some(c)
     }
 
+    /// This loop at toy sizes, for smoke runs and tests: 3 epochs of `epoch_length` real steps
+    /// (the first 100 random), SAC 16×16 with minibatches of 32, an ensemble of 3 (2 elites)
+    /// 16×16 members fitted for 2 epochs and at least 4 minibatches, a refit and a checkpoint
+    /// every half epoch, 2 rollouts and one update per real step, one evaluation episode an
+    /// epoch.
+    pub fn toy(mut self, epoch_length: u64) -> Self {
+        self.sac.hidden = vec![16, 16];
+        self.sac.batch_size = 32;
+        self.sac.learning_starts = 100;
+        self.ensemble.members = 3;
+        self.ensemble.elites = 2;
+        self.ensemble.hidden = vec![16, 16];
+        self.model_fit.epochs = 2;
+        self.model_min_updates = 4;
+        self.epoch_length = epoch_length;
+        self.real_steps = 3 * epoch_length;
+        self.model_train_freq = epoch_length / 2;
+        self.rollouts_per_step = 2;
+        self.updates_per_step = 1;
+        self.eval_every = epoch_length;
+        self.eval_episodes = 1;
+        self.checkpoint_every = epoch_length / 2;
+        self
+    }
+
     /// Checks the ranges the loop relies on.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: &str| Err(AlgoError::Config(m.to_string()));

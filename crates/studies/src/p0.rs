@@ -69,7 +69,7 @@ pub struct P0Study(pub P0Task);
 
 /// The `--quick` configuration: the same loop with small networks and budgets, for smoke tests.
 pub fn quick_config() -> P0Config {
-    let mut c = with_small_networks(P0Config::default());
+    let mut c = P0Config::default().with_networks(QUICK_HIDDEN, QUICK_BUFFER);
     c.pretrain_steps = 800;
     c.real_batch = 400;
     c.real_budget = 800;
@@ -82,7 +82,7 @@ pub fn quick_config() -> P0Config {
 
 /// The `--quick` configuration of `p0-leo`: Leo's settings with small networks and budgets.
 pub fn leo_quick_config() -> P0Config {
-    let mut c = with_small_networks(P0Config::leo());
+    let mut c = P0Config::leo().with_networks(QUICK_HIDDEN, QUICK_BUFFER);
     c.pretrain_steps = 700;
     c.real_batch = 700;
     c.real_budget = 1400;
@@ -95,14 +95,10 @@ pub fn leo_quick_config() -> P0Config {
     c
 }
 
-/// `c` with the `--quick` networks (32×32 actor, critic and difference network) and replay.
-fn with_small_networks(mut c: P0Config) -> P0Config {
-    c.ddpg.actor_hidden = vec![32, 32];
-    c.ddpg.critic_hidden = vec![32, 32];
-    c.ddpg.buffer_size = 10_000;
-    c.residual.hidden = vec![32, 32];
-    c
-}
+/// The `--quick` networks: 32×32 actor, critic and difference network.
+const QUICK_HIDDEN: &[usize] = &[32, 32];
+/// The `--quick` replay buffer.
+const QUICK_BUFFER: usize = 10_000;
 
 /// Applies the overrides in `text` (a `--config` file, named `what` in errors) to `base` and
 /// validates the result.

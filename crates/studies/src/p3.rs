@@ -83,25 +83,9 @@ impl Default for P3Settings {
     }
 }
 
-/// The shared loop at `--quick`'s toy sizes: 3 epochs of 300 steps, networks of 16×16, an
-/// ensemble of 3, refits every 150 steps, 2 rollouts per step, one update per step.
+/// The shared loop at `--quick`'s toy sizes ([`MbpoConfig::toy`]): 3 epochs of 300 steps.
 pub(crate) fn quick_loop(b: &mut MbpoConfig) {
-    b.sac.hidden = vec![16, 16];
-    b.sac.batch_size = 32;
-    b.sac.learning_starts = 100;
-    b.ensemble.members = 3;
-    b.ensemble.elites = 2;
-    b.ensemble.hidden = vec![16, 16];
-    b.model_fit.epochs = 2;
-    b.model_min_updates = 4;
-    b.epoch_length = 300;
-    b.real_steps = 900;
-    b.model_train_freq = 150;
-    b.rollouts_per_step = 2;
-    b.updates_per_step = 1;
-    b.eval_every = 300;
-    b.eval_episodes = 1;
-    b.checkpoint_every = 150;
+    *b = std::mem::take(b).toy(300);
 }
 
 /// The leg's id.
