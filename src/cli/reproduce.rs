@@ -4,9 +4,10 @@
 use std::path::PathBuf;
 
 use clap::{Args, Subcommand};
+use tandem_studies::interrupt::Stop;
 use tandem_studies::{StudyArgs, StudyOptions};
 
-use super::Result;
+use super::{CliError, Result};
 
 /// The reproductions.
 #[derive(Debug, Subcommand)]
@@ -176,5 +177,6 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
             return tandem_studies::merge(&a.dirs, a.out.as_deref(), a.overwrite)
         }
     };
-    tandem_studies::run_study(name, &options, &args)
+    let stop = Stop::on_signals().map_err(|e| CliError::Other(format!("signal handlers: {e}")))?;
+    tandem_studies::run_study(name, &options, &StudyArgs { stop, ..args })
 }

@@ -12,11 +12,12 @@
 //! - `state/seed<k>/<job>/`: each unfinished job's checkpoints, removed when the job is done;
 //! - the study's report files (tables, figures).
 //!
-//! SIGINT or SIGTERM stops every job at once (each loses the steps since its last checkpoint),
-//! marks `config.json` `interrupted` and exits with 130 or 143. `--resume DIR` continues from the
-//! checkpoints, also after a kill, refusing settings other than the recorded ones. Seeds can run
-//! as separate processes (`--seeds 1 --first-seed k`), on one machine or many; [`merge`] joins
-//! their complete directories into one report.
+//! A stop request ([`StudyArgs::stop`]; the `tandem` program sets it on SIGINT or SIGTERM)
+//! stops every job at once (each loses the steps since its last checkpoint), marks
+//! `config.json` `interrupted` and returns [`Error::Interrupted`] with the exit status 130 or
+//! 143. `--resume DIR` continues from the checkpoints, also after a kill, refusing settings
+//! other than the recorded ones. Seeds can run as separate processes (`--seeds 1 --first-seed
+//! k`), on one machine or many; [`merge`] joins their complete directories into one report.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -72,6 +73,10 @@ pub struct StudyArgs {
     /// and must then agree with the recorded ones.
     #[arg(long, value_name = "DIR", conflicts_with = "out")]
     pub resume: Option<PathBuf>,
+    /// What stops the study: [`Stop::never`] by default, so that a library caller keeps its own
+    /// signal handling; the `tandem` program passes [`Stop::on_signals`].
+    #[arg(skip)]
+    pub stop: Stop,
 }
 
 /// Parallel jobs when `--jobs` is not given.
@@ -90,6 +95,7 @@ impl Default for StudyArgs {
             quiet: false,
             overwrite: false,
             resume: None,
+            stop: Stop::never(),
         }
     }
 }
@@ -476,7 +482,7 @@ fn layout<S: Study>(study: &S, merged: bool) -> Layout {
 /// Runs (or resumes) `study` as the command line says.
 pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
     tandem_nn::set_gemm_threads(1);
-    let stop = Stop::on_signals().map_err(|e| Error::Other(format!("signal handlers: {e}")))?;
+    let stop = args.stop.clone();
     let mut rc = match &args.resume {
         Some(dir) => recorded(study, args, dir)?,
         None => fresh(study, args)?,
