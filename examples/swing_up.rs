@@ -3,8 +3,8 @@
 //! `(π, 0)`, reward `−5 φ² − 0.1 φ̇² − 0.01 u²` with φ wrapped, `|u| ≤ 3 V`.
 //!
 //! `cargo run --release --example swing_up [-- cem|mppi|dmd|ilqr ...]` prints
-//! each planner's episode return (p0: about −660 for its best learned policy; the issue asks for ≥
-//! −800), the part of it from the last 300 steps (balancing), the largest |φ| over the last 100
+//! each planner's episode return (p0: about −660 for its best learned policy; the target here is
+//! ≥ −800), the part of it from the last 300 steps (balancing), the largest |φ| over the last 100
 //! steps, and the wall time.
 //!
 //! Defaults: horizon 30 (iLQR 40); each sampled planner takes 4 rounds of 200 samples per step;
