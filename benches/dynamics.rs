@@ -9,7 +9,7 @@
 //! over hours, so only same-run comparisons are meaningful): Pinocchio 4.1 from the `pin` wheel,
 //! its algorithms compiled from the headers with `g++ -O3` (baseline x86-64, as tandem is built;
 //! a `-march=native` build crashed against the wheel's libraries), against
-//! `rigid_timing` (example of `tandem-dynamics`), same URDF and state, per call:
+//! `rigid_timing` (example of `tandem-robots`), same URDF and state, per call:
 //!
 //! | | Pinocchio min-of-N CPU | tandem min-of-N CPU | Pinocchio 5×100k wall median | tandem 5×100k wall median |
 //! |---|---|---|---|---|
@@ -26,9 +26,9 @@
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use nalgebra::DVector;
-use tandem_dynamics::biped::{leo_plant, leo_true_overrides, standing_state};
 use tandem_dynamics::rigid::{aba, aba_derivatives, crba, rnea, rnea_derivatives, Data, Model};
 use tandem_dynamics::rigid_plant::RigidPlantConfig;
+use tandem_robots::leo::{leo_plant, leo_true_overrides, standing_state};
 
 fn arm7() -> Model {
     Model::from_urdf_file(concat!(

@@ -3,9 +3,11 @@
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use nalgebra::DVector;
-use tandem_dynamics::classic::{CartPole, DcMotorPendulum, DcMotorPendulumParams, GymPendulum};
+use tandem::make_env as make;
+use tandem_dynamics::classic::{CartPole, GymPendulum};
 use tandem_dynamics::Plant;
-use tandem_envs::{make, Action};
+use tandem_envs::Action;
+use tandem_robots::{DcMotorPendulum, DcMotorPendulumParams};
 
 fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("plants");

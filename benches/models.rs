@@ -8,13 +8,13 @@ use ndarray::{Array2, Array3};
 use rand::Rng as _;
 use tandem_core::seeding::{rng_from_seed, Rng};
 use tandem_core::Action;
-use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
-use tandem_envs::{Env, PixelMazeEnv};
+use tandem_envs::Env;
 use tandem_models::{
     DynamicsModel, EnsembleConfig, ModelInput, PixelEpisodes, PixelFit, PixelModel,
     PixelModelConfig, ProbabilisticEnsemble, Propagation, ResidualModel, ResidualModelConfig,
     TvlgConfig, TvlgFit,
 };
+use tandem_robots::{DcMotorPendulum, DcMotorPendulumParams, PixelMazeEnv};
 
 fn uniform(rows: usize, cols: usize, rng: &mut Rng) -> Array2<f64> {
     Array2::from_shape_fn((rows, cols), |_| rng.random::<f64>() * 2.0 - 1.0)

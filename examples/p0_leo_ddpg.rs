@@ -19,8 +19,8 @@ use tandem::algos::difference_models::{
     agent_spaces, ddpg_agent, leo_measures, leo_task, measured_episode, p0_loop, Method, P0Config,
 };
 use tandem::core::SeedStream;
-use tandem::envs::{leo_parts, LeoModel, LeoStart};
 use tandem::models::{ModelEnv, PlantModel};
+use tandem::robots::{leo_parts, LeoModel, LeoStart};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

@@ -25,10 +25,11 @@ use tandem::core::{Action, SeedStream};
 use tandem::dynamics::rigid_plant::RigidBodyPlant;
 use tandem::dynamics::Clocked;
 use tandem::dynamics::Plant;
-use tandem::envs::{Env, Leg2RConfig, Leg2REnv, Leg2RModel, Task, TimeLimit};
+use tandem::envs::{Env, Task, TimeLimit};
 use tandem::models::{
     DynamicsModel, FitConfig, IncrementalModel, IncrementalModelConfig, TransitionsBuilder,
 };
+use tandem::robots::{Leg2RConfig, Leg2REnv, Leg2REnvExt, Leg2RModel};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let arg = |i: usize| std::env::args().nth(i).and_then(|s| s.parse::<u64>().ok());

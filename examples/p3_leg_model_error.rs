@@ -23,13 +23,14 @@ use std::error::Error;
 use ndarray::Array2;
 use rand::Rng as _;
 use tandem::core::{Rng, SeedStream};
-use tandem::dynamics::leg2r::{leg2r_plant, Leg2RParams};
 use tandem::dynamics::{Clocked, Plant};
-use tandem::envs::{Leg2REnv, Leg2RModel, Task};
+use tandem::envs::Task;
 use tandem::models::{
     DynamicsModel, EnsembleConfig, FitConfig, ModelInput, ProbabilisticEnsemble, Propagation,
     Transitions, TransitionsBuilder,
 };
+use tandem::robots::leg2r::{leg2r_plant, Leg2RParams};
+use tandem::robots::{Leg2REnv, Leg2REnvExt, Leg2RModel};
 
 const STEPS: usize = 20_000;
 const HELD_OUT: usize = 3_000;

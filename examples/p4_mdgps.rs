@@ -23,7 +23,7 @@ use tandem::algos::manipulation::{
 };
 use tandem::algos::mdgps::{train_mdgps, MdgpsConfig};
 use tandem::algos::Ephemeral;
-use tandem::mujoco::p4::ReacherCost;
+use tandem::robots::p4::ReacherCost;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

@@ -15,7 +15,7 @@
 use tandem::algos::gps::{train_local, LocalConfig, LocalMethod, LocalProblem};
 use tandem::algos::manipulation::{door_problem, pusher_problem};
 use tandem::algos::Ephemeral;
-use tandem::mujoco::p4::{DoorCost, PusherCost};
+use tandem::robots::p4::{DoorCost, PusherCost};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

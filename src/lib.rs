@@ -9,17 +9,18 @@
 //! |---|---|---|
 //! | [`core`] | `tandem-core` | spaces, actions, seeding |
 //! | [`dynamics`] | `tandem-dynamics` | `Plant`, integrators, rigid bodies, actuators, contact |
-//! | [`envs`] | `tandem-envs` | `Env`, tasks, sim-to-real pairs, wrappers |
+//! | [`envs`] | `tandem-envs` | `Env`, tasks, the classic gymnasium environments, wrappers |
 //! | [`nn`] | `tandem-nn` | MLPs, optimizers, heads, normalizers, checkpoints |
 //! | [`models`] | `tandem-models` | `DynamicsModel` and the learned models |
 //! | [`planners`] | `tandem-planners` | MPC planners and TVLG trajectory optimizers |
 //! | [`agents`] | `tandem-agents` | DDPG, SAC, REINFORCE, DQN, replay, agent adapters |
 //! | [`algos`] | `tandem-algos` | MBPO, Dyna, M-DeMoRL, difference models, imagined episodes, GPS, MDGPS |
 //! | [`mujoco`] | `tandem-mujoco` | gymnasium's MuJoCo v5 tasks and MJCF scenes (real MuJoCo with the feature `mujoco`) |
+//! | [`robots`] | `tandem-robots` | the papers' robots and scenes: the DC-motor pendulum, Leo, the 2R leg, the pixel maze, p4's scenes |
 //! | [`studies`] | `tandem-studies` | the papers' studies, run directories, reports, stop requests |
 //!
-//! [`make_env`] and [`registered_envs`] are the registry of every environment: `tandem-envs`'s and,
-//! with the feature `mujoco`, gymnasium's MuJoCo tasks.
+//! [`make_env`] and [`registered_envs`] are the registry of every environment: `tandem-envs`'s,
+//! then `tandem-robots`' and gymnasium's MuJoCo tasks (made with the feature `mujoco`).
 
 pub use tandem_agents as agents;
 pub use tandem_algos as algos;
@@ -30,11 +31,12 @@ pub use tandem_models as models;
 pub use tandem_mujoco as mujoco;
 pub use tandem_nn as nn;
 pub use tandem_planners as planners;
+pub use tandem_robots as robots;
 pub use tandem_studies as studies;
 
 /// The registered environment `id` with its time limit: `tandem-envs`'s own ([`envs::make`]),
-/// then gymnasium's MuJoCo tasks ([`mujoco::make`]; without the feature `mujoco` their ids give an
-/// error saying how to enable it).
+/// then the papers' ([`robots::make`]), then gymnasium's MuJoCo tasks ([`mujoco::make`]; without
+/// the feature `mujoco` their ids give an error saying how to enable it).
 ///
 /// ```
 /// assert_eq!(tandem::make_env("CartPole-v1").unwrap().max_episode_steps(), Some(500));
@@ -42,14 +44,19 @@ pub use tandem_studies as studies;
 /// ```
 pub fn make_env(id: &str) -> Result<Box<dyn envs::Env>, envs::EnvError> {
     match envs::make(id) {
-        Err(envs::EnvError::Unknown(_)) => mujoco::make(id),
+        Err(envs::EnvError::Unknown(_)) => match robots::make(id) {
+            Err(envs::EnvError::Unknown(_)) => mujoco::make(id),
+            made => made,
+        },
         made => made,
     }
 }
 
-/// Every environment [`make_env`] can make, `tandem-envs`'s first.
+/// Every environment [`make_env`] can make, in its order: `tandem-envs`'s, `tandem-robots`',
+/// gymnasium's MuJoCo tasks.
 pub fn registered_envs() -> Vec<envs::EnvSpec> {
     let mut specs = envs::registered();
+    specs.extend(robots::registered());
     specs.extend(mujoco::registered());
     specs
 }

@@ -594,10 +594,11 @@ fn settings_read_from_toml_with_defaults_for_what_is_left_out() {
 #[test]
 fn oracle_rollouts_on_the_leg_are_the_real_legs_own_steps() {
     use tandem::algos::mbpo::{leg2r_problem_with, Imagination, Imagine, OracleRollouts};
-    use tandem::dynamics::leg2r::leg2r_plant;
     use tandem::dynamics::Clocked;
-    use tandem::envs::{Action, Leg2RConfig, Leg2RModel, Task};
+    use tandem::envs::{Action, Task};
     use tandem::models::TransitionsBuilder;
+    use tandem::robots::leg2r::leg2r_plant;
+    use tandem::robots::{Leg2RConfig, Leg2RModel};
 
     let leg = Leg2RConfig {
         position_scale: 0.02,

@@ -5,8 +5,9 @@ use std::cell::Cell;
 use std::collections::BTreeMap;
 use tandem::agents::NoiseConfig;
 use tandem::core::{Action, Space};
-use tandem::dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
-use tandem::envs::{make, SampleCounter, Task};
+use tandem::envs::{SampleCounter, Task};
+use tandem::make_env as make;
+use tandem::robots::{DcMotorPendulum, DcMotorPendulumParams};
 
 use tandem::algos::difference_models::{
     agent_spaces, collect, ddpg_agent, leo_problem, p0_loop, pendulum_problem, run_seed, Method,

@@ -187,3 +187,65 @@ fn the_authors_layout_runs_its_100_step_episodes_without_ending_at_collisions() 
     let (_, v0) = whole(Method::ModelFree, &small(), 1);
     assert!(v0.real_samples <= 8 * 50);
 }
+
+/// The conv Q-network on p2's pixel maze: a run saved mid-episode and resumed equals an
+/// uninterrupted one (networks, Adam state, generators and replay of images all restored).
+#[test]
+fn conv_dqn_on_the_pixel_maze_resumes_bit_for_bit() {
+    use tandem::agents::{
+        AlgoConfig, ConvQNetConfig, DqnConfig, Learner, QNetwork, TrainSettings, Trainer,
+    };
+    use tandem::robots::PixelMazeEnv;
+    fn params(t: &mut Trainer) -> Vec<f32> {
+        match t.learner() {
+            Learner::Dqn(a) => a.q_params().to_vec(),
+            _ => unreachable!("a DQN run"),
+        }
+    }
+    let cfg = AlgoConfig::Dqn(DqnConfig {
+        network: QNetwork::Conv,
+        conv: ConvQNetConfig {
+            channels: vec![4],
+            kernels: vec![3],
+            strides: vec![4],
+            ..ConvQNetConfig::default()
+        },
+        hidden: vec![8],
+        batch_size: 8,
+        learning_starts: 40,
+        train_freq: 8,
+        gradient_steps: 2,
+        target_update_interval: 6,
+        exploration_steps: 100,
+        ..DqnConfig::default()
+    });
+    let settings = TrainSettings {
+        eval_interval: 70,
+        eval_episodes: 1,
+        max_episode_steps: Some(30),
+        ..TrainSettings::default()
+    };
+    let mut env = PixelMazeEnv::new();
+    let mut eval = PixelMazeEnv::new();
+    let mut whole = Trainer::new(cfg.clone(), settings.clone(), &env, 4).unwrap();
+    whole.run(&mut env, &mut eval, 150, &mut |_| {}).unwrap();
+    assert!(whole.updates() > 0);
+
+    let (mut env, mut eval) = (PixelMazeEnv::new(), PixelMazeEnv::new());
+    let mut first = Trainer::new(cfg.clone(), settings.clone(), &env, 4).unwrap();
+    first.run(&mut env, &mut eval, 97, &mut |_| {}).unwrap();
+    let bytes = first.save(&env).unwrap().to_bytes().unwrap();
+    drop(first);
+    let (mut env, mut eval) = (PixelMazeEnv::new(), PixelMazeEnv::new());
+    let mut resumed = Trainer::new(cfg, settings, &env, 4).unwrap();
+    resumed
+        .load(
+            &tandem::nn::Checkpoint::from_bytes(&bytes).unwrap(),
+            &mut env,
+        )
+        .unwrap();
+    resumed.run(&mut env, &mut eval, 150, &mut |_| {}).unwrap();
+    assert_eq!(whole.log(), resumed.log());
+    assert_eq!(params(&mut whole), params(&mut resumed));
+    assert_eq!(whole.updates(), resumed.updates());
+}

@@ -4,7 +4,7 @@
 
 use tandem::algos::manipulation::{reacher_test_set, train_ddpg_reacher, ReacherDdpg, TestedPoint};
 use tandem::algos::{AlgoError, Checkpoints, Ephemeral, InMemory, Result};
-use tandem::mujoco::p4::ReacherCost;
+use tandem::robots::p4::ReacherCost;
 use tandem_nn::Checkpoint;
 
 /// 300 steps of a small DDPG, measured every 100 on 5 test targets.

@@ -22,7 +22,8 @@ pub mod mutate;
 use serde_json::{json, Value};
 use tandem::agents::{Algo, AlgoConfig, QNetwork, TrainSettings, Trainer};
 use tandem::dynamics::rigid::Model;
-use tandem::envs::{make, registered, Env};
+use tandem::envs::{Env, EnvSpec};
+use tandem::make_env as make;
 use tandem::nn::budget::MemoryEstimate;
 use tandem::nn::Checkpoint;
 
@@ -87,6 +88,13 @@ fn env_for(cfg: &AlgoConfig) -> Box<dyn Env> {
         _ => "CartPole-v1",
     };
     make(id).expect("a registered environment")
+}
+
+/// The environments without MuJoCo, in registry order: `tandem-envs`' and `tandem-robots`'.
+fn registered() -> Vec<EnvSpec> {
+    let mut specs = tandem::envs::registered();
+    specs.extend(tandem::robots::registered());
+    specs
 }
 
 /// The estimate an agent's constructor checks.

@@ -82,7 +82,7 @@ mod tests {
                 p.file
             );
             train.validate().unwrap();
-            assert!(tandem_envs::make(p.env).is_ok(), "{}", p.env);
+            assert!(tandem::make_env(p.env).is_ok(), "{}", p.env);
         }
     }
 

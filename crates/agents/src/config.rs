@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 use tandem_nn::budget::MemoryEstimate;
 
+#[cfg(feature = "pixels")]
 use crate::conv_qnet::ConvQNetConfig;
 use crate::error::{ensure, Result};
 use crate::noise::NoiseConfig;
@@ -315,7 +316,8 @@ impl SacConfig {
 pub enum QNetwork {
     /// An MLP over flat observations.
     Mlp,
-    /// A [`ConvQNet`](crate::ConvQNet) over image observations (`DqnConfig::conv`).
+    /// A `ConvQNet` over image observations (`DqnConfig::conv`; feature `pixels`).
+    #[cfg(feature = "pixels")]
     Conv,
 }
 
@@ -326,6 +328,7 @@ pub struct DqnConfig {
     /// The Q-network: `"mlp"` or `"conv"`.
     pub network: QNetwork,
     /// The convolutional layers when `network = "conv"` (a `[agent.conv]` table in TOML).
+    #[cfg(feature = "pixels")]
     pub conv: ConvQNetConfig,
     /// Hidden layers of the Q-network: the whole MLP, or the fully connected layers after the
     /// convolutions of a conv Q-network.
@@ -379,6 +382,7 @@ impl Default for DqnConfig {
     fn default() -> Self {
         Self {
             network: QNetwork::Mlp,
+            #[cfg(feature = "pixels")]
             conv: ConvQNetConfig::default(),
             hidden: vec![256, 256],
             learning_rate: 2.3e-3,
@@ -405,6 +409,7 @@ impl DqnConfig {
     /// Checks every range.
     pub fn validate(&self) -> Result<()> {
         check_hidden("hidden", &self.hidden)?;
+        #[cfg(feature = "pixels")]
         if self.network == QNetwork::Conv {
             self.conv.validate()?;
         }
@@ -465,6 +470,7 @@ impl DqnConfig {
                 WITH_TARGET,
                 b,
             ),
+            #[cfg(feature = "pixels")]
             QNetwork::Conv => self.conv.memory(
                 MemoryEstimate::new(),
                 &self.hidden,

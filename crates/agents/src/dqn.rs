@@ -4,8 +4,9 @@
 //! loss, gradient-norm clipping, the double-DQN target (van Hasselt et al. 2016) and a linearly
 //! decaying learning rate (SB3's `linear_schedule`) as options.
 //!
-//! The Q-network is an MLP over flat observations (`network = "mlp"`) or, for image observations
-//! such as p2's 16×16 RGB maze, a [`ConvQNet`] (`network = "conv"`, layers in `DqnConfig::conv`).
+//! The Q-network is an MLP over flat observations (`network = "mlp"`) or, with the feature
+//! `pixels`, for image observations such as p2's 16×16 RGB maze, a `ConvQNet` (`network =
+//! "conv"`, layers in `DqnConfig::conv`).
 //! Both are trained by the same loss code: the agent computes `∂L/∂Q` of the Huber loss on
 //! `Q(s, a)` (`tandem-nn`'s [`huber`]) and the network back-propagates it.
 //!
@@ -16,8 +17,9 @@
 use ndarray::{Array1, Array2, ArrayView2};
 use rand::Rng as _;
 use tandem_core::{Action, Rng, SeedStream, Space};
-use tandem_nn::{clip_grad_norm, huber, Adam, AdamConfig, Checkpoint, Checkpointable, MlpConfig};
-use tandem_nn::{MlpWorkspace, Optimizer};
+use tandem_nn::{clip_grad_norm, huber, Checkpoint, MlpConfig, MlpWorkspace, Optimizer};
+#[cfg(feature = "pixels")]
+use tandem_nn::{Adam, AdamConfig, Checkpointable};
 
 use crate::agent::{
     act_one_row, check_action_rows, check_obs, discrete_batch_policy, infer_rows, obs_rows, Agent,
@@ -25,6 +27,7 @@ use crate::agent::{
 };
 use crate::common::{check_header, discrete_n, fit, obs_dim, save_header, Net, Target};
 use crate::config::{DqnConfig, QNetwork};
+#[cfg(feature = "pixels")]
 use crate::conv_qnet::ConvQNet;
 use crate::error::{AgentError, Result};
 
@@ -37,6 +40,7 @@ enum QNets {
         q_t: Target,
         next_ws: MlpWorkspace,
     },
+    #[cfg(feature = "pixels")]
     Conv {
         q: ConvQNet,
         q_t: ConvQNet,
@@ -50,6 +54,7 @@ impl QNets {
     fn infer(&self, x: &[f32], n: usize) -> Result<Vec<f32>> {
         match self {
             QNets::Mlp { q, .. } => q.infer(x, n),
+            #[cfg(feature = "pixels")]
             QNets::Conv { q, .. } => q.infer(x, n),
         }
     }
@@ -59,6 +64,7 @@ impl QNets {
     fn online_next(&mut self, x: &[f32], n: usize) -> Result<&[f32]> {
         match self {
             QNets::Mlp { q, next_ws, .. } => Ok(q.mlp.forward(x, n, next_ws)?),
+            #[cfg(feature = "pixels")]
             QNets::Conv { q, .. } => q.forward(x, n),
         }
     }
@@ -66,6 +72,7 @@ impl QNets {
     fn target(&mut self, x: &[f32], n: usize) -> Result<&[f32]> {
         match self {
             QNets::Mlp { q_t, .. } => Ok(q_t.mlp.forward(x, n, &mut q_t.ws)?),
+            #[cfg(feature = "pixels")]
             QNets::Conv { q_t, .. } => q_t.forward(x, n),
         }
     }
@@ -73,6 +80,7 @@ impl QNets {
     fn forward_train(&mut self, x: &[f32], n: usize) -> Result<&[f32]> {
         match self {
             QNets::Mlp { q, .. } => Ok(q.mlp.forward_train(x, n, &mut q.ws, None)?),
+            #[cfg(feature = "pixels")]
             QNets::Conv { q, .. } => q.forward_train(x, n),
         }
     }
@@ -87,6 +95,7 @@ impl QNets {
                 q.opt.set_lr(lr);
                 q.step()
             }
+            #[cfg(feature = "pixels")]
             QNets::Conv { q, opt, grads, .. } => {
                 q.backward(d_q, grads)?;
                 clip_grad_norm(grads, max_norm)?;
@@ -101,6 +110,7 @@ impl QNets {
     fn q_params(&self) -> &[f32] {
         match self {
             QNets::Mlp { q, .. } => q.mlp.params(),
+            #[cfg(feature = "pixels")]
             QNets::Conv { q, .. } => q.params(),
         }
     }
@@ -108,6 +118,7 @@ impl QNets {
     fn target_params(&self) -> &[f32] {
         match self {
             QNets::Mlp { q_t, .. } => q_t.mlp.params(),
+            #[cfg(feature = "pixels")]
             QNets::Conv { q_t, .. } => q_t.params(),
         }
     }
@@ -116,6 +127,7 @@ impl QNets {
         // Same architecture by construction, so the lengths match and the values are finite.
         match self {
             QNets::Mlp { q, q_t, .. } => q_t.mlp.params_mut().copy_from_slice(q.mlp.params()),
+            #[cfg(feature = "pixels")]
             QNets::Conv { q, q_t, .. } => q_t
                 .set_params(q.params())
                 .expect("online and target conv Q-networks share one architecture"),
@@ -128,6 +140,7 @@ impl QNets {
                 q.save("q", ckpt)?;
                 q_t.save("q_target", ckpt)
             }
+            #[cfg(feature = "pixels")]
             QNets::Conv { q, q_t, opt, .. } => {
                 q.save("qconv", ckpt)?;
                 opt.save_to("qconv_opt", ckpt)?;
@@ -142,6 +155,7 @@ impl QNets {
                 q.load("q", ckpt)?;
                 q_t.load("q_target", ckpt)
             }
+            #[cfg(feature = "pixels")]
             QNets::Conv { q, q_t, opt, .. } => {
                 let missing = |_| {
                     AgentError::Checkpoint(
@@ -216,6 +230,7 @@ impl Dqn {
                     next_ws: MlpWorkspace::default(),
                 }
             }
+            #[cfg(feature = "pixels")]
             QNetwork::Conv => {
                 config.conv.check_space(obs_space)?;
                 let q = ConvQNet::new(config.conv.clone(), &config.hidden, n_actions, &mut init)?;
@@ -223,6 +238,7 @@ impl Dqn {
                     AdamConfig::with_lr(config.learning_rate as f32),
                     q.num_params(),
                 )?;
+                #[cfg(feature = "pixels")]
                 QNets::Conv {
                     q_t: q.clone(),
                     grads: vec![0.0; q.num_params()],

@@ -26,13 +26,19 @@
 //! checkpoints ([`tandem_nn::Checkpoint`], safetensors) hold networks, optimizer states, noise
 //! state, generators, replay and the in-progress episode, so a resumed run continues bit-for-bit.
 //!
-//! DQN's Q-network is an MLP or, for image observations (p2's 16x16 RGB maze, `PixelMaze-v0`),
-//! a [`ConvQNet`] built from candle convolutions with `tandem_nn::candle_ext`'s seeded
-//! parameters, stepped by the same Adam. Not written yet: a Gaussian-policy REINFORCE for
+//! DQN's Q-network is an MLP or, with the feature `pixels`, for image observations (p2's 16x16
+//! RGB maze, `PixelMaze-v0`), a `ConvQNet` built from candle convolutions with
+//! `tandem_nn::candle_ext`'s seeded parameters, stepped by the same Adam. Not written yet: a Gaussian-policy REINFORCE for
 //! continuous actions.
 //!
+//! Feature `pixels` (off by default; on where p2's pixel pipeline is built: `tandem-algos`,
+//! `tandem-studies`, the facade): the conv Q-network. A feature rather than a crate above this
+//! one because DQN holds its Q-network in a private enum (MLP or conv) behind one config, its
+//! checkpoints and its memory estimate; a crate would need a new Q-network trait through DQN.
+//! Without it, `network = "conv"` is not a known value.
+//!
 //! Dependencies: `tandem-nn` (networks, optimizers, checkpoints), `candle-core`/`candle-nn`
-//! (the conv Q-network's layers and autograd), `tandem-envs` (the `Env` trait
+//! (optional, feature `pixels`: the conv Q-network's layers and autograd), `tandem-envs` (the `Env` trait
 //! the training loop drives), `ndarray` (replay storage and minibatches), `rand`/`rand_distr`
 //! (seeded exploration and sampling), `serde`/`serde_json`/`toml` (configs, checkpoint payloads),
 //! `thiserror`.
@@ -44,6 +50,7 @@ pub mod adapter;
 pub mod agent;
 mod common;
 pub mod config;
+#[cfg(feature = "pixels")]
 pub mod conv_qnet;
 pub mod ddpg;
 pub mod dqn;
@@ -65,6 +72,7 @@ pub use agent::{
 pub use config::{
     Baseline, DdpgConfig, DqnConfig, OffPolicySchedule, QNetwork, ReinforceConfig, SacConfig,
 };
+#[cfg(feature = "pixels")]
 pub use conv_qnet::{ConvQNet, ConvQNetConfig};
 pub use ddpg::{random_action, Ddpg};
 pub use dqn::Dqn;

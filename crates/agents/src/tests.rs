@@ -7,8 +7,7 @@ use tandem_core::{Action, Space};
 use tandem_nn::Checkpoint;
 
 use crate::agent::{Agent, Episode, EpisodicAgent, Mode, OffPolicyAgent};
-use crate::config::{Baseline, DdpgConfig, DqnConfig, QNetwork, ReinforceConfig, SacConfig};
-use crate::conv_qnet::ConvQNetConfig;
+use crate::config::{Baseline, DdpgConfig, DqnConfig, ReinforceConfig, SacConfig};
 use crate::replay::{ReplayBuffer, TransitionRef};
 use crate::{AgentError, Ddpg, Dqn, NoiseConfig, Reinforce, Sac};
 
@@ -295,161 +294,170 @@ fn dqn_learns_a_contextual_bandit_and_double_dqn_too() {
     }
 }
 
-/// A 4×4 one-channel image with one lit pixel in the left or right half; reward 1 for the action
-/// naming the half (0 left, 1 right). The conv Q-network must learn to read the image.
-fn image_bandit_obs(rng: &mut tandem_core::Rng) -> (Vec<f64>, usize) {
-    let (y, x) = (rng.random_range(0..4usize), rng.random_range(0..4usize));
-    let mut img = vec![0.0; 16];
-    img[y * 4 + x] = 1.0;
-    (img, usize::from(x >= 2))
-}
+#[cfg(feature = "pixels")]
+mod conv {
+    use super::*;
+    use crate::config::QNetwork;
+    use crate::conv_qnet::ConvQNetConfig;
 
-fn image_space() -> Space {
-    Space::Box {
-        low: vec![0.0; 16],
-        high: vec![1.0; 16],
-        shape: vec![4, 4, 1],
-    }
-}
-
-fn conv_dqn_config() -> DqnConfig {
-    DqnConfig {
-        network: QNetwork::Conv,
-        conv: ConvQNetConfig {
-            image: [4, 4, 1],
-            channels: vec![4],
-            kernels: vec![3],
-            strides: vec![1],
-        },
-        hidden: vec![16],
-        learning_rate: 3e-3,
-        target_update_interval: 50,
-        ..DqnConfig::default()
-    }
-}
-
-#[test]
-fn conv_dqn_learns_an_image_bandit_and_checkpoints_round_trip() {
-    let mut agent = Dqn::new(conv_dqn_config(), &image_space(), &Space::discrete(2), 0).unwrap();
-    let mut rng = rng_from_seed(5);
-    let mut buf = ReplayBuffer::new(500, 16, 1).unwrap();
-    for _ in 0..500 {
-        let (img, right) = image_bandit_obs(&mut rng);
-        let a = rng.random_range(0..2usize);
-        buf.push(TransitionRef {
-            obs: &img,
-            action: &[a as f64],
-            reward: if a == right { 1.0 } else { 0.0 },
-            next_obs: &img,
-            terminated: true,
-        })
-        .unwrap();
-    }
-    for _ in 0..300 {
-        agent.update(&buf.sample(32, &mut rng).unwrap()).unwrap();
-    }
-    // Every one of the 16 images: greedy action right, Q of the right action near 1.
-    for k in 0..16 {
+    /// A 4×4 one-channel image with one lit pixel in the left or right half; reward 1 for the action
+    /// naming the half (0 left, 1 right). The conv Q-network must learn to read the image.
+    fn image_bandit_obs(rng: &mut tandem_core::Rng) -> (Vec<f64>, usize) {
+        let (y, x) = (rng.random_range(0..4usize), rng.random_range(0..4usize));
         let mut img = vec![0.0; 16];
-        img[k] = 1.0;
-        let right = usize::from(k % 4 >= 2);
-        assert_eq!(
-            agent.act(&img, Mode::Deterministic).unwrap(),
-            Action::Discrete(right),
-            "pixel {k}"
-        );
-        let q = agent.q_values(&img).unwrap();
-        assert!((q[right] - 1.0).abs() < 0.2, "pixel {k}: {q:?}");
+        img[y * 4 + x] = 1.0;
+        (img, usize::from(x >= 2))
     }
 
-    // Save, keep training the original, load into a fresh agent and train it the same way.
-    let mut ckpt = Checkpoint::new();
-    agent.save(&mut ckpt).unwrap();
-    let ckpt = Checkpoint::from_bytes(&ckpt.to_bytes().unwrap()).unwrap();
-    let mut other = Dqn::new(conv_dqn_config(), &image_space(), &Space::discrete(2), 9).unwrap();
-    other.load(&ckpt).unwrap();
-    assert_eq!(other.q_params(), agent.q_params());
-    assert_eq!(other.target_params(), agent.target_params());
-    let batch = buf.sample(32, &mut rng).unwrap();
-    for _ in 0..3 {
-        agent.update(&batch).unwrap();
-        other.update(&batch).unwrap();
-    }
-    assert_eq!(
-        other.q_params(),
-        agent.q_params(),
-        "Adam state not restored"
-    );
-    let (mut a, mut b) = (agent.clone(), other.clone());
-    for _ in 0..20 {
-        assert_eq!(
-            a.act(&batch.obs.row(0).mapv(f64::from).to_vec(), Mode::Explore)
-                .unwrap(),
-            b.act(&batch.obs.row(0).mapv(f64::from).to_vec(), Mode::Explore)
-                .unwrap()
-        );
-    }
-
-    // An MLP DQN checkpoint does not load into the conv agent, and vice versa.
-    let mlp_cfg = DqnConfig {
-        hidden: vec![16],
-        ..DqnConfig::default()
-    };
-    let mut mlp = Dqn::new(mlp_cfg, &image_space(), &Space::discrete(2), 0).unwrap();
-    let e = mlp.load(&ckpt).unwrap_err();
-    assert!(matches!(e, AgentError::Checkpoint(_)), "{e}");
-    let mut mlp_ck = Checkpoint::new();
-    mlp.save(&mut mlp_ck).unwrap();
-    let before = other.q_params().to_vec();
-    let e = other.load(&mlp_ck).unwrap_err();
-    assert!(e.to_string().contains("conv"), "{e}");
-    assert_eq!(other.q_params(), &before[..]);
-}
-
-#[test]
-fn conv_dqn_is_seeded_and_rejects_observations_that_are_not_its_image() {
-    let acts = Space::discrete(2);
-    let a = Dqn::new(conv_dqn_config(), &image_space(), &acts, 3).unwrap();
-    let b = Dqn::new(conv_dqn_config(), &image_space(), &acts, 3).unwrap();
-    let c = Dqn::new(conv_dqn_config(), &image_space(), &acts, 4).unwrap();
-    assert_eq!(a.q_params(), b.q_params());
-    assert_eq!(a.q_params(), a.target_params());
-    assert_ne!(a.q_params(), c.q_params());
-    // A flat vector of the right length, an image of another shape, a discrete space.
-    for space in [
-        Space::symmetric(16, 1.0),
+    fn image_space() -> Space {
         Space::Box {
             low: vec![0.0; 16],
             high: vec![1.0; 16],
-            shape: vec![2, 8, 1],
-        },
-    ] {
-        let e = Dqn::new(conv_dqn_config(), &space, &acts, 0).unwrap_err();
-        assert!(
-            matches!(e, AgentError::WrongObservationSpace { agent: "dqn", .. }),
-            "{e}"
-        );
-        assert!(e.to_string().contains("[4, 4, 1]"), "{e}");
+            shape: vec![4, 4, 1],
+        }
     }
-    assert!(Dqn::new(conv_dqn_config(), &Space::discrete(3), &acts, 0).is_err());
-    // A conv layer list out of range is a config error.
-    let bad = DqnConfig {
-        conv: ConvQNetConfig {
-            kernels: vec![2],
-            ..conv_dqn_config().conv
-        },
-        ..conv_dqn_config()
-    };
-    assert!(matches!(
-        Dqn::new(bad, &image_space(), &acts, 0),
-        Err(AgentError::Config { .. })
-    ));
-    // An observation of the wrong length when acting.
-    let mut a = a;
-    assert!(matches!(
-        a.act(&[0.0; 15], Mode::Deterministic),
-        Err(AgentError::Dim { .. })
-    ));
+
+    fn conv_dqn_config() -> DqnConfig {
+        DqnConfig {
+            network: QNetwork::Conv,
+            conv: ConvQNetConfig {
+                image: [4, 4, 1],
+                channels: vec![4],
+                kernels: vec![3],
+                strides: vec![1],
+            },
+            hidden: vec![16],
+            learning_rate: 3e-3,
+            target_update_interval: 50,
+            ..DqnConfig::default()
+        }
+    }
+
+    #[test]
+    fn conv_dqn_learns_an_image_bandit_and_checkpoints_round_trip() {
+        let mut agent =
+            Dqn::new(conv_dqn_config(), &image_space(), &Space::discrete(2), 0).unwrap();
+        let mut rng = rng_from_seed(5);
+        let mut buf = ReplayBuffer::new(500, 16, 1).unwrap();
+        for _ in 0..500 {
+            let (img, right) = image_bandit_obs(&mut rng);
+            let a = rng.random_range(0..2usize);
+            buf.push(TransitionRef {
+                obs: &img,
+                action: &[a as f64],
+                reward: if a == right { 1.0 } else { 0.0 },
+                next_obs: &img,
+                terminated: true,
+            })
+            .unwrap();
+        }
+        for _ in 0..300 {
+            agent.update(&buf.sample(32, &mut rng).unwrap()).unwrap();
+        }
+        // Every one of the 16 images: greedy action right, Q of the right action near 1.
+        for k in 0..16 {
+            let mut img = vec![0.0; 16];
+            img[k] = 1.0;
+            let right = usize::from(k % 4 >= 2);
+            assert_eq!(
+                agent.act(&img, Mode::Deterministic).unwrap(),
+                Action::Discrete(right),
+                "pixel {k}"
+            );
+            let q = agent.q_values(&img).unwrap();
+            assert!((q[right] - 1.0).abs() < 0.2, "pixel {k}: {q:?}");
+        }
+
+        // Save, keep training the original, load into a fresh agent and train it the same way.
+        let mut ckpt = Checkpoint::new();
+        agent.save(&mut ckpt).unwrap();
+        let ckpt = Checkpoint::from_bytes(&ckpt.to_bytes().unwrap()).unwrap();
+        let mut other =
+            Dqn::new(conv_dqn_config(), &image_space(), &Space::discrete(2), 9).unwrap();
+        other.load(&ckpt).unwrap();
+        assert_eq!(other.q_params(), agent.q_params());
+        assert_eq!(other.target_params(), agent.target_params());
+        let batch = buf.sample(32, &mut rng).unwrap();
+        for _ in 0..3 {
+            agent.update(&batch).unwrap();
+            other.update(&batch).unwrap();
+        }
+        assert_eq!(
+            other.q_params(),
+            agent.q_params(),
+            "Adam state not restored"
+        );
+        let (mut a, mut b) = (agent.clone(), other.clone());
+        for _ in 0..20 {
+            assert_eq!(
+                a.act(&batch.obs.row(0).mapv(f64::from).to_vec(), Mode::Explore)
+                    .unwrap(),
+                b.act(&batch.obs.row(0).mapv(f64::from).to_vec(), Mode::Explore)
+                    .unwrap()
+            );
+        }
+
+        // An MLP DQN checkpoint does not load into the conv agent, and vice versa.
+        let mlp_cfg = DqnConfig {
+            hidden: vec![16],
+            ..DqnConfig::default()
+        };
+        let mut mlp = Dqn::new(mlp_cfg, &image_space(), &Space::discrete(2), 0).unwrap();
+        let e = mlp.load(&ckpt).unwrap_err();
+        assert!(matches!(e, AgentError::Checkpoint(_)), "{e}");
+        let mut mlp_ck = Checkpoint::new();
+        mlp.save(&mut mlp_ck).unwrap();
+        let before = other.q_params().to_vec();
+        let e = other.load(&mlp_ck).unwrap_err();
+        assert!(e.to_string().contains("conv"), "{e}");
+        assert_eq!(other.q_params(), &before[..]);
+    }
+
+    #[test]
+    fn conv_dqn_is_seeded_and_rejects_observations_that_are_not_its_image() {
+        let acts = Space::discrete(2);
+        let a = Dqn::new(conv_dqn_config(), &image_space(), &acts, 3).unwrap();
+        let b = Dqn::new(conv_dqn_config(), &image_space(), &acts, 3).unwrap();
+        let c = Dqn::new(conv_dqn_config(), &image_space(), &acts, 4).unwrap();
+        assert_eq!(a.q_params(), b.q_params());
+        assert_eq!(a.q_params(), a.target_params());
+        assert_ne!(a.q_params(), c.q_params());
+        // A flat vector of the right length, an image of another shape, a discrete space.
+        for space in [
+            Space::symmetric(16, 1.0),
+            Space::Box {
+                low: vec![0.0; 16],
+                high: vec![1.0; 16],
+                shape: vec![2, 8, 1],
+            },
+        ] {
+            let e = Dqn::new(conv_dqn_config(), &space, &acts, 0).unwrap_err();
+            assert!(
+                matches!(e, AgentError::WrongObservationSpace { agent: "dqn", .. }),
+                "{e}"
+            );
+            assert!(e.to_string().contains("[4, 4, 1]"), "{e}");
+        }
+        assert!(Dqn::new(conv_dqn_config(), &Space::discrete(3), &acts, 0).is_err());
+        // A conv layer list out of range is a config error.
+        let bad = DqnConfig {
+            conv: ConvQNetConfig {
+                kernels: vec![2],
+                ..conv_dqn_config().conv
+            },
+            ..conv_dqn_config()
+        };
+        assert!(matches!(
+            Dqn::new(bad, &image_space(), &acts, 0),
+            Err(AgentError::Config { .. })
+        ));
+        // An observation of the wrong length when acting.
+        let mut a = a;
+        assert!(matches!(
+            a.act(&[0.0; 15], Mode::Deterministic),
+            Err(AgentError::Dim { .. })
+        ));
+    }
 }
 
 #[test]

@@ -5,9 +5,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use tandem_agents::{
-    AgentError, ConvQNetConfig, DdpgConfig, Dqn, DqnConfig, QNetwork, Sac, SacConfig,
-};
+use tandem_agents::{AgentError, DdpgConfig, Sac, SacConfig};
 use tandem_agents::{Ddpg, ReplayBuffer};
 use tandem_core::Space;
 
@@ -91,33 +89,37 @@ fn oversized_networks_and_buffers_are_refused_before_allocation() {
         "allocated {largest} bytes before refusing"
     );
 
-    // A conv layer of 100,000 channels on p2's 16x16 images: feature maps of gigabytes.
-    let dqn = DqnConfig {
-        network: QNetwork::Conv,
-        conv: ConvQNetConfig {
-            channels: vec![100_000],
-            kernels: vec![3],
-            strides: vec![1],
+    #[cfg(feature = "pixels")]
+    {
+        use tandem_agents::{ConvQNetConfig, Dqn, DqnConfig, QNetwork};
+        // A conv layer of 100,000 channels on p2's 16x16 images: feature maps of gigabytes.
+        let dqn = DqnConfig {
+            network: QNetwork::Conv,
+            conv: ConvQNetConfig {
+                channels: vec![100_000],
+                kernels: vec![3],
+                strides: vec![1],
+                ..Default::default()
+            },
             ..Default::default()
-        },
-        ..Default::default()
-    };
-    dqn.validate().unwrap();
-    let image = Space::Box {
-        low: vec![0.0; 768],
-        high: vec![1.0; 768],
-        shape: vec![16, 16, 3],
-    };
-    let (r, largest) =
-        largest_allocation(|| Dqn::new(dqn, &image, &Space::discrete(4), 0).map(|_| ()));
-    assert_memory_error(
-        r.unwrap_err(),
-        &["dqn (obs 768, 4 actions)", "fully connected layers"],
-    );
-    assert!(
-        largest < 1 << 20,
-        "allocated {largest} bytes before refusing"
-    );
+        };
+        dqn.validate().unwrap();
+        let image = Space::Box {
+            low: vec![0.0; 768],
+            high: vec![1.0; 768],
+            shape: vec![16, 16, 3],
+        };
+        let (r, largest) =
+            largest_allocation(|| Dqn::new(dqn, &image, &Space::discrete(4), 0).map(|_| ()));
+        assert_memory_error(
+            r.unwrap_err(),
+            &["dqn (obs 768, 4 actions)", "fully connected layers"],
+        );
+        assert!(
+            largest < 1 << 20,
+            "allocated {largest} bytes before refusing"
+        );
+    }
 
     // A replay buffer of 10^12 transitions; its size overflows nothing but the machine.
     let ddpg = DdpgConfig {

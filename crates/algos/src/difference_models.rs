@@ -29,16 +29,16 @@ use tandem_agents::{
     OffPolicyAgent, OffPolicyLoop, OffPolicySchedule, Resumable, StepOptions, Store,
 };
 use tandem_core::{CurvePoint, Rng, SeedStream, Space};
-use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 use tandem_dynamics::rigid_plant::RigidBodyPlant;
 use tandem_dynamics::Plant;
-use tandem_envs::{
-    leo_parts, DcMotorPendulumEnv, DcMotorPendulumTask, Env, EnvError, LeoModel, LeoStart,
-    LeoWalkTask, LeoWork, PlantEnv, SampleCount, SampleCounter, Task, TimeLimit, LEO_STEPS,
-};
+use tandem_envs::{Env, EnvError, PlantEnv, SampleCount, SampleCounter, Task, TimeLimit};
 use tandem_models::{
     DynamicsModel, FitConfig, FitReport, ModelEnv, PlantModel, ResidualModel, ResidualModelConfig,
     Transitions, TransitionsBuilder,
+};
+use tandem_robots::{
+    leo_parts, DcMotorPendulum, DcMotorPendulumEnv, DcMotorPendulumEnvExt, DcMotorPendulumParams,
+    DcMotorPendulumTask, LeoModel, LeoStart, LeoWalkTask, LeoWork, LEO_STEPS,
 };
 
 use tandem_nn::{Checkpoint, Checkpointable};
@@ -1021,7 +1021,7 @@ pub fn pendulum_problem() -> SimToReal<DcMotorPendulum, DcMotorPendulumTask> {
     SimToReal {
         real: Problem {
             task: DcMotorPendulumTask::new(DcMotorPendulumEnv::ID_IDEALIZED, &params),
-            env: Box::new(|| tandem_envs::make(DcMotorPendulumEnv::ID_REAL)),
+            env: Box::new(|| tandem_robots::make(DcMotorPendulumEnv::ID_REAL)),
         },
         idealized: DcMotorPendulum::new(params),
         measures: None,

@@ -30,9 +30,10 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use tandem_agents::{Dqn, DqnConfig, EpisodeRunner, OffPolicyLoop, StepOptions, StepRecord};
 use tandem_core::SeedStream;
-use tandem_envs::{Env, PixelMazeEnv, SampleCount, SampleCounter};
+use tandem_envs::{Env, SampleCount, SampleCounter};
 use tandem_models::{PixelEpisodes, PixelFit, PixelModel, PixelModelConfig, PixelModelEnv};
 use tandem_nn::{Checkpoint, Checkpointable};
+use tandem_robots::PixelMazeEnv;
 
 use super::driver::{drive, Algorithm};
 use super::imagined_episodes::{Event, Method, RunRecord, Tally};
@@ -182,7 +183,7 @@ fn not_a_maze(env: &str) -> AlgoError {
 
 /// The maze as the runs use it: [`MazeConfig::env`] with its registered episode limit.
 fn maze(cfg: &MazeConfig) -> Result<Box<dyn Env>> {
-    Ok(tandem_envs::make(&cfg.env)?)
+    Ok(tandem_robots::make(&cfg.env)?)
 }
 
 /// One real episode's frames, actions and rewards (the model's data).

@@ -23,7 +23,10 @@
 //! `tandem` program keeps checkpoints as files, [`InMemory`] keeps them in memory, [`Ephemeral`]
 //! keeps none. A resumed run gives exactly the numbers of an uninterrupted one.
 //!
-//! Dependencies: the workspace crates it composes; `nalgebra` and `ndarray` (the controllers'
+//! Dependencies: the workspace crates it composes, among them `tandem-robots` (the papers'
+//! problems: p0's pendulum and Leo, p3's leg, p2's maze, p4's scenes) and, with their feature
+//! `pixels`, `tandem-models` and `tandem-agents` (p2's pixel model and conv Q-network for
+//! `imagined_pixels`); `nalgebra` and `ndarray` (the controllers'
 //! matrices and batched states), `rand` (seeded sampling), `serde` (settings, records and
 //! checkpoint payloads), `thiserror` (the error type), `toml` (p2's maze reads the DQN preset it
 //! shares with `tandem train`).

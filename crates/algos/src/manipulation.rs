@@ -2,21 +2,21 @@
 //! ([`super::gps`]) trains local controllers on.
 //!
 //! The gripper pusher ([`pusher_problem`]): the scene `p4_pusher.xml` as a `MujocoPlant`
-//! (state `qpos ++ qvel`, 0.05 s control), [`tandem_mujoco::p4::PUSHER_CONDITIONS`] as the
+//! (state `qpos ++ qvel`, 0.05 s control), [`tandem_robots::p4::PUSHER_CONDITIONS`] as the
 //! conditions, [`PusherCost`] as every condition's cost (its terminal cost the last step's
 //! distance terms), and the final block–goal distance as the measure.
 //!
-//! The door ([`door_problem`]): the scene `p4_door.xml`, [`tandem_mujoco::p4::DOOR_CONDITIONS`],
+//! The door ([`door_problem`]): the scene `p4_door.xml`, [`tandem_robots::p4::DOOR_CONDITIONS`],
 //! [`DoorCost`] on the hook and grasp points from MuJoCo's kinematics (its expansion Gauss–Newton
 //! through finite-difference site Jacobians), and the final door angle as the measure.
 
 use nalgebra::{DMatrix, DVector};
-use tandem_mujoco::p4::{
+use tandem_planners::{Objective, QuadCost, QuadTerminal};
+use tandem_robots::p4::{
     reacher_distance, reacher_starts, DoorCost, PusherCondition, PusherCost, ReacherCost,
     PUSHER_ACTION_DIM, PUSHER_CONDITIONS, PUSHER_HORIZON, PUSHER_STATE_DIM, REACHER_ACTION_DIM,
     REACHER_HORIZON, REACHER_STATE_DIM,
 };
-use tandem_planners::{Objective, QuadCost, QuadTerminal};
 
 use super::gps::{Condition, LocalProblem};
 use super::mdgps::TestSet;
@@ -75,7 +75,7 @@ pub fn pusher_problem(cost: PusherCost) -> Result<LocalProblem> {
 
 #[cfg(feature = "mujoco")]
 fn pusher_system() -> Result<Box<dyn tandem_models::DynamicsModel + Send + Sync>> {
-    let plant = tandem_mujoco::p4::pusher_plant().map_err(|e| AlgoError::Config(e.to_string()))?;
+    let plant = tandem_robots::p4::pusher_plant().map_err(|e| AlgoError::Config(e.to_string()))?;
     Ok(Box::new(tandem_models::PlantModel::new(plant)))
 }
 
@@ -130,11 +130,11 @@ pub fn reacher_problem(cost: ReacherCost, conditions: usize, seed: u64) -> Resul
 }
 
 /// The reacher's global policy sees `Reacher-v5`'s observation
-/// ([`tandem_mujoco::p4::reacher_observation`]), as DDPG does.
+/// ([`tandem_robots::p4::reacher_observation`]), as DDPG does.
 pub fn reacher_policy_input() -> tandem_agents::PolicyInput {
     tandem_agents::PolicyInput {
-        dim: tandem_mujoco::p4::REACHER_OBS_DIM,
-        map: std::sync::Arc::new(tandem_mujoco::p4::reacher_observation),
+        dim: tandem_robots::p4::REACHER_OBS_DIM,
+        map: std::sync::Arc::new(tandem_robots::p4::reacher_observation),
     }
 }
 
@@ -208,11 +208,11 @@ pub fn door_problem(cost: DoorCost) -> Result<LocalProblem> {
 #[cfg(feature = "mujoco")]
 mod door {
     use nalgebra::{DMatrix, DVector};
-    use tandem_mujoco::p4::{
+    use tandem_planners::{Objective, QuadTerminal};
+    use tandem_robots::p4::{
         door_initial_state, door_plant, DoorCost, DoorKinematics, DOOR_ACTION_DIM, DOOR_ANGLE,
         DOOR_CONDITIONS, DOOR_HORIZON, DOOR_STATE_DIM,
     };
-    use tandem_planners::{Objective, QuadTerminal};
 
     use super::super::gps::{Condition, LocalProblem};
     use super::super::{AlgoError, Result};
@@ -291,7 +291,7 @@ mod door {
     use super::super::gps::LocalProblem;
     use super::super::{AlgoError, Result};
 
-    pub(super) fn problem(_cost: tandem_mujoco::p4::DoorCost) -> Result<LocalProblem> {
+    pub(super) fn problem(_cost: tandem_robots::p4::DoorCost) -> Result<LocalProblem> {
         Err(AlgoError::Config(
             "p4's door needs a build with `--features mujoco` after scripts/setup-mujoco.sh".into(),
         ))
@@ -386,7 +386,7 @@ mod ddpg {
     use ndarray::Array2;
     use tandem_agents::{AlgoConfig, BatchPolicy, Learner, Mode, Pause, TrainSettings, Trainer};
     use tandem_envs::{PlantEnv, TimeLimit};
-    use tandem_mujoco::p4::{
+    use tandem_robots::p4::{
         reacher_observation, ReacherCost, ReacherTask, REACHER_HORIZON, REACHER_OBS_DIM,
     };
 
@@ -501,7 +501,7 @@ mod ddpg {
 
 #[cfg(not(feature = "mujoco"))]
 mod ddpg {
-    use tandem_mujoco::p4::ReacherCost;
+    use tandem_robots::p4::ReacherCost;
 
     use super::super::mdgps::TestSet;
     use super::super::{AlgoError, Checkpoints, Result};

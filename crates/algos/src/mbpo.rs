@@ -38,14 +38,13 @@ use tandem_agents::{
 };
 use tandem_core::{CurvePoint, LinearSchedule, Rng, SeedStream, Space};
 use tandem_dynamics::classic::GymPendulumParams;
-use tandem_envs::{
-    Env, EnvError, Leg2REnv, Leg2RModel, Leg2RTask, PendulumTask, SampleCount, SampleCounter, Task,
-};
+use tandem_envs::{Env, EnvError, PendulumTask, SampleCount, SampleCounter, Task};
 use tandem_models::{
     DynamicsModel, EnsembleConfig, FitConfig, Judge, Judges, ProbabilisticEnsemble, Propagation,
     Transitions, TransitionsBuilder,
 };
 use tandem_nn::{Checkpoint, Checkpointable};
+use tandem_robots::{Leg2REnv, Leg2REnvExt, Leg2RModel, Leg2RTask};
 
 use super::driver::{drive, timed, Algorithm};
 use super::dyna::{imagine, sample_starts};
@@ -326,7 +325,7 @@ pub fn pendulum_problem() -> Problem<PendulumTask, MakeEnv> {
 pub fn leg2r_problem() -> Problem<Leg2RTask, MakeEnv> {
     Problem {
         task: Leg2REnv::new(Leg2RModel::Idealized).task().clone(),
-        env: Box::new(|| tandem_envs::make(Leg2REnv::ID)),
+        env: Box::new(|| tandem_robots::make(Leg2REnv::ID)),
     }
 }
 
@@ -335,7 +334,7 @@ pub fn leg2r_problem() -> Problem<Leg2RTask, MakeEnv> {
 /// configuration is invalid.
 pub fn leg2r_problem_with(
     id: &str,
-    config: &tandem_envs::Leg2RConfig,
+    config: &tandem_robots::Leg2RConfig,
 ) -> Result<Problem<Leg2RTask, MakeEnv>> {
     let env = Leg2REnv::with_config(id, config.clone())?;
     let task = env.task().clone();

@@ -7,12 +7,12 @@
 //! This crate owns
 //! - the [`Plant`] trait and its finite-difference [`Plant::linearize`] default ([`linearize_fd`]),
 //! - [`integrate`]: fixed-step integrators (explicit Euler, RK4) for continuous-time dynamics,
-//! - classic plants (cart-pole, gymnasium pendulum, the DC-motor pendulum of paper p0),
+//! - classic plants (cart-pole, gymnasium pendulum),
 //! - [`rigid`]: rigid bodies from URDF (kinematics, Jacobians, RNEA, CRBA, ABA, analytical
 //!   derivatives, COM, energies) in Pinocchio's Model/Data style; [`actuators`] (DC motor, joint
 //!   friction, PD), [`contact`] (compliant ground contact), [`rigid_plant::RigidBodyPlant`] (a URDF
-//!   robot as a [`Plant`], with idealized/true overrides), [`biped`] (a planar Leo-like biped) and
-//!   [`leg2r`] (p3's 2R leg on a test rig, from `assets/leg2r.urdf`),
+//!   robot as a [`Plant`], with idealized/true overrides); the papers' robots built from them
+//!   (p0's DC-motor pendulum and Leo-like biped, p3's 2R leg) are `tandem-robots`',
 //! - [`Clocked`]: any plant with a phase clock in its state, for tasks that track a periodic
 //!   reference.
 //!
@@ -25,12 +25,10 @@
 //! the 7-DoF arm ~7% faster; musl's kernels, under 1 ulp).
 
 pub mod actuators;
-pub mod biped;
 pub mod classic;
 mod clock;
 pub mod contact;
 pub mod integrate;
-pub mod leg2r;
 mod plant;
 pub mod rigid;
 pub mod rigid_plant;

@@ -173,9 +173,10 @@ pub fn round_to_f32(v: &[f64]) -> Vec<f64> {
     v.iter().map(|&x| x as f32 as f64).collect()
 }
 
-/// Where a base environment is in its episode; shared bookkeeping of the environments here.
+/// Where a base environment is in its episode; shared bookkeeping of the environments here and
+/// of those written over this crate (`tandem-robots`' pixel maze).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Phase {
+pub enum Phase {
     /// `reset` has not been called yet.
     NotReset,
     /// An episode is running.
@@ -186,7 +187,7 @@ pub(crate) enum Phase {
 
 impl Phase {
     /// `Ok` if `step` may be called.
-    pub(crate) fn check(self, env: &str) -> Result<(), EnvError> {
+    pub fn check(self, env: &str) -> Result<(), EnvError> {
         match self {
             Phase::Running => Ok(()),
             Phase::NotReset => Err(EnvError::NeedsReset {
@@ -202,7 +203,7 @@ impl Phase {
 }
 
 /// Checks `action` against `space`, naming the environment in the error.
-pub(crate) fn check_action(env: &str, space: &Space, action: &Action) -> Result<(), EnvError> {
+pub fn check_action(env: &str, space: &Space, action: &Action) -> Result<(), EnvError> {
     space
         .check(action)
         .map_err(|source| EnvError::InvalidAction {

@@ -6,19 +6,19 @@
 //! true system's environment ([`PlantEnv`]), an idealized simulator (the same `PlantEnv` over
 //! other parameters) and a learned model's environment (`tandem_models::ModelEnv`), so that all
 //! of them score and end episodes alike. The classic environments are `PlantEnv`s:
-//! [`crate::CartPoleEnv`], [`crate::PendulumEnv`], [`crate::DcMotorPendulumEnv`].
+//! [`crate::CartPoleEnv`], [`crate::PendulumEnv`]; so are the papers' (`tandem-robots`).
 //!
 //! ```
-//! use tandem_envs::{Action, DcMotorPendulumTask, Env, PlantEnv, Task};
-//! use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
+//! use tandem_envs::{Action, Env, PendulumTask, PlantEnv, Task};
+//! use tandem_dynamics::classic::{GymPendulum, GymPendulumParams};
 //!
-//! // p0's swing-up task over a heavier pendulum than the registered ones.
-//! let params = DcMotorPendulumParams { m: 0.2, ..DcMotorPendulumParams::real() };
-//! let task = DcMotorPendulumTask::new("HeavyPendulum-v0", &params);
-//! let mut env = PlantEnv::from_parts(DcMotorPendulum::new(params), task).unwrap();
+//! // Gymnasium's swing-up task over a heavier pendulum than the registered one.
+//! let params = GymPendulumParams { m: 2.0, ..GymPendulumParams::default() };
+//! let task = PendulumTask::new(&params);
+//! let mut env = PlantEnv::from_parts(GymPendulum::new(params), task).unwrap();
 //! let obs = env.reset(Some(0));
-//! assert_eq!(obs.len(), 2);
-//! let step = env.step(&Action::Continuous(vec![3.0])).unwrap();
+//! assert_eq!(obs.len(), 3);
+//! let step = env.step(&Action::Continuous(vec![2.0])).unwrap();
 //! assert!(step.reward < 0.0 && !step.terminated);
 //! ```
 
@@ -295,8 +295,8 @@ impl<P: Plant, T: Task> Env for PlantEnv<P, T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{CartPoleTask, DcMotorPendulumTask, PendulumTask};
-    use tandem_dynamics::classic::{CartPole, DcMotorPendulumParams, GymPendulum};
+    use crate::{CartPoleTask, PendulumTask};
+    use tandem_dynamics::classic::{CartPole, GymPendulum, GymPendulumParams};
 
     #[test]
     fn a_plant_and_task_of_different_sizes_are_refused() {
@@ -304,8 +304,7 @@ mod tests {
             .err()
             .unwrap();
         assert!(err.to_string().contains("states of 2"), "{err}");
-        let params = DcMotorPendulumParams::idealized();
-        let task = DcMotorPendulumTask::new("x", &params);
+        let task = PendulumTask::new(&GymPendulumParams::default());
         assert!(PlantEnv::from_parts(CartPole::default(), task).is_err());
     }
 

@@ -7,10 +7,10 @@
 //! ```
 //! use tandem_envs::{make, Action, Env, RescaleAction, SampleCounter};
 //!
-//! let (env, count) = SampleCounter::new(make("DcMotorPendulum-real-v0").unwrap());
+//! let (env, count) = SampleCounter::new(make("Pendulum-v1").unwrap());
 //! let mut env = RescaleAction::new(env).unwrap(); // the agent acts in [-1, 1]
 //! env.reset(Some(0));
-//! let step = env.step(&Action::Continuous(vec![1.0])).unwrap(); // 3 V
+//! let step = env.step(&Action::Continuous(vec![1.0])).unwrap(); // 2 N m
 //! assert_eq!(count.get(), 1);
 //! # let _ = step;
 //! ```
@@ -434,7 +434,7 @@ impl<E: Env> TransformObservation<E, RunningNormalizer> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{CartPoleEnv, DcMotorPendulumEnv, PendulumEnv, PendulumModel};
+    use crate::{CartPoleEnv, PendulumEnv};
 
     #[test]
     fn time_limit_truncates_at_the_limit_and_blocks_until_reset() {
@@ -489,11 +489,11 @@ mod tests {
 
     #[test]
     fn clip_action_clips_into_bounds() {
-        let mut plain = DcMotorPendulumEnv::new(PendulumModel::Real);
-        let mut clipped = ClipAction::new(DcMotorPendulumEnv::new(PendulumModel::Real)).unwrap();
-        plain.reset(None);
-        clipped.reset(None);
-        let a = plain.step(&Action::Continuous(vec![-3.0])).unwrap();
+        let mut plain = PendulumEnv::new();
+        let mut clipped = ClipAction::new(PendulumEnv::new()).unwrap();
+        plain.reset(Some(0));
+        clipped.reset(Some(0));
+        let a = plain.step(&Action::Continuous(vec![-2.0])).unwrap();
         let b = clipped.step(&Action::Continuous(vec![-100.0])).unwrap();
         assert_eq!(a, b);
         assert!(clipped.step(&Action::Continuous(vec![f64::NAN])).is_err());

@@ -540,24 +540,37 @@ mod tests {
     }
 
     /// A rigid-body plant whose exact input Jacobian comes from the analytic ABA derivatives:
-    /// the 2R leg (no hard stops), torques well inside its motors' limits. On one-step-back
+    /// the 2R leg of the Pinocchio fixtures with torque-driven joints, torques well inside their
+    /// limits. On one-step-back
     /// data whose two steps leave the same predecessor `x` (`s_t = f(x, u_prev)`,
     /// `s_{t+1} = f(x, u)`) the incremental form is exact to first order in `Δu`, so the fitted
     /// `L_θ(s_t, u_prev)` must be `∂f/∂u (x, u_prev)`: checked at held-out states.
     #[test]
     fn learns_the_input_jacobian_of_a_rigid_body_plant() {
         use nalgebra::DVector;
-        use tandem_dynamics::leg2r::{leg2r_plant, Leg2RParams};
+        use tandem_dynamics::actuators::Actuator;
+        use tandem_dynamics::rigid::Model;
+        use tandem_dynamics::rigid_plant::{RigidBodyPlant, RigidPlantConfig};
         use tandem_dynamics::Plant;
 
-        let plant = leg2r_plant(&Leg2RParams {
-            joint_limits: None,
-            ..Leg2RParams::idealized()
-        })
+        let model = Model::from_urdf_file(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../tests/fixtures/pinocchio/leg2r.urdf"
+        ))
         .unwrap();
+        let config = RigidPlantConfig {
+            control_period: 0.002,
+            internal_step: 0.0005,
+        };
+        let mut plant = RigidBodyPlant::new(model, config).unwrap();
+        for joint in ["hip", "knee"] {
+            plant = plant
+                .with_actuator(joint, Actuator::Torque { limit: 3.0 })
+                .unwrap();
+        }
         let mut rng = rng_from_seed(5);
         // (x, u_prev, u): joint angles over a band of the workspace, slow joints, torques of
-        // at most 1 N m (the motors give 3) changed by at most 0.3 N m.
+        // at most 1 N m (the joints allow 3) changed by at most 0.3 N m.
         let mut sample = |n: usize| -> Vec<(DVector<f64>, DVector<f64>, DVector<f64>)> {
             (0..n)
                 .map(|_| {

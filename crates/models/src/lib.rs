@@ -19,9 +19,10 @@
 //!   [`MlpModel`] (p2 eq. 1: state change, reward, termination), [`ResidualModel`] (p0:
 //!   `f_idl(s, a) + d_θ(s, a)` over any plant), [`IncrementalModel`] (p1 eqs. 4–6:
 //!   `s_t + L_θ Δa_t`), [`ProbabilisticEnsemble`] (p3 / PETS / MBPO: Gaussian members, elites,
-//!   three [`Propagation`] modes), [`PixelModel`] (p2 §3.2: an action-conditioned conv
-//!   encoder–decoder predicting the next binary frame, reward and termination from four frames;
-//!   [`PixelEpisodes`] its data, [`PixelModelEnv`] its imagined episodes, per-channel F1).
+//!   three [`Propagation`] modes), `PixelModel` (feature `pixels`; p2 §3.2: an
+//!   action-conditioned conv encoder–decoder predicting the next binary frame, reward and
+//!   termination from four frames; `PixelEpisodes` its data, `PixelModelEnv` its imagined
+//!   episodes, per-channel F1).
 //! * [`TvlgFit`]: time-varying linear-Gaussian dynamics from trajectories with a GMM
 //!   normal-inverse-Wishart prior (p4 / guided policy search). Time-varying, so not a
 //!   `DynamicsModel`: it returns [`TvlgDynamics`] for LQR-type trajectory optimizers.
@@ -96,8 +97,9 @@
 //! ```
 //!
 //! Dependencies: `tandem-dynamics` (the plants residual and plant models wrap), `tandem-envs` (the `Task` model environments are judged by), `tandem-nn`
-//! (networks and optimizers), `candle-core`/`candle-nn` (the pixel model's convolutions, transposed
-//! convolutions and autograd, through `tandem_nn::candle_ext::ParamSet`), `ndarray` (batched data), `nalgebra` (plant states and the small
+//! (networks and optimizers), `candle-core`/`candle-nn` (optional, feature `pixels`: the pixel
+//! model's convolutions, transposed convolutions and autograd, through
+//! `tandem_nn::candle_ext::ParamSet`), `ndarray` (batched data), `nalgebra` (plant states and the small
 //! matrices of the TVLG fit and its GMM: at most `2 dX + dU` square, where faer has no advantage,
 //! so faer is not used), `rand`/`rand_distr` (seeded sampling), `serde`, `thiserror`. An
 //! ensemble's members forward and train side by side through `tandem-nn`'s row dealing.
@@ -110,6 +112,7 @@ mod incremental;
 mod mlp_model;
 mod model;
 mod model_env;
+#[cfg(feature = "pixels")]
 mod pixel_model;
 mod plant_model;
 mod residual;
@@ -131,6 +134,7 @@ pub use model::{
 pub use model_env::{
     branched_rollouts, canonical_pair, Imagined, Judge, Judges, ModelEnv, RolloutPolicy,
 };
+#[cfg(feature = "pixels")]
 pub use pixel_model::{
     f1_score, PixelBatch, PixelEpisodes, PixelFit, PixelLayers, PixelModel, PixelModelConfig,
     PixelModelEnv, PixelPrediction,

@@ -312,8 +312,9 @@ impl DynamicsModel for MlpModel {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testutil::{cartpole_data, pendulum_data, rmse, zero_change_rmse};
-    use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
+    use crate::testutil::{
+        cartpole_data, idealized_pendulum, pendulum_data, rmse, true_pendulum, zero_change_rmse,
+    };
 
     fn small(seed: u64) -> MlpModelConfig {
         MlpModelConfig {
@@ -325,8 +326,8 @@ mod tests {
     }
 
     #[test]
-    fn one_step_error_on_the_p0_pendulum() {
-        let plant = DcMotorPendulum::new(DcMotorPendulumParams::real());
+    fn one_step_error_on_the_pendulum() {
+        let plant = true_pendulum();
         let train = pendulum_data(&plant, 3000, 1);
         let test = pendulum_data(&plant, 500, 2);
         let mut m = MlpModel::new(2, 1, small(0)).unwrap();
@@ -340,7 +341,7 @@ mod tests {
         assert_eq!(rep.train_loss.len(), 60);
         assert_eq!(rep.holdout_loss.len(), 60);
         let (e, e0) = (rmse(&m, &test), zero_change_rmse(&test));
-        eprintln!("p0 pendulum MlpModel one-step RMSE {e:.5} (no-change predictor {e0:.4})");
+        eprintln!("pendulum MlpModel one-step RMSE {e:.5} (no-change predictor {e0:.4})");
         assert!(e < 0.03 * e0, "rmse {e}, no-change {e0}");
     }
 
@@ -419,7 +420,7 @@ mod tests {
 
     #[test]
     fn same_seed_same_fit_bit_for_bit() {
-        let plant = DcMotorPendulum::new(DcMotorPendulumParams::idealized());
+        let plant = idealized_pendulum();
         let data = pendulum_data(&plant, 300, 5);
         let fit = FitConfig {
             epochs: 3,
@@ -450,7 +451,7 @@ mod tests {
 
     #[test]
     fn divergence_and_bad_data_leave_the_model_unchanged() {
-        let plant = DcMotorPendulum::new(DcMotorPendulumParams::idealized());
+        let plant = idealized_pendulum();
         let data = pendulum_data(&plant, 200, 6);
         let cfg = MlpModelConfig {
             optimizer: OptimizerConfig::sgd(1e12),

@@ -188,14 +188,14 @@ fn check_pair<M: DynamicsModel + ?Sized, T: Task + ?Sized>(
 /// Stochastic models draw from the environment's generator (seeded by `reset`).
 ///
 /// ```
-/// use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
-/// use tandem_envs::{Action, DcMotorPendulumTask, Env};
+/// use tandem_dynamics::classic::{GymPendulum, GymPendulumParams};
+/// use tandem_envs::{Action, Env, PendulumTask};
 /// use tandem_models::{ModelEnv, PlantModel};
 ///
-/// // The idealized pendulum as a simulator: p0's pre-training environment.
-/// let p = DcMotorPendulumParams::idealized();
-/// let task = DcMotorPendulumTask::new("DcMotorPendulum-idealized-v0", &p);
-/// let mut env = ModelEnv::new(PlantModel::new(DcMotorPendulum::new(p)), task).unwrap();
+/// // A known plant as a simulator: the pre-training environment of a difference model.
+/// let p = GymPendulumParams::default();
+/// let task = PendulumTask::new(&p);
+/// let mut env = ModelEnv::new(PlantModel::new(GymPendulum::new(p)), task).unwrap();
 /// env.reset(Some(0));
 /// let step = env.step(&Action::Continuous(vec![3.0])).unwrap();
 /// assert!(step.reward < 0.0);
@@ -583,27 +583,27 @@ mod tests {
     use crate::{FitConfig, FitReport, PlantModel, Transitions};
     use ndarray::array;
     use tandem_core::seeding::rng_from_seed;
-    use tandem_dynamics::classic::{CartPole, DcMotorPendulum, DcMotorPendulumParams};
-    use tandem_envs::{CartPoleEnv, CartPoleTask, DcMotorPendulumTask};
+    use tandem_dynamics::classic::{CartPole, GymPendulum, GymPendulumParams};
+    use tandem_envs::{CartPoleEnv, CartPoleTask, PendulumTask};
 
-    /// The model environment over the true plant replays the registered true environment exactly:
-    /// same observations, rewards and truncation, including across the ±π wrap.
+    /// The model environment over the plant replays the registered environment exactly: same
+    /// observations, rewards and truncation, also over the top.
     #[test]
     fn plant_model_env_matches_the_registered_pendulum() {
-        let p = DcMotorPendulumParams::real();
-        let task = DcMotorPendulumTask::new("DcMotorPendulum-real-v0", &p);
-        let mut m = ModelEnv::new(PlantModel::new(DcMotorPendulum::new(p)), task).unwrap();
-        let mut e = tandem_envs::make("DcMotorPendulum-real-v0").unwrap();
+        let p = GymPendulumParams::default();
+        let task = PendulumTask::new(&p);
+        let mut m = ModelEnv::new(PlantModel::new(GymPendulum::new(p)), task).unwrap();
+        let mut e = tandem_envs::make("Pendulum-v1").unwrap();
         assert_eq!(m.reset(Some(1)), e.reset(Some(1)));
         let mut wrapped = false;
         let mut velocity = 0.0;
-        for t in 0..400 {
-            // Pumping energy (voltage along the velocity, over-range to test clipping) swings the
-            // pendulum to the top and over it, through both wraps.
-            let u = if velocity >= 0.0 { 4.5 } else { -4.5 };
+        for t in 0..200 {
+            // Pumping energy (torque along the velocity, over-range to test clipping) swings the
+            // pendulum to the top and over it.
+            let u = if velocity >= 0.0 { 3.0 } else { -3.0 };
             let a = Action::Continuous(vec![u]);
             let (sm, se) = (m.step(&a).unwrap(), e.step(&a).unwrap());
-            for k in 0..2 {
+            for k in 0..3 {
                 assert!(
                     (sm.observation[k] - se.observation[k]).abs() < 1e-6,
                     "t={t}: {:?} vs {:?}",
@@ -613,8 +613,8 @@ mod tests {
             }
             assert!((sm.reward - se.reward).abs() < 1e-6);
             assert_eq!(sm.truncated, se.truncated, "t={t}");
-            wrapped |= sm.observation[0].abs() < 0.5;
-            velocity = se.observation[1];
+            wrapped |= sm.observation[0] > 0.9;
+            velocity = se.observation[2];
         }
         assert!(wrapped, "the test trajectory should reach the top");
         assert!(matches!(
@@ -734,14 +734,14 @@ mod tests {
 
     #[test]
     fn bad_pairs_policies_and_missing_predictions_are_errors() {
-        let p = DcMotorPendulumParams::real();
-        let task = DcMotorPendulumTask::new("x", &p);
+        let p = GymPendulumParams::default();
+        let task = PendulumTask::new(&p);
         assert!(ModelEnv::new(PlantModel::new(CartPole::default()), task.clone()).is_err());
         let bad = Judges {
             terminal_threshold: f64::NAN,
             ..Judges::default()
         };
-        let model = PlantModel::new(DcMotorPendulum::new(p));
+        let model = PlantModel::new(GymPendulum::new(p));
         assert!(ModelEnv::with_judges(model.clone(), task.clone(), bad).is_err());
         let mut env = ModelEnv::with_judges(model.clone(), task.clone(), Judges::model()).unwrap();
         env.reset(Some(0));

@@ -41,36 +41,29 @@
 //!
 //! ```
 //! use tandem_core::{seeding::rng_from_seed, Action};
-//! use tandem_envs::{Env, PixelMazeEnv};
+//! use tandem_envs::Env;
 //! use tandem_models::{PixelEpisodes, PixelFit, PixelModel, PixelModelConfig, PixelModelEnv};
 //!
-//! // Three random-policy episodes of p2's maze.
-//! let mut data = PixelEpisodes::new(16 * 16 * 3);
-//! let mut env = PixelMazeEnv::new();
+//! // Three episodes of random binary 16×16 RGB frames (p2's maze, `tandem-robots`' pixel maze,
+//! // gives real ones).
 //! let mut rng = rng_from_seed(0);
-//! for k in 0..3 {
-//!     let mut frames = vec![env.reset(Some(k))];
-//!     let (mut actions, mut rewards) = (vec![], vec![]);
-//!     loop {
-//!         let a = rand::Rng::random_range(&mut rng, 0..5);
-//!         let st = env.step(&Action::Discrete(a)).unwrap();
-//!         frames.push(st.observation);
-//!         actions.push(a);
-//!         rewards.push(st.reward);
-//!         if st.terminated || actions.len() == 10 {
-//!             data.push_episode(&frames, &actions, &rewards, st.terminated).unwrap();
-//!             break;
-//!         }
-//!     }
+//! let mut frame = || -> Vec<f64> {
+//!     (0..768).map(|_| f64::from(rand::Rng::random_range(&mut rng, 0..2u8))).collect()
+//! };
+//! let mut data = PixelEpisodes::new(16 * 16 * 3);
+//! for _ in 0..3 {
+//!     let frames: Vec<Vec<f64>> = (0..11).map(|_| frame()).collect();
+//!     let actions: Vec<usize> = (0..10).map(|k| k % 5).collect();
+//!     data.push_episode(&frames, &actions, &[0.0; 10], false).unwrap();
 //! }
 //! let cfg = PixelModelConfig { channels: [8, 8, 8], features: 32, factors: 32, ..Default::default() };
 //! let mut model = PixelModel::new(cfg).unwrap();
 //! let loss = model.fit(&data, &PixelFit { steps: 2, batch_size: 8, seed: 1 }).unwrap();
 //! assert!(loss.is_finite());
-//! let f1 = model.f1(&data).unwrap(); // [obstacles, goal, agent] (the maze's R, G, B channels)
+//! let f1 = model.f1(&data).unwrap(); // one score per channel
 //! assert!(f1.iter().all(|f| (0.0..=1.0).contains(f)));
 //! // Imagined episodes start from real first frames.
-//! let starts = vec![env.reset(Some(9))];
+//! let starts = vec![frame()];
 //! let mut imagined = PixelModelEnv::new(model, starts, Some(50)).unwrap();
 //! let obs = imagined.reset(Some(3));
 //! let step = imagined.step(&Action::Discrete(4)).unwrap();

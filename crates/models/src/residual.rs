@@ -239,17 +239,13 @@ impl<P: Plant> DynamicsModel for ResidualModel<P> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testutil::{pendulum_data, rmse};
+    use crate::testutil::{idealized_pendulum as idealized, pendulum_data, rmse, true_pendulum};
     use crate::PlantModel;
-    use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 
-    fn idealized() -> DcMotorPendulum {
-        DcMotorPendulum::new(DcMotorPendulumParams::idealized())
-    }
-
-    /// Fits on 3750 transitions of the true p0 pendulum and compares held-out one-step errors.
+    /// Fits on 3750 transitions of the true pendulum of the tests' pair and compares held-out
+    /// one-step errors.
     pub(super) fn residual_gain(cfg: ResidualModelConfig, fit: &FitConfig) -> (f64, f64) {
-        let real = DcMotorPendulum::new(DcMotorPendulumParams::real());
+        let real = true_pendulum();
         let train = pendulum_data(&real, 3750, 11);
         let test = pendulum_data(&real, 1000, 12);
         let mut m = ResidualModel::new(idealized(), cfg).unwrap();
@@ -258,10 +254,10 @@ mod tests {
     }
 
     #[test]
-    fn cuts_the_idealized_one_step_error_tenfold_on_the_p0_pendulum() {
+    fn cuts_the_idealized_one_step_error_tenfold_on_a_pendulum_pair() {
         // A narrower network than p0's 3x400 without dropout keeps this test fast (dropout 0.3
-        // on 64-unit layers costs most of the accuracy: ratio 7 instead of 64 measured); p0's
-        // own network and dropout run in the ignored test below. AdaGrad and ReLU as in p0.
+        // on 64-unit layers costs most of the accuracy); p0's own network and dropout run in the
+        // ignored test below. AdaGrad and ReLU as in p0.
         let cfg = ResidualModelConfig {
             hidden: vec![64, 64, 64],
             dropout: 0.0,
@@ -276,14 +272,14 @@ mod tests {
         };
         let (e_idl, e_res) = residual_gain(cfg, &fit);
         eprintln!(
-            "p0 pendulum one-step RMSE: idealized {e_idl:.4}, residual {e_res:.5}, ratio {:.1}",
+            "pendulum pair one-step RMSE: idealized {e_idl:.4}, residual {e_res:.5}, ratio {:.1}",
             e_idl / e_res
         );
         assert!(e_res * 30.0 < e_idl, "idealized {e_idl}, residual {e_res}");
     }
 
     #[test]
-    #[ignore = "p0's 3x400 network: about 40 s in the test profile (measured ratio 11.8)"]
+    #[ignore = "p0's 3x400 network: about 40 s in the test profile"]
     fn p0_network_cuts_the_idealized_one_step_error_tenfold() {
         let fit = FitConfig {
             epochs: 100,
@@ -303,7 +299,7 @@ mod tests {
     /// (optimizer state included) to the same second fit; another architecture is refused.
     #[test]
     fn a_saved_model_resumes_fitting_exactly() {
-        let real = DcMotorPendulum::new(DcMotorPendulumParams::real());
+        let real = true_pendulum();
         let (d1, d2) = (pendulum_data(&real, 300, 21), pendulum_data(&real, 300, 22));
         let cfg = ResidualModelConfig {
             hidden: vec![16, 16],
@@ -347,7 +343,7 @@ mod tests {
 
     #[test]
     fn unfitted_model_is_the_plant_and_failures_change_nothing() {
-        let real = DcMotorPendulum::new(DcMotorPendulumParams::real());
+        let real = true_pendulum();
         let data = pendulum_data(&real, 200, 13);
         let mut m = ResidualModel::new(
             idealized(),

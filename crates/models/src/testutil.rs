@@ -3,22 +3,36 @@
 use nalgebra::DVector;
 use rand::Rng as _;
 use tandem_core::seeding::rng_from_seed;
-use tandem_dynamics::classic::CartPole;
+use tandem_dynamics::classic::{CartPole, GymPendulum, GymPendulumParams};
 use tandem_dynamics::Plant;
 
 use crate::{DynamicsModel, ModelInput, Transitions, TransitionsBuilder};
 
-/// `n` transitions of a p0 pendulum from uniform states (φ in [-π, π], φ̇ in [-10, 10] rad/s) and
-/// voltages in [-3, 3] V; reward p0-like `-(φ² + 0.1 φ̇²)`.
+/// Gymnasium's pendulum (1 kg), the idealized plant of the tests' idealized/true pair.
+pub(crate) fn idealized_pendulum() -> GymPendulum {
+    GymPendulum::default()
+}
+
+/// The true plant of that pair: a 60 % heavier bob.
+pub(crate) fn true_pendulum() -> GymPendulum {
+    GymPendulum::new(GymPendulumParams {
+        m: 1.6,
+        ..GymPendulumParams::default()
+    })
+}
+
+/// `n` transitions of a pendulum from uniform states (φ in [-π, π], φ̇ in [-6, 6] rad/s: one step
+/// stays inside the gymnasium pendulum's ±8 rad/s clip) and inputs in [-2, 2] (its torque bound);
+/// reward `-(φ² + 0.1 φ̇²)`.
 pub(crate) fn pendulum_data<P: Plant>(plant: &P, n: usize, seed: u64) -> Transitions {
     let mut rng = rng_from_seed(seed);
     let mut b = TransitionsBuilder::new(2, 1);
     for _ in 0..n {
         let s = [
             rng.random_range(-std::f64::consts::PI..std::f64::consts::PI),
-            rng.random_range(-10.0..10.0),
+            rng.random_range(-6.0..6.0),
         ];
-        let a = [rng.random_range(-3.0..3.0)];
+        let a = [rng.random_range(-2.0..2.0)];
         let next = plant.step(&DVector::from_row_slice(&s), &DVector::from_row_slice(&a));
         b.push(
             s,

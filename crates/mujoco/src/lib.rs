@@ -14,7 +14,6 @@
 //! | [`TaskKind`], [`TaskSpec`], [`Readout`], [`Outcome`] | always | the tasks' observation layouts, rewards (with gymnasium's float32 control costs and NumPy's summation order, [`numpy`]), reward terms, health, reset noise: pure functions, tested without the library |
 //! | [`GymTask`] | always | a locomotion task as a `tandem_envs::Task` over `qpos ++ qvel`, for learned models (with the feature, `gym_task(id)` reads the model's `qpos0` from its MJCF) |
 //! | [`make`], [`registered`], [`AVAILABLE`] | always | the registry: with the feature, `make("HalfCheetah-v5")` is the task with its time limit; without it, an error saying how to enable it |
-//! | [`p4`] | always | p4's manipulation scenes (MJCF in `scenes/`): conditions, forward kinematics, costs, the pusher and the reacher as `Task`s (with the feature also the door, and the scenes as plants) |
 //! | `Scene`, `MujocoEnv`, `MujocoPlant` | `mujoco` | a loaded MJCF model; an environment (gymnasium's task, or any scene); a plant (state `qpos ++ qvel`, batch step, finite-difference linearization) |
 //!
 //! With the feature, replaying gymnasium 1.4.0's recorded episodes gives bit-identical `qpos`,
@@ -24,12 +23,13 @@
 //!
 //! Dependencies: `tandem-core` (spaces, seeding), `tandem-dynamics` (the `Plant` trait),
 //! `tandem-envs` (the `Env` trait, `TimeLimit`), `nalgebra` (plant vectors), `rand` and
-//! `rand_distr` (reset noise), `thiserror` (errors), `serde` (p4's conditions and costs in
-//! recorded settings), optional `mujoco-rs` (MuJoCo).
+//! `rand_distr` (reset noise), `thiserror` (errors), optional `mujoco-rs` (MuJoCo).
+//!
+//! p4's own MJCF scenes (pusher, door) and their tasks are `tandem-robots`' (`p4`), built on the
+//! `Scene`/`MujocoPlant` here.
 
 mod gym_task;
 pub mod numpy;
-pub mod p4;
 mod registry;
 #[cfg(feature = "mujoco")]
 mod sim;

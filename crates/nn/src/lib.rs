@@ -17,9 +17,9 @@
 //!   uses, SIMD-accelerated), written atomically ([`write_atomic`]).
 //! * [`candle_ext`]: seeded candle parameters ([`candle_ext::ParamSet`]: linear, conv,
 //!   transposed conv) stepped by the same optimizers, and [`candle_ext::configure_cpu_threads`].
-//! * [`conv`]: convolution and transposed convolution as candle custom ops (im2col / col2im and
-//!   one `gemm` product each, gradients included; 2–4× faster than candle's own for a training
-//!   pass on the CPU), and a per-channel bias add with a fast gradient.
+//! * `conv` (feature `pixels`): convolution and transposed convolution as candle custom ops
+//!   (im2col / col2im and one `gemm` product each, gradients included; 2–4× faster than candle's
+//!   own for a training pass on the CPU), and a per-channel bias add with a fast gradient.
 //! * [`SharedWorkspace`]: a network workspace behind a mutex, for inference through `&self`
 //!   (models' `predict`, agents' batched acting).
 //! * [`RowDealer`]: the rows of several batched passes (an ensemble's members) dealt in equal
@@ -114,6 +114,7 @@
 pub mod budget;
 pub mod candle_ext;
 pub mod checkpoint;
+#[cfg(feature = "pixels")]
 pub mod conv;
 pub mod error;
 pub mod fastmath;

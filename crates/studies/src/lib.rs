@@ -26,7 +26,8 @@
 //! assert!(refused.unwrap_err().to_string().contains("no study p9"));
 //! ```
 //!
-//! Dependencies: `serde`/`serde_json` and `toml` for the recorded settings and `--config` files,
+//! Dependencies: the workspace crates the studies run (`tandem-robots` for the papers' robots and
+//! scenes); `serde`/`serde_json` and `toml` for the recorded settings and `--config` files,
 //! `clap` so that every study's command line flattens the one [`StudyArgs`], `indicatif` for the
 //! progress bars, `signal-hook` for [`interrupt`], and `thiserror` for [`Error`].
 

@@ -48,8 +48,8 @@ use tandem_algos::difference_models::{
     SimToReal, Tick, LEO_MEASURES,
 };
 use tandem_algos::Checkpoints;
-use tandem_dynamics::biped::{leo_plant, skeleton};
 use tandem_dynamics::rigid_plant::{Overrides, RigidPlantConfig};
+use tandem_robots::leo::{leo_plant, skeleton};
 
 use crate::harness::{self, JobError, Study};
 use crate::{Error, Result};

@@ -36,7 +36,7 @@ use serde::{Deserialize, Serialize};
 use tandem_algos::imagined_episodes::{cartpole, Event, Method, P2Config, RunRecord};
 use tandem_algos::imagined_pixels::{self, MazeConfig, Quality, QualityConfig};
 use tandem_algos::{Checkpoints, Result as AlgoResult};
-use tandem_envs::PixelMazeEnv;
+use tandem_robots::PixelMazeEnv;
 
 use crate::harness::{self, JobError, Study};
 use crate::{Error, Result};

@@ -24,10 +24,11 @@ use tandem_algos::mbpo::{
 };
 use tandem_algos::{Checkpoints, Problem};
 use tandem_core::LinearSchedule;
-use tandem_envs::{Env, EnvError, Leg2RConfig, Leg2REnv, Leg2RModel, Task};
+use tandem_envs::{Env, EnvError, Task};
 use tandem_models::PlantModel;
 use tandem_mujoco::TaskKind;
 use tandem_planners::Utility;
+use tandem_robots::{Leg2RConfig, Leg2REnv, Leg2REnvExt, Leg2RModel};
 
 use crate::harness::{self, JobError, Study};
 use crate::{Error, Result};

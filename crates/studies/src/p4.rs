@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 use tandem_algos::gps::{train_local, LocalConfig, LocalMethod, LocalPoint, LocalProblem};
 use tandem_algos::manipulation::{door_problem, pusher_problem};
 use tandem_algos::{Checkpoints, Result as AlgoResult};
-use tandem_mujoco::p4::{
+use tandem_robots::p4::{
     DoorCost, PusherCost, DOOR_CONDITIONS, DOOR_TARGET, PUSHER_CONDITIONS, PUSHER_HARD,
 };
 

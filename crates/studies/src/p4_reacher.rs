@@ -30,7 +30,7 @@ use tandem_algos::manipulation::{
 };
 use tandem_algos::mdgps::{train_mdgps, MdgpsConfig};
 use tandem_algos::Checkpoints;
-use tandem_mujoco::p4::{ReacherCost, REACHER_HORIZON};
+use tandem_robots::p4::{ReacherCost, REACHER_HORIZON};
 
 use crate::harness::{self, JobError, Study};
 use crate::p4::{figure_row, SeedFigure};

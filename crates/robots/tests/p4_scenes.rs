@@ -4,11 +4,11 @@
 
 use nalgebra::DVector;
 use tandem_dynamics::Plant;
-use tandem_mujoco::p4::{
+use tandem_mujoco::{MujocoPlant, Scene};
+use tandem_robots::p4::{
     pusher_gripper, scene_path, PUSHER_ACTION_DIM, PUSHER_CONDITIONS, PUSHER_FRAME_SKIP,
     PUSHER_SCENE, PUSHER_STATE_DIM,
 };
-use tandem_mujoco::{MujocoPlant, Scene};
 
 fn pusher() -> MujocoPlant {
     MujocoPlant::from_xml(scene_path(PUSHER_SCENE), PUSHER_FRAME_SKIP).unwrap()
@@ -81,7 +81,7 @@ fn pusher_block_moves_only_on_contact() {
 /// it (0.0565 m in front of the door face, 0.35 m from the hinge), moving with the door.
 #[test]
 fn door_scene_holds_still_and_its_grasp_point_turns_with_the_door() {
-    use tandem_mujoco::p4::{
+    use tandem_robots::p4::{
         door_initial_state, DOOR_ACTION_DIM, DOOR_ANGLE, DOOR_CONDITIONS, DOOR_FRAME_SKIP,
         DOOR_SCENE, DOOR_STATE_DIM,
     };
@@ -131,11 +131,11 @@ fn door_scene_holds_still_and_its_grasp_point_turns_with_the_door() {
 #[test]
 fn reacher_kinematics_is_gymnasiums() {
     use tandem_envs::Env;
-    use tandem_mujoco::p4::{
+    use tandem_mujoco::{assets_dir, MujocoEnv, TaskKind};
+    use tandem_robots::p4::{
         reacher_fingertip, reacher_observation, REACHER_ACTION_DIM, REACHER_OBS_DIM, REACHER_QPOS0,
         REACHER_STATE_DIM,
     };
-    use tandem_mujoco::{assets_dir, MujocoEnv, TaskKind};
     let mut env = MujocoEnv::task(TaskKind::Reacher, &assets_dir()).unwrap();
     assert_eq!(env.scene_ref().qpos0(), &REACHER_QPOS0);
     let plant = env.plant();
@@ -173,7 +173,7 @@ fn reacher_kinematics_is_gymnasiums() {
 #[test]
 fn pusher_task_is_an_environment_over_the_scene() {
     use tandem_envs::{Action, Env, PlantEnv, Task, TimeLimit};
-    use tandem_mujoco::p4::{
+    use tandem_robots::p4::{
         l12, pusher_plant, PusherCost, PusherTask, PUSHER_HORIZON, PUSHER_OBS_DIM,
     };
     let scene = Scene::from_xml(scene_path(PUSHER_SCENE)).unwrap();
@@ -219,7 +219,7 @@ fn pusher_task_is_an_environment_over_the_scene() {
     assert_eq!(steps, PUSHER_HORIZON);
     assert!(PusherTask::new(
         cost,
-        tandem_mujoco::p4::PusherCondition {
+        tandem_robots::p4::PusherCondition {
             block: [f64::NAN, 0.0],
             goal: [0.0, 0.0]
         }
@@ -233,7 +233,7 @@ fn pusher_task_is_an_environment_over_the_scene() {
 #[test]
 fn door_task_is_an_environment_over_the_scene() {
     use tandem_envs::{Action, Env, PlantEnv, Task};
-    use tandem_mujoco::p4::{
+    use tandem_robots::p4::{
         door_initial_state, door_plant, l12, DoorCost, DoorKinematics, DoorTask, DOOR_ACTION_DIM,
         DOOR_CONDITIONS, DOOR_OBS_DIM, DOOR_STATE_DIM,
     };

@@ -1,15 +1,15 @@
 //! p0's walking task for the Leo-like biped (§IV-B): walk forwards on the boom, fast and
 //! cheaply, without falling.
 //!
-//! The plant is [`tandem_dynamics::biped`]'s planar biped: torso on a boom (`boom_x`, `boom_z`,
+//! The plant is [`crate::leo`]'s planar biped: torso on a boom (`boom_x`, `boom_z`,
 //! `torso_pitch`), six DC-motor leg joints driven by voltages, a PD-held shoulder, ground contact
 //! at heels, toes, knees, hip, head and hand; 30 ms control period (1 ms RK4 inside).
 //!
 //! | | |
 //! |---|---|
-//! | state | the plant's `[q (10), q̇ (10)]`, joints in [`tandem_dynamics::biped`]'s order: `boom_x`, `boom_z`, `torso_pitch`, hips, knees, ankles (left then right), `shoulder` |
+//! | state | the plant's `[q (10), q̇ (10)]`, joints in [`crate::leo`]'s order: `boom_x`, `boom_z`, `torso_pitch`, hips, knees, ankles (left then right), `shoulder` |
 //! | observation | p0's 18 dimensions: the state without the shoulder's angle and velocity, i.e. `[x, z, θ_torso, 6 leg angles, ẋ, ż, θ̇_torso, 6 leg velocities]` (m, rad, m/s, rad/s) |
-//! | action | `Box(6)`: the six leg motors' voltages in [`tandem_dynamics::biped::MOTOR_JOINTS`] order, clipped to ±10.7 V |
+//! | action | `Box(6)`: the six leg motors' voltages in [`crate::leo::MOTOR_JOINTS`] order, clipped to ±10.7 V |
 //! | reward | [`LeoWalkTask::reward`]: `300 Δx − 1.5 − 2 W` per step, `W` the step's electrical work (J), and `−75` on a fall |
 //! | start | standing straight with flat feet, at rest (deterministic); [`LeoWalkTask::with_start`] with [`LeoStart::Stepping`] starts mid-step instead |
 //! | episode | 667 steps (20 s at 30 ms); terminates on a fall: a knee, the hip, the head or the hand touches the ground |
@@ -20,7 +20,8 @@
 //! [`LeoWalkTask::gait`] turns a trajectory into p0's walked distance `L` and work per metre `E`.
 //!
 //! ```
-//! use tandem_envs::{Action, Env, LeoEnv, LeoModel};
+//! use tandem_envs::{Action, Env};
+//! use tandem_robots::{LeoEnv, LeoEnvExt, LeoModel};
 //!
 //! let mut env = LeoEnv::new(LeoModel::Idealized);
 //! let obs = env.reset(Some(0));
@@ -31,14 +32,14 @@
 //! assert!(env.step(&Action::Continuous(vec![0.0; 5])).is_err());
 //! ```
 
+use super::plant::{leo_plant, leo_true_overrides, standing_state};
 use tandem_core::{Action, Rng, Space};
 use tandem_dynamics::actuators::{Actuator, DcMotor};
-use tandem_dynamics::biped::{leo_plant, leo_true_overrides, standing_state};
 use tandem_dynamics::rigid_plant::{Overrides, RigidBodyPlant, RigidPlantConfig};
 use tandem_dynamics::Plant;
 
-use crate::task::clip_to;
-use crate::{EnvError, PlantEnv, Task};
+use tandem_envs::clip_to;
+use tandem_envs::{EnvError, PlantEnv, Task};
 
 /// Episode length: 20 s at p0's sampling period of 30 ms.
 pub const LEO_STEPS: usize = 667;
@@ -331,14 +332,16 @@ impl Task for LeoWalkTask {
 /// The registered Leo environments: p0's walking task over the idealized or the true biped.
 pub type LeoEnv = PlantEnv<RigidBodyPlant, LeoWalkTask>;
 
-impl LeoEnv {
+/// The ids and constructor of [`LeoEnv`] (a trait: the environment is `tandem-envs`' [`PlantEnv`], to which only that crate can add
+/// inherent items).
+pub trait LeoEnvExt: Sized {
     /// Id of the idealized biped's environment.
-    pub const ID: &'static str = "Leo-v0";
+    const ID: &'static str = "Leo-v0";
     /// Id of the true biped's environment.
-    pub const ID_TRUE: &'static str = "Leo-true-v0";
+    const ID_TRUE: &'static str = "Leo-true-v0";
 
     /// The registered id of `model`'s biped ([`Self::ID`] or [`Self::ID_TRUE`]).
-    pub fn id_of(model: LeoModel) -> &'static str {
+    fn id_of(model: LeoModel) -> &'static str {
         match model {
             LeoModel::Idealized => Self::ID,
             LeoModel::True => Self::ID_TRUE,
@@ -346,7 +349,11 @@ impl LeoEnv {
     }
 
     /// The walking task over `model`'s biped.
-    pub fn new(model: LeoModel) -> Self {
+    fn new(model: LeoModel) -> Self;
+}
+
+impl LeoEnvExt for LeoEnv {
+    fn new(model: LeoModel) -> Self {
         let (plant, task) = leo_parts(model).expect("the registered Leo builds");
         PlantEnv::from_parts(plant, task).expect("the Leo task fits its plant")
     }
@@ -369,9 +376,9 @@ pub fn leo_parts(model: LeoModel) -> Result<(RigidBodyPlant, LeoWalkTask), EnvEr
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Env;
-    use tandem_dynamics::biped::BipedTestPolicy;
+    use crate::leo::BipedTestPolicy;
     use tandem_dynamics::Plant;
+    use tandem_envs::Env;
 
     /// Runs `policy` for `steps` steps on `model`'s biped; returns states and controls.
     fn rollout(
@@ -502,7 +509,7 @@ mod tests {
             s.reward
         );
         let x = env.state();
-        assert!(x[1] < tandem_dynamics::biped::HIP_HEIGHT - 0.05);
+        assert!(x[1] < crate::leo::HIP_HEIGHT - 0.05);
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! p3's leg trajectory tracking (§5): a torque-controlled 2R leg on a test rig moves its foot
 //! along a semi-elliptical trajectory, scored by reward (15).
 //!
-//! The plant is [`tandem_dynamics::leg2r`]'s URDF leg (thigh and shank 0.15 m, 0.35 and 0.20 kg,
+//! The plant is [`crate::leg2r`]'s URDF leg (thigh and shank 0.15 m, 0.35 and 0.20 kg,
 //! 3 N m per joint, 500 Hz) with a [`Clocked`] phase: the task's target depends on time, and a
 //! task reads time from the state, so the state carries the gait phase as `(cos φ, sin φ)`.
 //!
@@ -30,7 +30,8 @@
 //! 0.97.
 //!
 //! ```
-//! use tandem_envs::{Action, Env, Leg2REnv, Leg2RModel};
+//! use tandem_envs::{Action, Env};
+//! use tandem_robots::{Leg2REnv, Leg2REnvExt, Leg2RModel};
 //!
 //! let mut env = Leg2REnv::new(Leg2RModel::Idealized);
 //! let obs = env.reset(Some(0));
@@ -44,15 +45,15 @@
 
 use std::f64::consts::{PI, TAU};
 
+use super::plant::{joint_motors, leg2r_plant, FootKinematics, Leg2RParams};
 use rand::Rng as _;
 use serde::{Deserialize, Serialize};
 use tandem_core::{Action, Rng, Space};
-use tandem_dynamics::leg2r::{joint_motors, leg2r_plant, FootKinematics, Leg2RParams};
 use tandem_dynamics::rigid_plant::RigidBodyPlant;
 use tandem_dynamics::Clocked;
 
-use crate::task::clip_to;
-use crate::{EnvError, PlantEnv, Task};
+use tandem_envs::clip_to;
+use tandem_envs::{EnvError, PlantEnv, Task};
 
 /// Episode length of p3's leg task: 1000 steps (p3: "1000 interactions per episode"), 2 s at
 /// 500 Hz.
@@ -62,7 +63,7 @@ pub const LEG2R_STEPS: usize = 1000;
 /// position error and `e_v = ṗ − ṗ_d` its velocity error (the paper's units: metres and m/s).
 ///
 /// ```
-/// use tandem_envs::leg2r_reward;
+/// use tandem_robots::leg2r_reward;
 /// assert_eq!(leg2r_reward([0.0, 0.0], [0.0, 0.0]), 1.0);
 /// // A 10 cm position error costs half a percent of the position term.
 /// assert!((leg2r_reward([0.1, 0.0], [0.0, 0.0]) - (0.8 * (-0.01f64).exp() + 0.2)).abs() < 1e-15);
@@ -414,17 +415,27 @@ impl Task for Leg2RTask {
 }
 
 /// p3's leg task without its time limit ([`crate::make`] adds the 1000-step
-/// [`crate::TimeLimit`]): a [`PlantEnv`] of [`Leg2RTask`] over the [`Clocked`] leg.
+/// [`tandem_envs::TimeLimit`]): a [`PlantEnv`] of [`Leg2RTask`] over the [`Clocked`] leg.
 pub type Leg2REnv = PlantEnv<Clocked<RigidBodyPlant>, Leg2RTask>;
 
-impl Leg2REnv {
+/// The ids and constructors of [`Leg2REnv`] (a trait: the environment is `tandem-envs`' [`PlantEnv`], to which only that crate can add
+/// inherent items).
+pub trait Leg2REnvExt: Sized {
     /// Id of the idealized leg.
-    pub const ID: &'static str = "Leg2R-v0";
+    const ID: &'static str = "Leg2R-v0";
     /// Id of the true ("real") leg: heavier shank, joint friction.
-    pub const ID_REAL: &'static str = "Leg2R-real-v0";
+    const ID_REAL: &'static str = "Leg2R-real-v0";
 
     /// The registered task on one leg of the pair.
-    pub fn new(model: Leg2RModel) -> Self {
+    fn new(model: Leg2RModel) -> Self;
+
+    /// The task with a custom configuration, reported as `id`; an error when the configuration
+    /// is invalid (a trajectory out of reach, a non-positive scale or period).
+    fn with_config(id: &str, config: Leg2RConfig) -> Result<Self, EnvError>;
+}
+
+impl Leg2REnvExt for Leg2REnv {
+    fn new(model: Leg2RModel) -> Self {
         let id = match model {
             Leg2RModel::Idealized => Self::ID,
             Leg2RModel::Real => Self::ID_REAL,
@@ -433,9 +444,7 @@ impl Leg2REnv {
             .expect("the registered leg configurations are valid")
     }
 
-    /// The task with a custom configuration, reported as `id`; an error when the configuration
-    /// is invalid (a trajectory out of reach, a non-positive scale or period).
-    pub fn with_config(id: &str, config: Leg2RConfig) -> Result<Self, EnvError> {
+    fn with_config(id: &str, config: Leg2RConfig) -> Result<Self, EnvError> {
         let invalid = |e: &dyn std::fmt::Display| invalid_config(id, e.to_string());
         let leg = leg2r_plant(&config.plant).map_err(|e| invalid(&e))?;
         let task = Leg2RTask::new(id, config.clone(), &leg)?;

@@ -54,7 +54,7 @@ use std::path::PathBuf;
 
 use nalgebra::{DMatrix, DVector};
 
-/// The folder of p4's MJCF scenes (`crates/mujoco/scenes` of the repository this crate was built
+/// The folder of p4's MJCF scenes (`crates/robots/scenes` of the repository this crate was built
 /// from).
 pub fn scenes_dir() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"))
@@ -311,7 +311,7 @@ pub const PUSHER_OBS_DIM: usize = PUSHER_STATE_DIM + 2;
 ///
 /// ```
 /// use tandem_envs::Task;
-/// use tandem_mujoco::p4::{PusherCost, PusherTask, PUSHER_CONDITIONS, PUSHER_HARD};
+/// use tandem_robots::p4::{PusherCost, PusherTask, PUSHER_CONDITIONS, PUSHER_HARD};
 ///
 /// let task = PusherTask::new(PusherCost::default(), PUSHER_CONDITIONS[PUSHER_HARD]).unwrap();
 /// let x0 = task.initial_state(&mut tandem_core::seeding::rng_from_seed(0));
@@ -535,7 +535,7 @@ pub use door_scene::{door_plant, pusher_plant, DoorKinematics, DoorTask};
 #[cfg(feature = "mujoco")]
 mod door_scene {
     use super::*;
-    use crate::{MujocoError, MujocoPlant, Scene};
+    use tandem_mujoco::{MujocoError, MujocoPlant, Scene};
 
     /// The pusher's scene as a plant (state `qpos ++ qvel`, 0.05 s a control step).
     pub fn pusher_plant() -> Result<MujocoPlant, MujocoError> {
@@ -740,7 +740,8 @@ pub fn reacher_observation(x: &[f64], out: &mut [f64]) {
 pub fn reacher_starts(n: usize, rng: &mut tandem_core::Rng) -> Vec<Vec<f64>> {
     (0..n)
         .map(|_| {
-            let (mut q, v) = crate::TaskKind::Reacher.reset_state(&REACHER_QPOS0, &[0.0; 4], rng);
+            let (mut q, v) =
+                tandem_mujoco::TaskKind::Reacher.reset_state(&REACHER_QPOS0, &[0.0; 4], rng);
             q.extend(v);
             q
         })

@@ -4,13 +4,13 @@
 //! slower.
 //!
 //! ```text
-//! cargo run --release -p tandem-dynamics --example rigid_timing            # all, min of 200 batches
-//! cargo run --release -p tandem-dynamics --example rigid_timing -- crba 1000000   # one, N calls
-//! cargo run --release -p tandem-dynamics --example rigid_timing -- pinocchio       # 5 × 100k, median
+//! cargo run --release -p tandem-robots --example rigid_timing            # all, min of 200 batches
+//! cargo run --release -p tandem-robots --example rigid_timing -- crba 1000000   # one, N calls
+//! cargo run --release -p tandem-robots --example rigid_timing -- pinocchio       # 5 × 100k, median
 //! ```
 //!
-//! `rigid_timing pinocchio` times ABA, RNEA and CRBA as the issue's Pinocchio figures were timed:
-//! the median of 5 batches of 100 000 calls, wall clock.
+//! `rigid_timing pinocchio` times ABA, RNEA and CRBA as the Pinocchio figures it is compared with
+//! were timed: the median of 5 batches of 100 000 calls, wall clock.
 //!
 //! `rigid_timing NAME N` runs one algorithm `N` times and prints nothing else, for instruction counts:
 //! `valgrind --tool=callgrind target/release/examples/rigid_timing crba 100000`.
@@ -18,9 +18,9 @@
 use nalgebra::DVector;
 use std::hint::black_box;
 use std::time::Instant;
-use tandem_dynamics::biped::{leo_plant, leo_true_overrides, standing_state};
 use tandem_dynamics::rigid::{aba, aba_derivatives, crba, rnea, Data, Model};
 use tandem_dynamics::rigid_plant::{RigidBodyPlant, RigidPlantConfig};
+use tandem_robots::leo::{leo_plant, leo_true_overrides, standing_state};
 
 /// `struct timespec` of 64-bit Linux.
 #[repr(C)]
@@ -109,8 +109,8 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if let [mode] = args.as_slice() {
         assert_eq!(mode, "pinocchio", "one argument: `pinocchio`");
-        // The protocol of the issue's Pinocchio figures: wall time of 5 batches of 100 000
-        // calls each, the median batch's mean per call.
+        // The protocol of the Pinocchio figures it is compared with: wall time of 5 batches of
+        // 100 000 calls each, the median batch's mean per call.
         for name in ["aba", "rnea", "crba"] {
             let mut per_call: Vec<f64> = (0..5)
                 .map(|_| {

@@ -26,7 +26,7 @@
 //! an idealized/true pair: a 30 % heavier shank and joint friction.
 //!
 //! ```
-//! use tandem_dynamics::leg2r::{leg2r_plant, FootKinematics, Leg2RParams};
+//! use tandem_robots::leg2r::{leg2r_plant, FootKinematics, Leg2RParams};
 //! use tandem_dynamics::Plant;
 //!
 //! let plant = leg2r_plant(&Leg2RParams::idealized()).unwrap();
@@ -44,15 +44,17 @@ use std::sync::Mutex;
 
 use serde::{Deserialize, Serialize};
 
-use crate::actuators::{Actuator, TorqueMotor};
-use crate::rigid::{forward_kinematics, frame_jacobian, update_frame_placements, Data, Model};
-use crate::rigid_plant::{
+use tandem_dynamics::actuators::{Actuator, TorqueMotor};
+use tandem_dynamics::rigid::{
+    forward_kinematics, frame_jacobian, update_frame_placements, Data, Model,
+};
+use tandem_dynamics::rigid_plant::{
     LimitSpring, Overrides, RigidBodyPlant, RigidPlantConfig, RigidPlantError,
 };
 
 /// The leg's URDF (`assets/leg2r.urdf`): links `rig` (fixed), `thigh`, `shank`, `foot` (a
 /// massless frame at the end of the shank); joints `hip`, `knee`.
-pub const LEG2R_URDF: &str = include_str!("../assets/leg2r.urdf");
+pub const LEG2R_URDF: &str = include_str!("../../assets/leg2r.urdf");
 
 /// Thigh length (m), as in the URDF.
 pub const THIGH: f64 = 0.15;
@@ -160,7 +162,7 @@ pub fn joint_motors(model: &Model) -> Result<[TorqueMotor; 2], RigidPlantError> 
 }
 
 /// Position, velocity, Jacobian and inverse kinematics of the foot in the sagittal plane, from
-/// the rigid-body model (forward kinematics and the frame Jacobian of [`crate::rigid`]).
+/// the rigid-body model (forward kinematics and the frame Jacobian of [`tandem_dynamics::rigid`]).
 /// Coordinates are `(x, z)` in metres: x forward, z up, origin at the hip.
 ///
 /// It keeps a [`Data`] workspace behind a mutex, as [`RigidBodyPlant`] does, so that a task can

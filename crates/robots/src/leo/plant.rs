@@ -10,11 +10,11 @@
 //! shin 0.1085 m), not the real robot's data. All joints rotate about +y: a positive angle
 //! swings the part below it backwards (towards −x); the robot walks towards +x.
 
-use crate::actuators::{Actuator, DcMotor, PdController};
-use crate::contact::GroundContact;
-use crate::rigid::{forward_kinematics, Data, Model};
-use crate::rigid_plant::{Overrides, RigidBodyPlant, RigidPlantConfig, RigidPlantError};
 use nalgebra::{DVector, Vector3};
+use tandem_dynamics::actuators::{Actuator, DcMotor, PdController};
+use tandem_dynamics::contact::GroundContact;
+use tandem_dynamics::rigid::{forward_kinematics, Data, Model};
+use tandem_dynamics::rigid_plant::{Overrides, RigidBodyPlant, RigidPlantConfig, RigidPlantError};
 
 /// Thigh length (m).
 pub const THIGH: f64 = 0.116;

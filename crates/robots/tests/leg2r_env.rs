@@ -7,9 +7,9 @@ use std::f64::consts::{PI, TAU};
 
 use tandem_dynamics::rigid::{rnea, Data};
 use tandem_dynamics::Plant;
-use tandem_envs::{
-    leg2r_reward, make, Action, Env, EnvError, FootTrajectory, Leg2RConfig, Leg2REnv, Leg2RModel,
-    Leg2RTask, Task,
+use tandem_envs::{Action, Env, EnvError, Task};
+use tandem_robots::{
+    leg2r_reward, make, FootTrajectory, Leg2RConfig, Leg2REnv, Leg2REnvExt, Leg2RModel, Leg2RTask,
 };
 
 /// The textbook foot position of the leg (angles about +y, 0.15 m links).

@@ -3,7 +3,7 @@
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 
-use crate::Plant;
+use tandem_dynamics::Plant;
 
 /// Pendulum mass of the idealized model, kg (p0, Table I).
 pub const M_IDEALIZED: f64 = 0.055;
@@ -119,7 +119,7 @@ impl Default for DcMotorPendulumParams {
 /// integrated over each sampling period with `substeps` classical RK4 steps, the voltage held.
 ///
 /// ```
-/// use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
+/// use tandem_robots::{DcMotorPendulum, DcMotorPendulumParams};
 /// let p = DcMotorPendulum::new(DcMotorPendulumParams::real());
 /// // Hanging at rest is an equilibrium; upright at rest too (unstable).
 /// assert!(p.step_array(&[std::f64::consts::PI, 0.0], 0.0)[1].abs() < 1e-12);
@@ -218,8 +218,8 @@ impl Plant for DcMotorPendulum {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::integrate::rk4_substeps;
     use std::f64::consts::PI;
+    use tandem_dynamics::integrate::rk4_substeps;
 
     /// Times at which `e(t)` crosses zero downwards, linearly interpolated.
     fn down_crossings(p: &DcMotorPendulum, mut s: [f64; 2], steps: usize) -> Vec<f64> {

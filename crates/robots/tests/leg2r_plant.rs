@@ -3,12 +3,12 @@
 
 use nalgebra::DVector;
 use tandem_dynamics::actuators::Actuator;
-use tandem_dynamics::leg2r::{
-    joint_motors, leg2r_model, leg2r_plant, FootKinematics, Leg2RParams, SHANK, THIGH,
-};
 use tandem_dynamics::rigid::{rnea, Data};
 use tandem_dynamics::rigid_plant::{RigidBodyPlant, RigidPlantConfig};
 use tandem_dynamics::Plant;
+use tandem_robots::leg2r::{
+    joint_motors, leg2r_model, leg2r_plant, FootKinematics, Leg2RParams, SHANK, THIGH,
+};
 
 /// Configurations across the workspace, both knee bends and the straight leg included.
 const CONFIGS: [[f64; 2]; 6] = [

@@ -15,7 +15,7 @@
 //! | agent start | a uniformly random cell that no obstacle occupies now or after its next move | the bottom-left cell `(0, 15)` |
 //! | goal | the bottom-right cell `(7, 7)` | the top-right cell `(15, 0)` |
 //! | a collision | ends the episode | does not end it (the agent can collide again) |
-//! | episode (the registered [`crate::TimeLimit`]) | 50 steps | 100 steps |
+//! | episode (the registered [`tandem_envs::TimeLimit`]) | 50 steps | 100 steps |
 //!
 //! `PixelMaze-v1` follows the maze in the code the authors published with p2 (its grid, object
 //! size, obstacle count and placement, start, goal, episode length and non-terminating
@@ -43,8 +43,8 @@ use rand::Rng as _;
 use tandem_core::seeding::{rng_from_seed, Rng};
 use tandem_core::{Action, Space};
 
-use crate::env::{check_action, check_state, Phase};
-use crate::{Env, EnvError, Step};
+use tandem_envs::{check_action, check_state, Phase};
+use tandem_envs::{Env, EnvError, Step};
 
 /// `PixelMaze-v0`'s grid cells per side.
 pub const PIXEL_MAZE_GRID: usize = 8;

@@ -1,9 +1,9 @@
 //! The planar Leo-like biped stands, falls and walks plausibly under hand-written policies.
 
 use nalgebra::DVector;
-use tandem_dynamics::biped::*;
 use tandem_dynamics::rigid_plant::{Overrides, RigidPlantConfig};
 use tandem_dynamics::Plant;
+use tandem_robots::leo::*;
 
 fn run(
     policy: Option<BipedTestPolicy>,

@@ -1,12 +1,12 @@
 //! The swing-up task of paper p0 on the DC-motor pendulum, as an idealized/true pair.
 
+use super::plant::{DcMotorPendulum, DcMotorPendulumParams};
 use std::f64::consts::PI;
 use tandem_core::{Action, Rng, Space};
-use tandem_dynamics::classic::{DcMotorPendulum, DcMotorPendulumParams};
 
-use crate::pendulum::angle_normalize;
-use crate::task::clip_to;
-use crate::{PlantEnv, Task};
+use tandem_envs::angle_normalize;
+use tandem_envs::clip_to;
+use tandem_envs::{PlantEnv, Task};
 
 /// Episode length of the p0 swing-up: 20 s at `T_s` = 0.05 s.
 pub const DC_MOTOR_PENDULUM_STEPS: usize = 400;
@@ -25,7 +25,7 @@ pub fn wrap_angle(phi: f64) -> f64 {
 /// function directly.
 ///
 /// ```
-/// use tandem_envs::dc_motor_pendulum_reward;
+/// use tandem_robots::dc_motor_pendulum_reward;
 /// assert_eq!(dc_motor_pendulum_reward(&[0.0, 0.0], 0.0), 0.0);
 /// // Angles are wrapped: 2π is upright.
 /// assert!(dc_motor_pendulum_reward(&[2.0 * std::f64::consts::PI, 0.0], 0.0).abs() < 1e-20);
@@ -105,17 +105,26 @@ impl Task for DcMotorPendulumTask {
 }
 
 /// The p0 swing-up over [`DcMotorPendulum`], without its time limit ([`crate::make`] adds the
-/// 400-step [`crate::TimeLimit`]): a [`PlantEnv`] of [`DcMotorPendulumTask`].
+/// 400-step [`tandem_envs::TimeLimit`]): a [`PlantEnv`] of [`DcMotorPendulumTask`].
 pub type DcMotorPendulumEnv = PlantEnv<DcMotorPendulum, DcMotorPendulumTask>;
 
-impl DcMotorPendulumEnv {
+/// The ids and constructors of [`DcMotorPendulumEnv`] (a trait: the environment is `tandem-envs`' [`PlantEnv`], to which only that crate can add
+/// inherent items).
+pub trait DcMotorPendulumEnvExt: Sized {
     /// Id of the idealized task.
-    pub const ID_IDEALIZED: &'static str = "DcMotorPendulum-idealized-v0";
+    const ID_IDEALIZED: &'static str = "DcMotorPendulum-idealized-v0";
     /// Id of the true ("real") task.
-    pub const ID_REAL: &'static str = "DcMotorPendulum-real-v0";
+    const ID_REAL: &'static str = "DcMotorPendulum-real-v0";
 
     /// The task on one of p0's two models.
-    pub fn new(model: PendulumModel) -> Self {
+    fn new(model: PendulumModel) -> Self;
+
+    /// The task on a pendulum with custom parameters, reported under `id`.
+    fn with_params(id: &'static str, params: DcMotorPendulumParams) -> Self;
+}
+
+impl DcMotorPendulumEnvExt for DcMotorPendulumEnv {
+    fn new(model: PendulumModel) -> Self {
         match model {
             PendulumModel::Idealized => {
                 Self::with_params(Self::ID_IDEALIZED, DcMotorPendulumParams::idealized())
@@ -124,8 +133,7 @@ impl DcMotorPendulumEnv {
         }
     }
 
-    /// The task on a pendulum with custom parameters, reported under `id`.
-    pub fn with_params(id: &'static str, params: DcMotorPendulumParams) -> Self {
+    fn with_params(id: &'static str, params: DcMotorPendulumParams) -> Self {
         PlantEnv::from_parts(
             DcMotorPendulum::new(params),
             DcMotorPendulumTask::new(id, &params),
@@ -137,7 +145,7 @@ impl DcMotorPendulumEnv {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Env;
+    use tandem_envs::Env;
 
     #[test]
     fn starts_hanging_and_the_two_models_differ() {
