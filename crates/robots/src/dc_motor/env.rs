@@ -108,8 +108,8 @@ impl Task for DcMotorPendulumTask {
 /// 400-step [`tandem_envs::TimeLimit`]): a [`PlantEnv`] of [`DcMotorPendulumTask`].
 pub type DcMotorPendulumEnv = PlantEnv<DcMotorPendulum, DcMotorPendulumTask>;
 
-/// The ids and constructors of [`DcMotorPendulumEnv`] (a trait: the environment is `tandem-envs`' [`PlantEnv`], to which only that crate can add
-/// inherent items).
+/// The ids and constructors of [`DcMotorPendulumEnv`]. A trait: the environment is `tandem-envs`'
+/// [`PlantEnv`], to which only that crate can add inherent items.
 pub trait DcMotorPendulumEnvExt: Sized {
     /// Id of the idealized task.
     const ID_IDEALIZED: &'static str = "DcMotorPendulum-idealized-v0";

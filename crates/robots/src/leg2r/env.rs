@@ -418,8 +418,8 @@ impl Task for Leg2RTask {
 /// [`tandem_envs::TimeLimit`]): a [`PlantEnv`] of [`Leg2RTask`] over the [`Clocked`] leg.
 pub type Leg2REnv = PlantEnv<Clocked<RigidBodyPlant>, Leg2RTask>;
 
-/// The ids and constructors of [`Leg2REnv`] (a trait: the environment is `tandem-envs`' [`PlantEnv`], to which only that crate can add
-/// inherent items).
+/// The ids and constructors of [`Leg2REnv`]. A trait: the environment is `tandem-envs`'
+/// [`PlantEnv`], to which only that crate can add inherent items.
 pub trait Leg2REnvExt: Sized {
     /// Id of the idealized leg.
     const ID: &'static str = "Leg2R-v0";

@@ -332,8 +332,8 @@ impl Task for LeoWalkTask {
 /// The registered Leo environments: p0's walking task over the idealized or the true biped.
 pub type LeoEnv = PlantEnv<RigidBodyPlant, LeoWalkTask>;
 
-/// The ids and constructor of [`LeoEnv`] (a trait: the environment is `tandem-envs`' [`PlantEnv`], to which only that crate can add
-/// inherent items).
+/// The ids and constructor of [`LeoEnv`]. A trait: the environment is `tandem-envs`'
+/// [`PlantEnv`], to which only that crate can add inherent items.
 pub trait LeoEnvExt: Sized {
     /// Id of the idealized biped's environment.
     const ID: &'static str = "Leo-v0";
