@@ -7,7 +7,7 @@
 //! |---|---|
 //! | [`Agent`], [`OffPolicyAgent`], [`EpisodicAgent`], [`Mode`] | acting and the two ways of learning |
 //! | [`BatchPolicy`], [`Critic`] | batched `&self` acting (explicit generator) and `Q(s, a)`, `V(s)`, for planners and model rollouts |
-//! | [`ReplayBuffer`], [`MixedSampler`], [`Batch`], [`Episode`] | data (ring buffer in `ndarray`, keeps the previous action) |
+//! | [`ReplayBuffer`], [`MixedSampler`], [`Batch`], [`Episode`] | data (ring buffer in `ndarray`) |
 //! | [`Ddpg`], [`Sac`], [`Dqn`], [`Reinforce`] and their `*Config` | the agents; each `Default` cites its source |
 //! | [`Noise`], [`NoiseConfig`] | Ornstein–Uhlenbeck and Gaussian exploration |
 //! | [`Learner`], [`Algo`], [`AlgoConfig`] | "one of the four", chosen by name |

@@ -218,7 +218,7 @@ impl EpisodeRunner {
     }
 
     /// The observation to act on, starting episode [`EpisodeRunner::episode`] (seeded reset,
-    /// `agent.reset_episode()`, previous action zero) if none is in progress.
+    /// `agent.reset_episode()`) if none is in progress.
     pub fn observation(&mut self, env: &mut dyn Env, agent: &mut dyn Agent) -> Vec<f64> {
         if let Some(o) = self.obs.take() {
             return o;

@@ -65,9 +65,8 @@ impl ReplayBuffer {
     }
 
     /// Bytes a buffer of `capacity` transitions allocates (`f32` columns: observation, next
-    /// observation, action, previous action, reward, terminated); `None` on overflow.
+    /// observation, action, reward, terminated); `None` on overflow.
     pub fn bytes(capacity: usize, obs_dim: usize, act_dim: usize) -> Option<u64> {
-        // Observations, next observations, actions, reward and termination.
         let width = obs_dim
             .checked_mul(2)?
             .checked_add(act_dim)?

@@ -4,7 +4,8 @@
 //! What this crate owns:
 //! * [`DynamicsModel`]: batched one-step prediction ([`ModelInput`] → [`Prediction`]: next state,
 //!   and where the model has them its variance, reward and termination probability) and `fit` on
-//!   [`Transitions`] (which keep each transition's previous action: p1's one-step-back data),
+//!   [`Transitions`] (built by [`TransitionsBuilder`]; `with_prev_action` adds each state's
+//!   previous action to it, p1's one-step-back data),
 //!   returning a [`FitReport`] of training and held-out loss per epoch; and linearization
 //!   ([`DynamicsModel::linearize`]: Jacobians at a batch of points, finite differences of one
 //!   batched `predict` by default, [`linearize_fd`]). It is the one model trait planners use,
