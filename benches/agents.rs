@@ -1,4 +1,4 @@
-//! One update of the off-policy agents at the sizes issue 5 compares against stable-baselines3
+//! One update of the off-policy agents at the sizes we compare against stable-baselines3
 //! 2.9 + PyTorch on a 2-core machine (SAC 11.9–12.3 ms, DDPG 11.5 ms per update):
 //! Pendulum-v1's dimensions (3 observations, 1 action), minibatch 256, SAC with two hidden layers
 //! of 256 (SB3 defaults), DDPG with 400 and 300 (SB3 zoo / p0). Each iteration samples the

@@ -1,6 +1,6 @@
-//! Hot paths of `tandem-nn`: the network work of one RL update, at the sizes the issues compare
-//! against PyTorch (issue 4: critic update, dynamics-model step, batched prediction; issue 5: one
-//! full SAC update with stable-baselines3's defaults).
+//! Hot paths of `tandem-nn`: the network work of one RL update, at the sizes we compare against
+//! PyTorch (critic update, dynamics-model step, batched prediction, and one full SAC update with
+//! stable-baselines3's defaults).
 //!
 //! Also (`conv`): each convolution of p2's pixel model (batch 32, forward and backward) through
 //! `tandem_nn::conv` and through candle's own ops.

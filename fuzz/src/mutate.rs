@@ -1,6 +1,6 @@
 //! A small seeded mutator for the stable driver: libFuzzer-style byte mutations plus tokens that
 //! matter to these inputs (huge and non-finite numbers, XML and JSON brackets, the oversized
-//! network settings of issue 19), spliced between the seeds of a corpus.
+//! network settings that once aborted a run), spliced between the seeds of a corpus.
 
 /// SplitMix64: a tiny, seedable generator (no dependency, identical on every platform).
 #[derive(Debug, Clone)]
@@ -28,7 +28,7 @@ impl SplitMix {
 }
 
 /// Tokens inserted or substituted by [`Mutator`]: numbers at and beyond the edges of `f64`,
-/// `u64` and `usize`, JSON/TOML/XML syntax, and the settings issue 19 found to abort.
+/// `u64` and `usize`, JSON/TOML/XML syntax, and settings that once aborted a run.
 pub const TOKENS: &[&str] = &[
     "0",
     "-0",

@@ -53,7 +53,7 @@ pub struct TrainSettings {
 }
 
 impl Default for TrainSettings {
-    /// Evaluate every 1000 steps on 10 deterministic episodes (the final evaluation
+    /// Evaluate every 1000 steps on 10 deterministic episodes (the final evaluation
     /// uses 10 as well); CartPole's solved criterion window of 100 episodes.
     fn default() -> Self {
         Self {

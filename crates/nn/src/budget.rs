@@ -256,7 +256,7 @@ mod tests {
     }
 
     #[test]
-    fn the_issue_configs_are_over_the_default_limit_and_the_defaults_are_not() {
+    fn the_reported_configs_are_over_the_default_limit_and_the_defaults_are_not() {
         // hidden = [16384; 4] on a 17-dim observation: 805,748,742 params × 4 copies × 4 B
         // = 12.0 GiB, plus 0.19 GiB of activations.
         let big = MemoryEstimate::new().mlp("actor", &[17, 16384, 16384, 16384, 16384, 6], 4, 256);
