@@ -12,6 +12,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use fuzz::mutate::Mutator;
+use tandem::algos::driver::Algorithm;
 
 /// Inputs per target (mutations, on top of the seeds themselves).
 fn inputs() -> usize {
@@ -33,11 +34,15 @@ fn corpus(target: &str) -> Vec<Vec<u8>> {
     files.iter().map(|p| std::fs::read(p).unwrap()).collect()
 }
 
-/// The checkpoints of the small trainers the checkpoint target restores into, as bytes.
+/// The checkpoints of the small runs the checkpoint target restores into, as bytes.
 fn checkpoint_seeds() -> Vec<Vec<u8>> {
-    fuzz::small_trainers()
+    fuzz::small_runs()
         .into_iter()
-        .map(|(t, env)| t.save(&*env).unwrap().to_bytes().unwrap())
+        .map(|run| {
+            let mut ckpt = tandem::nn::Checkpoint::new();
+            run.save(&mut ckpt).unwrap();
+            ckpt.to_bytes().unwrap()
+        })
         .collect()
 }
 
@@ -98,14 +103,14 @@ fn checkpoint_loading_survives_mutated_bytes() {
     fuzz_target("checkpoint", checkpoint_seeds());
 }
 
-/// The checkpoint target is not vacuous: a checkpoint of each small trainer restores into a
-/// fresh one, so mutations of it reach `Trainer::load`.
+/// The checkpoint target is not vacuous: a checkpoint of each small run restores into a
+/// fresh one, so mutations of it reach `ModelFree::load`.
 #[test]
-fn checkpoint_seeds_restore_into_the_small_trainers() {
+fn checkpoint_seeds_restore_into_the_small_runs() {
     let seeds = checkpoint_seeds();
-    for ((mut trainer, mut env), bytes) in fuzz::small_trainers().into_iter().zip(&seeds) {
+    for (mut run, bytes) in fuzz::small_runs().into_iter().zip(&seeds) {
         let ckpt = tandem::nn::Checkpoint::from_bytes(bytes).unwrap();
-        trainer.load(&ckpt, &mut *env).unwrap();
+        run.load(&ckpt).unwrap();
     }
 }
 

@@ -192,12 +192,12 @@ fn the_authors_layout_runs_its_100_step_episodes_without_ending_at_collisions() 
 /// uninterrupted one (networks, Adam state, generators and replay of images all restored).
 #[test]
 fn conv_dqn_on_the_pixel_maze_resumes_bit_for_bit() {
-    use tandem::agents::{
-        AlgoConfig, ConvQNetConfig, DqnConfig, Learner, QNetwork, TrainSettings, Trainer,
-    };
+    use tandem::agents::{AlgoConfig, ConvQNetConfig, DqnConfig, Learner, QNetwork};
+    use tandem::algos::model_free::{train, Event, TrainSettings, Trained};
+    use tandem::algos::{AlgoError, Checkpoints, Ephemeral, InMemory};
     use tandem::robots::PixelMazeEnv;
-    fn params(t: &mut Trainer) -> Vec<f32> {
-        match t.learner() {
+    fn params(t: &mut Trained) -> Vec<f32> {
+        match &mut t.learner {
             Learner::Dqn(a) => a.q_params().to_vec(),
             _ => unreachable!("a DQN run"),
         }
@@ -225,27 +225,22 @@ fn conv_dqn_on_the_pixel_maze_resumes_bit_for_bit() {
         max_episode_steps: Some(30),
         ..TrainSettings::default()
     };
-    let mut env = PixelMazeEnv::new();
-    let mut eval = PixelMazeEnv::new();
-    let mut whole = Trainer::new(cfg.clone(), settings.clone(), &env, 4).unwrap();
-    whole.run(&mut env, &mut eval, 150, &mut |_| {}).unwrap();
-    assert!(whole.updates() > 0);
+    let run = |store: &mut dyn Checkpoints, on_event: &mut dyn FnMut(Event)| {
+        let (env, eval) = (Box::new(PixelMazeEnv::new()), Box::new(PixelMazeEnv::new()));
+        let (cfg, settings) = (cfg.clone(), settings.clone());
+        train(cfg, settings, env, eval, 150, 4, store, on_event)
+    };
+    let mut whole = run(&mut Ephemeral, &mut |_| {}).unwrap();
+    assert!(whole.updates > 0);
 
-    let (mut env, mut eval) = (PixelMazeEnv::new(), PixelMazeEnv::new());
-    let mut first = Trainer::new(cfg.clone(), settings.clone(), &env, 4).unwrap();
-    first.run(&mut env, &mut eval, 97, &mut |_| {}).unwrap();
-    let bytes = first.save(&env).unwrap().to_bytes().unwrap();
-    drop(first);
-    let (mut env, mut eval) = (PixelMazeEnv::new(), PixelMazeEnv::new());
-    let mut resumed = Trainer::new(cfg, settings, &env, 4).unwrap();
-    resumed
-        .load(
-            &tandem::nn::Checkpoint::from_bytes(&bytes).unwrap(),
-            &mut env,
-        )
-        .unwrap();
-    resumed.run(&mut env, &mut eval, 150, &mut |_| {}).unwrap();
-    assert_eq!(whole.log(), resumed.log());
+    // Stopped after 97 steps, mid-episode: the stop saves that step.
+    let mut store = InMemory::default();
+    let stop = store.stop_flag();
+    let e = run(&mut store, &mut |e| stop.set(e == Event::Step(97))).unwrap_err();
+    assert!(matches!(e, AlgoError::Stopped), "{e}");
+    stop.set(false);
+    let mut resumed = run(&mut store, &mut |e| assert_ne!(e, Event::Step(97))).unwrap();
+    assert_eq!(whole.log, resumed.log);
     assert_eq!(params(&mut whole), params(&mut resumed));
-    assert_eq!(whole.updates(), resumed.updates());
+    assert_eq!(whole.updates, resumed.updates);
 }

@@ -20,7 +20,9 @@ mod cli;
 pub mod mutate;
 
 use serde_json::{json, Value};
-use tandem::agents::{Algo, AlgoConfig, QNetwork, TrainSettings, Trainer};
+use tandem::agents::{Algo, AlgoConfig, QNetwork};
+use tandem::algos::driver::Algorithm;
+use tandem::algos::model_free::{ModelFree, TrainSettings};
 use tandem::dynamics::rigid::Model;
 use tandem::envs::{Env, EnvSpec};
 use tandem::make_env as make;
@@ -79,7 +81,7 @@ pub fn urdf(data: &[u8]) {
     }
 }
 
-/// The environment a trainer for `cfg` runs on: pendulum for continuous agents, the pixel maze
+/// The environment a run of `cfg` trains on: pendulum for continuous agents, the pixel maze
 /// for a conv DQN, CartPole otherwise.
 fn env_for(cfg: &AlgoConfig) -> Box<dyn Env> {
     let id = match cfg {
@@ -114,7 +116,7 @@ fn estimate(cfg: &AlgoConfig, env: &dyn Env) -> MemoryEstimate {
 }
 
 /// `tandem train --config`: the file parsed for each of the four algorithms; a config that
-/// parses is built into a trainer (validation, the memory check, allocation) when its estimate
+/// parses is built into a run (validation, the memory check, allocation) when its estimate
 /// is small, otherwise validated and estimated only.
 pub fn train_config(data: &[u8]) {
     let Ok(text) = std::str::from_utf8(data) else {
@@ -127,7 +129,8 @@ pub fn train_config(data: &[u8]) {
         let env = env_for(&cfg);
         let est = estimate(&cfg, &*env);
         if est.total().is_some_and(|b| b < BUILD_BELOW) {
-            let _ = Trainer::new(cfg, settings, &*env, 0);
+            let eval_env = env_for(&cfg);
+            let _ = ModelFree::new(cfg, settings, env, eval_env, 1, 0);
         } else {
             let _ = est.check("fuzz");
         }
@@ -153,7 +156,8 @@ pub fn reproduce_config(data: &[u8]) {
             .total()
             .is_some_and(|b| b < BUILD_BELOW)
         {
-            let _ = Trainer::new(agent, TrainSettings::default(), &*env, 0);
+            let eval_env = env_for(&agent);
+            let _ = ModelFree::new(agent, TrainSettings::default(), env, eval_env, 1, 0);
         }
     }
 }
@@ -184,7 +188,7 @@ pub fn env_replay(data: &[u8]) {
 
 /// The small agents the checkpoint target restores into (DQN on CartPole, SAC on the
 /// pendulum): a few hundred parameters and a 64-transition replay, so a million loads are fast.
-pub fn small_trainers() -> Vec<(Trainer, Box<dyn Env>)> {
+pub fn small_runs() -> Vec<ModelFree> {
     let table = |s: &str| s.parse::<toml::Table>().expect("valid TOML");
     [
         (Algo::Dqn, "hidden = [8]\nbuffer_size = 64\nbatch_size = 8"),
@@ -193,20 +197,19 @@ pub fn small_trainers() -> Vec<(Trainer, Box<dyn Env>)> {
     .into_iter()
     .map(|(algo, t)| {
         let cfg = AlgoConfig::from_toml(algo, table(t)).expect("a valid config");
-        let env = env_for(&cfg);
-        let trainer = Trainer::new(cfg, TrainSettings::default(), &*env, 0).expect("small");
-        (trainer, env)
+        let (env, eval_env) = (env_for(&cfg), env_for(&cfg));
+        ModelFree::new(cfg, TrainSettings::default(), env, eval_env, 1, 0).expect("small")
     })
     .collect()
 }
 
 /// `tandem train --resume`: the bytes read as a checkpoint and, if they are one, restored into
-/// each small trainer (which must either accept them or say why).
+/// each small run (which must either accept them or say why).
 pub fn checkpoint(data: &[u8]) {
     let Ok(ckpt) = Checkpoint::from_bytes(data) else {
         return;
     };
-    for (mut trainer, mut env) in small_trainers() {
-        let _ = trainer.load(&ckpt, &mut *env);
+    for mut run in small_runs() {
+        let _ = run.load(&ckpt);
     }
 }

@@ -69,7 +69,8 @@ pub fn find(algo: &str, env: &str) -> Option<&'static Preset> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tandem_agents::{Algo, AlgoConfig, TrainSettings};
+    use tandem::algos::model_free::TrainSettings;
+    use tandem_agents::{Algo, AlgoConfig};
 
     #[test]
     fn every_preset_parses_for_its_algorithm_and_its_environment_exists() {

@@ -8,18 +8,21 @@
 //! preset for the (algorithm, environment) pair is used where one exists ([`super::presets`]);
 //! stderr, `config.toml` (`config_source`) and `summary.json` say which settings were used.
 
-use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
+use tandem::algos::driver::{drive, Algorithm};
+use tandem::algos::model_free::{Event, ModelFree, RunLog, TrainSettings, Trained};
+use tandem::algos::{AlgoError, Checkpoints, Result as AlgoResult};
 use tandem::make_env as make;
 use tandem::studies::interrupt::{Stop, EXIT_SIGINT};
 use tandem::studies::report::{ensure_finite, to_json_pretty, NonFinite};
 use tandem::studies::run::{csv, svg_chart, Existing, Layout, RunDir, Series};
-use tandem_agents::{Algo, AlgoConfig, Pause, TrainSettings, Trainer};
+use tandem_agents::{Algo, AlgoConfig};
+use tandem_nn::Checkpoint;
 
 use super::presets::{self, Preset};
 use super::{CliError, Result};
@@ -335,10 +338,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         None => fresh(args)?,
     };
     let algo: Algo = rc.algo.parse().map_err(other)?;
-    let mut env = make(&rc.env)?;
-    let mut eval_env = make(&rc.env)?;
-    let mut trainer =
-        Trainer::new(rc.agent.clone(), rc.train.clone(), &*env, rc.seed).map_err(other)?;
+    let run = fresh_run(&rc)?;
     let (out, existing) = match (&args.resume, args.overwrite) {
         (Some(dir), _) => (Some(dir.as_path()), Existing::Resume),
         (None, true) => (args.out.as_deref(), Existing::Overwrite),
@@ -353,16 +353,11 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         );
     }
     let ckpt_path = dir.path().join(CHECKPOINT);
-    if args.resume.is_some() && ckpt_path.exists() {
-        let bad = |e: String| CliError::input(format!("--resume {}", ckpt_path.display()), e);
-        let ckpt = tandem_nn::Checkpoint::load(&ckpt_path).map_err(|e| bad(e.to_string()))?;
-        trainer
-            .load(&ckpt, &mut *env)
-            .map_err(|e| bad(e.to_string()))?;
+    let resuming = args.resume.is_some() && ckpt_path.exists();
+    if resuming {
         eprintln!(
-            "resuming {} at step {} of {}",
+            "resuming {} from its checkpoint ({} steps in all)",
             dir.path().display(),
-            trainer.steps(),
             rc.steps
         );
     } else {
@@ -380,54 +375,58 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
-    bar.set_position(trainer.steps());
     let start = Instant::now();
-    let start_step = trainer.steps();
-    let mut last_evals = 0;
-    let mut progress = |t: &Trainer| {
-        if t.steps().is_multiple_of(100) || t.log().evals.len() != last_evals {
-            bar.set_position(t.steps());
-            let ev = t.log().evals.last().map(|e| e.mean);
-            let tr = t.log().episodes.last().map(|e| e.ret_window_mean);
+    let (mut train_end, mut steps_run) = (start, 0u64);
+    let (mut episodes, mut window, mut eval) = (0, None, None);
+    let mut on_event = |e: Event| {
+        let (steps, evaluated) = match e {
+            Event::Step(n) => {
+                (train_end, steps_run) = (Instant::now(), steps_run + 1);
+                (n, false)
+            }
+            Event::Episode(r) => {
+                (episodes, window) = (r.episode + 1, Some(r.ret_window_mean));
+                return;
+            }
+            Event::Evaluation(r) => {
+                eval = Some(r.mean);
+                (r.step, true)
+            }
+        };
+        if evaluated || steps.is_multiple_of(100) {
+            bar.set_position(steps);
+            let shown = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.1}"));
             bar.set_message(format!(
-                "{} {} ep {} train {} eval {}",
+                "{} {} ep {episodes} train {} eval {}",
                 algo.name(),
                 rc.env,
-                t.episodes(),
-                tr.map_or("-".into(), |v| format!("{v:.1}")),
-                ev.map_or("-".into(), |v| format!("{v:.1}")),
+                shown(window),
+                shown(eval),
             ));
-            last_evals = t.log().evals.len();
-        }
-        if stop.requested() {
-            ControlFlow::Break(())
-        } else {
-            ControlFlow::Continue(())
         }
     };
-    let status = loop {
-        let pause = trainer
-            .run_until_pause(&mut *env, &mut *eval_env, rc.steps, &mut progress)
-            .map_err(other)?;
-        match pause {
-            Pause::Checkpoint => save_progress(&dir, &trainer, &*env)?,
-            Pause::Stopped => break Status::Interrupted,
-            Pause::Finished => break Status::Complete,
+    let mut files = RunFiles {
+        dir: &dir,
+        stop: &stop,
+        resume: resuming,
+    };
+    let (status, trained) = match drive(run, &mut files, &mut on_event) {
+        Ok(t) => (Status::Complete, t),
+        Err(AlgoError::Stopped) => (Status::Interrupted, restored(&rc, &ckpt_path)?),
+        Err(e @ AlgoError::Checkpoint(_)) if resuming => {
+            return Err(CliError::input(
+                format!("--resume {}", ckpt_path.display()),
+                e.to_string(),
+            ))
         }
+        Err(e) => return Err(other(e)),
     };
-    let train_seconds = start.elapsed().as_secs_f64();
-    // Final deterministic evaluation (unless the last step just did one).
-    let final_eval = match (status, trainer.log().evals.last()) {
-        (Status::Interrupted, last) => last.cloned(),
-        (Status::Complete, Some(e)) if e.step == trainer.steps() => Some(e.clone()),
-        (Status::Complete, _) => Some(trainer.evaluate(&mut *eval_env).map_err(other)?),
-    };
+    let train_seconds = train_end.duration_since(start).as_secs_f64();
     let wall_seconds = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
-    save_progress(&dir, &trainer, &*env)?;
 
-    let log = trainer.log();
-    let steps_run = trainer.steps() - start_step;
+    let log = &trained.log;
+    let final_eval = log.evals.last();
     let best_window = log
         .episodes
         .iter()
@@ -440,15 +439,15 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         status,
         config_source: rc.config_source.clone(),
         seed: rc.seed,
-        steps: trainer.steps(),
-        episodes: trainer.episodes(),
-        updates: trainer.updates(),
-        eval_step: final_eval.as_ref().map(|e| e.step),
+        steps: trained.steps,
+        episodes: trained.episodes,
+        updates: trained.updates,
+        eval_step: final_eval.map(|e| e.step),
         eval_episodes: rc.train.eval_episodes,
-        eval_return_mean: final_eval.as_ref().map(|e| e.mean),
-        eval_return_std: final_eval.as_ref().map(|e| e.std),
-        eval_returns: final_eval.as_ref().map_or(&[], |e| &e.returns),
-        real_samples: trainer.steps(),
+        eval_return_mean: final_eval.map(|e| e.mean),
+        eval_return_std: final_eval.map(|e| e.std),
+        eval_returns: final_eval.map_or(&[], |e| &e.returns),
+        real_samples: trained.steps,
         wall_seconds,
         train_seconds,
         env_steps_per_second: steps_run as f64 / wall_seconds,
@@ -461,13 +460,13 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     let text =
         to_json_pretty(&summary).map_err(|e| CliError::Other(format!("summary.json: {e}")))?;
     dir.write("summary.json", &text).map_err(io(dir.path()))?;
-    write_curve(&dir, &trainer, &rc)?;
+    write_curve(&dir, log, &rc)?;
 
     if status == Status::Interrupted {
         return Err(CliError::Interrupted {
             what: format!(
                 "checkpoint at step {} of {} written to {}; continue with `tandem train --resume {}`",
-                trainer.steps(),
+                trained.steps,
                 rc.steps,
                 dir.path().display(),
                 dir.path().display()
@@ -480,17 +479,59 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     Ok(())
 }
 
+/// A fresh run of the recorded settings.
+fn fresh_run(rc: &ResolvedConfig) -> Result<ModelFree> {
+    let (env, eval_env) = (make(&rc.env)?, make(&rc.env)?);
+    let (agent, train) = (rc.agent.clone(), rc.train.clone());
+    ModelFree::new(agent, train, env, eval_env, rc.steps, rc.seed).map_err(other)
+}
+
+/// The run as its checkpoint at `path` left it (a stopped run saves where it stopped).
+fn restored(rc: &ResolvedConfig, path: &Path) -> Result<Trained> {
+    let mut run = fresh_run(rc)?;
+    let ckpt = tandem_nn::Checkpoint::load(path).map_err(other)?;
+    run.load(&ckpt).map_err(other)?;
+    run.finish(0.0).map_err(other)
+}
+
+/// The run directory as the loop's checkpoint store: the checkpoint, with `metrics.csv` and
+/// `episodes.csv` as they stand beside it; it asks to stop on SIGINT/SIGTERM.
+struct RunFiles<'a> {
+    dir: &'a RunDir,
+    stop: &'a Stop,
+    /// Whether the checkpoint there continues this run.
+    resume: bool,
+}
+
+impl Checkpoints for RunFiles<'_> {
+    fn load(&mut self, _key: &str) -> AlgoResult<Option<Checkpoint>> {
+        let path = self.dir.path().join(CHECKPOINT);
+        Ok(match self.resume {
+            true => Some(Checkpoint::load(path)?),
+            false => None,
+        })
+    }
+
+    /// Writes the checkpoint (atomically, the previous one kept until the new one is complete),
+    /// then the logs as they stand.
+    fn save(&mut self, _key: &str, ckpt: &Checkpoint) -> AlgoResult<()> {
+        ckpt.save(self.dir.path().join(CHECKPOINT))?;
+        write_logs(self.dir, &RunLog::from_checkpoint(ckpt)?)
+            .map_err(|e| AlgoError::Checkpoint(e.to_string()))
+    }
+
+    fn stop_requested(&self) -> bool {
+        self.stop.requested()
+    }
+}
+
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CliError {
     let path = path.to_path_buf();
     move |source| CliError::Io { path, source }
 }
 
-/// Writes the checkpoint (atomically, the previous one kept until the new one is complete),
-/// then `metrics.csv` and `episodes.csv` as they stand.
-fn save_progress(dir: &RunDir, trainer: &Trainer, env: &dyn tandem_envs::Env) -> Result<()> {
-    let ckpt = trainer.save(env).map_err(other)?;
-    ckpt.save(dir.path().join(CHECKPOINT)).map_err(other)?;
-    let log = trainer.log();
+/// `metrics.csv` (one row per evaluation) and `episodes.csv` as `log` stands.
+fn write_logs(dir: &RunDir, log: &RunLog) -> Result<()> {
     // metrics.csv: one row per evaluation, with the last update's figures.
     let mut names: Vec<String> = Vec::new();
     for e in &log.evals {
@@ -565,8 +606,7 @@ fn save_progress(dir: &RunDir, trainer: &Trainer, env: &dyn tandem_envs::Env) ->
 }
 
 /// `curve.svg`: evaluations (mean ± std) and the windowed training return against steps.
-fn write_curve(dir: &RunDir, trainer: &Trainer, rc: &ResolvedConfig) -> Result<()> {
-    let log = trainer.log();
+fn write_curve(dir: &RunDir, log: &RunLog, rc: &ResolvedConfig) -> Result<()> {
     let eval_series = Series {
         name: format!(
             "evaluation ({} deterministic episodes, mean ± std)",

@@ -1,5 +1,5 @@
 //! Model-free agents: DDPG, SAC, REINFORCE and DQN, replay buffers (including the mixed
-//! real/model sampler of p1 and p3), the training loop with its checkpoints, and the
+//! real/model sampler of p1 and p3), the one off-policy loop with its checkpoints, and the
 //! configurations. Off-policy agents update from any [`Batch`], so a pipeline decides whether it
 //! holds real data, model data, or a mix; REINFORCE updates from any list of [`Episode`]s.
 //!
@@ -12,7 +12,6 @@
 //! | [`Noise`], [`NoiseConfig`] | Ornstein–Uhlenbeck and Gaussian exploration |
 //! | [`Learner`], [`Algo`], [`AlgoConfig`] | "one of the four", chosen by name |
 //! | [`OffPolicyLoop`], [`EpisodeRunner`], [`evaluate`] | the one off-policy loop every pipeline runs: real and model steps, two replay buffers mixed at a set ratio, exact sample counts, stable-baselines3's schedule, evaluation, save/resume |
-//! | [`Trainer`], [`TrainSettings`], [`RunLog`] | `tandem train`'s loop: any of the four agents on one environment, on the shared loop |
 //! | [`Adapted`], [`Feature`] | an adapter in front of any off-policy agent: observation features, reward scale, settable exploration noise |
 //! | [`GlobalPolicy`], [`PolicyConfig`], [`PolicyInput`] | GPS's neural Gaussian policy, regressed onto target actions (MDGPS's global policy) |
 //!
@@ -39,7 +38,7 @@
 //!
 //! Dependencies: `tandem-nn` (networks, optimizers, checkpoints), `candle-core`/`candle-nn`
 //! (optional, feature `pixels`: the conv Q-network's layers and autograd), `tandem-envs` (the `Env` trait
-//! the training loop drives), `ndarray` (replay storage and minibatches), `rand`/`rand_distr`
+//! the off-policy loop drives), `ndarray` (replay storage and minibatches), `rand`/`rand_distr`
 //! (seeded exploration and sampling), `serde`/`serde_json`/`toml` (configs, checkpoint payloads),
 //! `thiserror`.
 
@@ -62,7 +61,6 @@ pub mod off_policy;
 pub mod reinforce;
 pub mod replay;
 pub mod sac;
-pub mod trainer;
 
 pub use adapter::{feature_dim, features_of, Adapted, Feature};
 pub use agent::{
@@ -87,9 +85,6 @@ pub use off_policy::{
 pub use reinforce::Reinforce;
 pub use replay::{MixedSampler, ReplayBuffer, TransitionRef};
 pub use sac::Sac;
-pub use trainer::{EpisodeRecord, EvalRecord, Pause, RunLog, TrainSettings, Trainer};
 
 #[cfg(test)]
 mod tests;
-#[cfg(test)]
-mod trainer_tests;

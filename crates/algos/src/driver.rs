@@ -1,9 +1,10 @@
 //! The one resumable driver: an algorithm is a value holding its whole state (agent, model,
 //! buffers, generators, counters, the episode in progress) that [`drive`] steps until it is done.
 //! MBPO's loop ([`crate::mbpo::Mbpo`], also M-DeMoRL's and p1's), p2's
-//! ([`crate::imagined_episodes::ImaginedEpisodes`], [`crate::imagined_pixels::PixelDqn`]) and p0's
-//! ([`crate::difference_models::DifferenceModels`]) run on it; GPS and MDGPS, whose runs take
-//! minutes and restart when stopped, keep their own loops. The driver owns the bookkeeping the
+//! ([`crate::imagined_episodes::ImaginedEpisodes`], [`crate::imagined_pixels::PixelDqn`]), p0's
+//! ([`crate::difference_models::DifferenceModels`]) and model-free training
+//! ([`crate::model_free::ModelFree`], also under p4's DDPG baseline) run on it; GPS and MDGPS,
+//! whose runs take minutes and restart when stopped, keep their own loops. The driver owns the bookkeeping the
 //! algorithms share: restoring a saved run (refusing another run's checkpoint), stop requests,
 //! checkpoints when the algorithm says one is due, and the wall time (summed over every process
 //! that ran it, for the algorithms that ask).
@@ -29,6 +30,10 @@ pub trait Algorithm {
     /// process that ran it. Without it equal runs save equal bytes, and [`Algorithm::finish`]
     /// gets the last process's time.
     const SUMS_WALL_TIME: bool = false;
+    /// Whether every step boundary is a resume point, so that a stop request saves a checkpoint
+    /// before [`drive`] returns [`AlgoError::Stopped`] and loses nothing. Without it the last
+    /// checkpoint the algorithm asked for resumes the run.
+    const SAVES_ON_STOP: bool = false;
 
     /// The method's name (the checkpoint's key) and the run's seed.
     fn id(&self) -> (&str, u64);
@@ -98,20 +103,26 @@ pub fn drive<A: Algorithm>(
             0.0
         }
     };
+    let save = |algo: &A, store: &mut dyn Checkpoints| -> Result<()> {
+        let mut ckpt = Checkpoint::new();
+        algo.save(&mut ckpt)?;
+        let header = Header {
+            method: name.clone(),
+            seed,
+            wall_seconds: A::SUMS_WALL_TIME.then(|| before + t0.elapsed().as_secs_f64()),
+        };
+        ckpt.put_json(HEADER, &header)?;
+        store.save(&name, &ckpt)
+    };
     while !algo.done() {
         if store.stop_requested() {
+            if A::SAVES_ON_STOP {
+                save(&algo, store)?;
+            }
             return Err(AlgoError::Stopped);
         }
         if algo.step(on_event, &*store)? {
-            let mut ckpt = Checkpoint::new();
-            algo.save(&mut ckpt)?;
-            let header = Header {
-                method: name.clone(),
-                seed,
-                wall_seconds: A::SUMS_WALL_TIME.then(|| before + t0.elapsed().as_secs_f64()),
-            };
-            ckpt.put_json(HEADER, &header)?;
-            store.save(&name, &ckpt)?;
+            save(&algo, store)?;
         }
     }
     algo.finish(before + t0.elapsed().as_secs_f64())

@@ -1,6 +1,7 @@
-//! The model-based algorithms of tandem, each generic over the parts it composes (a plant or
-//! environment, a learned model, a planner, an agent), with its settings type and the papers'
-//! settings as named presets.
+//! The algorithms of tandem, each generic over the parts it composes (a plant or environment, a
+//! learned model, a planner, an agent), with its settings type and the papers' settings as named
+//! presets: the model-based ones, and model-free training (the baseline they are measured
+//! against, and `tandem train`'s loop).
 //!
 //! | module | algorithm | loop |
 //! |---|---|---|
@@ -13,6 +14,7 @@
 //! | [`imagined_pixels`] | the same, DQN from pixels (p2) | the same loop for an off-policy agent on p2's maze, with the pixel model; the pixel model's F1 experiment |
 //! | [`gps`] | Chebotar et al., PILQR (and GPS; p4) | one TVLG controller per condition, improved from its own samples by LQR-FLM, PI² or PILQR |
 //! | [`mdgps`] | Montgomery and Levine, MDGPS (p4 §IV) | a neural global policy regressed onto the local controllers, each updated under a KL bound to the linearized global policy |
+//! | [`model_free`] | any of the four agents alone (`tandem train`) | DDPG, SAC or DQN on the shared off-policy loop, or REINFORCE on whole episodes; periodic deterministic evaluation |
 //! | [`manipulation`] | p4's tasks | the gripper pusher's, the door's and the reacher's conditions and costs on MuJoCo for [`gps`] and [`mdgps`]; DDPG on the reacher, measured on the same test targets |
 //!
 //! The loops that act in a real system take a [`Problem`]: the task the real system and its
@@ -42,6 +44,7 @@ pub mod m_demorl;
 pub mod manipulation;
 pub mod mbpo;
 pub mod mdgps;
+pub mod model_free;
 
 use tandem_agents::AgentError;
 use tandem_envs::EnvError;

@@ -381,52 +381,114 @@ pub fn train_ddpg_reacher(
 
 #[cfg(feature = "mujoco")]
 mod ddpg {
-    use std::ops::ControlFlow;
-
     use ndarray::Array2;
-    use tandem_agents::{AlgoConfig, BatchPolicy, Learner, Mode, Pause, TrainSettings, Trainer};
-    use tandem_envs::{PlantEnv, TimeLimit};
+    use tandem_agents::{AlgoConfig, BatchPolicy, Learner, Mode};
+    use tandem_envs::{Env, PlantEnv, TimeLimit};
+    use tandem_models::PlantModel;
+    use tandem_mujoco::MujocoPlant;
+    use tandem_nn::Checkpoint;
     use tandem_robots::p4::{
         reacher_observation, ReacherCost, ReacherTask, REACHER_HORIZON, REACHER_OBS_DIM,
     };
 
+    use super::super::driver::{drive, Algorithm};
     use super::super::mdgps::TestSet;
-    use super::super::{ensure_same_run, AlgoError, Checkpoints, Result};
+    use super::super::model_free::{ModelFree, TrainSettings};
+    use super::super::{AlgoError, Checkpoints, Result};
     use super::{reacher_plant, ReacherDdpg, TestedPoint};
 
-    const KEY: &str = "ddpg";
+    const CURVE: &str = "reacher_ddpg.curve";
 
-    fn measure(
-        trainer: &mut Trainer,
-        system: &tandem_models::PlantModel<tandem_mujoco::MujocoPlant>,
-        test: &TestSet,
+    /// DDPG on the reacher as one checkpointable value: the model-free run and the test curve.
+    struct ReacherRun<'a> {
+        run: ModelFree,
+        system: PlantModel<MujocoPlant>,
+        test: &'a TestSet,
         seed: u64,
-    ) -> Result<TestedPoint> {
-        let samples = trainer.steps();
-        let Learner::Ddpg(agent) = trainer.learner() else {
-            unreachable!("the trainer was built for DDPG");
-        };
-        // Deterministic acting draws nothing; the generator only satisfies the signature.
-        let (mut rng, mut unused) = (
-            tandem_core::seeding::rng_from_seed(seed),
-            tandem_core::seeding::rng_from_seed(seed),
-        );
-        let test_measure =
-            test.measure_policy(system, REACHER_HORIZON, &mut rng, &mut |x: &Array2<f64>| {
-                let mut obs = Array2::zeros((x.nrows(), REACHER_OBS_DIM));
-                for (s, mut o) in x.rows().into_iter().zip(obs.rows_mut()) {
-                    reacher_observation(
-                        s.as_slice().expect("standard layout"),
-                        o.as_slice_mut().expect("standard layout"),
-                    );
-                }
-                let a = agent.act_batch(obs.view(), Mode::Deterministic, &mut unused)?;
-                Ok(a.iter().copied().collect())
-            })?;
-        Ok(TestedPoint {
-            samples,
-            test_measure,
-        })
+        curve: Vec<TestedPoint>,
+    }
+
+    impl ReacherRun<'_> {
+        /// The deterministic policy's point on the test set now.
+        fn measure(&mut self) -> Result<TestedPoint> {
+            let samples = self.run.steps();
+            let Learner::Ddpg(agent) = self.run.learner() else {
+                unreachable!("the run was built for DDPG");
+            };
+            // Deterministic acting draws nothing; the generator only satisfies the signature.
+            let (mut rng, mut unused) = (
+                tandem_core::seeding::rng_from_seed(self.seed),
+                tandem_core::seeding::rng_from_seed(self.seed),
+            );
+            let test_measure = self.test.measure_policy(
+                &self.system,
+                REACHER_HORIZON,
+                &mut rng,
+                &mut |x: &Array2<f64>| {
+                    let mut obs = Array2::zeros((x.nrows(), REACHER_OBS_DIM));
+                    for (s, mut o) in x.rows().into_iter().zip(obs.rows_mut()) {
+                        reacher_observation(
+                            s.as_slice().expect("standard layout"),
+                            o.as_slice_mut().expect("standard layout"),
+                        );
+                    }
+                    let a = agent.act_batch(obs.view(), Mode::Deterministic, &mut unused)?;
+                    Ok(a.iter().copied().collect())
+                },
+            )?;
+            Ok(TestedPoint {
+                samples,
+                test_measure,
+            })
+        }
+    }
+
+    impl Algorithm for ReacherRun<'_> {
+        type Event = u64;
+        type Record = Vec<TestedPoint>;
+
+        fn id(&self) -> (&str, u64) {
+            ("ddpg", self.seed)
+        }
+
+        fn start(&mut self, _: &mut dyn FnMut(u64)) -> Result<()> {
+            self.curve = vec![self.measure()?];
+            Ok(())
+        }
+
+        fn done(&self) -> bool {
+            self.run.done()
+        }
+
+        /// An environment step; measured (and checkpointed) every `eval_every` steps and at
+        /// the end.
+        fn step(&mut self, on_event: &mut dyn FnMut(u64), _: &dyn Checkpoints) -> Result<bool> {
+            let due = self.run.advance(&mut |_| {})?;
+            let steps = self.run.steps();
+            if steps.is_multiple_of(1000) {
+                on_event(steps);
+            }
+            if due || self.run.done() {
+                let point = self.measure()?;
+                self.curve.push(point);
+            }
+            Ok(due)
+        }
+
+        fn save(&self, ckpt: &mut Checkpoint) -> Result<()> {
+            self.run.save(ckpt)?;
+            Ok(ckpt.put_json(CURVE, &self.curve)?)
+        }
+
+        fn load(&mut self, ckpt: &Checkpoint) -> Result<()> {
+            self.run.load(ckpt)?;
+            self.curve = ckpt.get_json(CURVE)?;
+            Ok(())
+        }
+
+        fn finish(self, _wall_seconds: f64) -> Result<Vec<TestedPoint>> {
+            Ok(self.curve)
+        }
     }
 
     pub(super) fn train(
@@ -438,64 +500,29 @@ mod ddpg {
         progress: &mut dyn FnMut(u64),
     ) -> Result<Vec<TestedPoint>> {
         let task = ReacherTask::new(cost).map_err(AlgoError::Config)?;
-        // The scene is read once: the training environment, the trainer's (unused) evaluation
+        // The scene is read once: the training environment, the loop's (unused) evaluation
         // environment and the test rollouts step copies of one plant.
         let plant = reacher_plant()?;
-        let make = || -> Result<TimeLimit<PlantEnv<_, _>>> {
-            Ok(TimeLimit::new(
-                PlantEnv::from_parts(plant.clone(), task.clone())?,
-                REACHER_HORIZON,
-            ))
+        let make = || -> Result<Box<dyn Env>> {
+            let env = PlantEnv::from_parts(plant.clone(), task.clone())?;
+            Ok(Box::new(TimeLimit::new(env, REACHER_HORIZON)))
         };
-        let (mut env, mut unused) = (make()?, make()?);
-        let system = tandem_models::PlantModel::new(plant);
         let settings = TrainSettings {
             eval_interval: 0,
             checkpoint_interval: cfg.eval_every,
             max_episode_steps: Some(REACHER_HORIZON),
             ..TrainSettings::default()
         };
-        let mut trainer = Trainer::new(AlgoConfig::Ddpg(cfg.agent.clone()), settings, &env, seed)?;
-        let mut curve: Vec<TestedPoint> = match store.load(KEY)? {
-            Some(ckpt) => {
-                let (name, saved_seed): (String, u64) = ckpt.get_json("run")?;
-                ensure_same_run((&name, saved_seed), (KEY, seed))?;
-                trainer.load(&ckpt, &mut env)?;
-                ckpt.get_json("curve")?
-            }
-            None => vec![measure(&mut trainer, &system, test, seed)?],
+        let agent = AlgoConfig::Ddpg(cfg.agent.clone());
+        let run = ModelFree::new(agent, settings, make()?, make()?, cfg.steps, seed)?;
+        let run = ReacherRun {
+            run,
+            system: PlantModel::new(plant),
+            test,
+            seed,
+            curve: Vec::new(),
         };
-        progress(trainer.steps());
-        loop {
-            let pause = {
-                let stop = &*store;
-                trainer.run_until_pause(&mut env, &mut unused, cfg.steps, &mut |t| {
-                    if t.steps() % 1000 == 0 {
-                        progress(t.steps());
-                    }
-                    if stop.stop_requested() {
-                        ControlFlow::Break(())
-                    } else {
-                        ControlFlow::Continue(())
-                    }
-                })?
-            };
-            match pause {
-                Pause::Stopped => return Err(AlgoError::Stopped),
-                Pause::Checkpoint | Pause::Finished => {
-                    if curve.last().map(|p| p.samples) != Some(trainer.steps()) {
-                        curve.push(measure(&mut trainer, &system, test, seed)?);
-                    }
-                    if pause == Pause::Finished {
-                        return Ok(curve);
-                    }
-                    let mut ckpt = trainer.save(&env)?;
-                    ckpt.put_json("run", &(KEY, seed))?;
-                    ckpt.put_json("curve", &curve)?;
-                    store.save(KEY, &ckpt)?;
-                }
-            }
-        }
+        drive(run, store, progress)
     }
 }
 

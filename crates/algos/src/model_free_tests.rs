@@ -5,11 +5,15 @@ use rand::{Rng as _, SeedableRng};
 use tandem_core::{Action, Rng, Space};
 use tandem_envs::{Env, EnvError, Step};
 
-use crate::config::{DdpgConfig, DqnConfig, ReinforceConfig, SacConfig};
-use crate::learner::{AlgoConfig, Learner};
-use crate::trainer::{Pause, TrainSettings, Trainer};
-use crate::AgentError;
-use std::ops::ControlFlow;
+use std::cell::Cell;
+
+use tandem_agents::{AlgoConfig, DdpgConfig, DqnConfig, Learner, ReinforceConfig, SacConfig};
+use tandem_nn::Checkpoint;
+
+use super::{train, Event, TrainSettings, Trained};
+use crate::{AlgoError, Checkpoints, Ephemeral, InMemory};
+
+type Result<T, E = AlgoError> = std::result::Result<T, E>;
 
 /// A damped point mass: obs `[x, v]`, push `u` in `[-1, 1]` (or 3 discrete pushes), reward
 /// `-x²`, terminated when `|x| > 2`, episodes of at most 30 steps.
@@ -136,8 +140,8 @@ fn settings() -> TrainSettings {
     }
 }
 
-fn params(t: &mut Trainer) -> Vec<f32> {
-    match t.learner() {
+fn params(t: &mut Trained) -> Vec<f32> {
+    match &mut t.learner {
         Learner::Sac(a) => a.actor_params().to_vec(),
         Learner::Ddpg(a) => a.actor_params().to_vec(),
         Learner::Dqn(a) => a.q_params().to_vec(),
@@ -145,21 +149,41 @@ fn params(t: &mut Trainer) -> Vec<f32> {
     }
 }
 
-fn run(cfg: &AlgoConfig, discrete: bool, seed: u64, steps: u64) -> Trainer {
-    let (mut env, mut eval) = (PointMass::new(discrete), PointMass::new(discrete));
-    let mut t = Trainer::new(cfg.clone(), settings(), &env, seed).unwrap();
-    t.run(&mut env, &mut eval, steps, &mut |_| {}).unwrap();
-    t
+fn train_on(
+    cfg: &AlgoConfig,
+    settings: &TrainSettings,
+    discrete: bool,
+    (seed, steps): (u64, u64),
+    store: &mut dyn Checkpoints,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<Trained> {
+    let env = |_| -> Box<dyn Env> { Box::new(PointMass::new(discrete)) };
+    let (env, eval) = (env(()), env(()));
+    train(
+        cfg.clone(),
+        settings.clone(),
+        env,
+        eval,
+        steps,
+        seed,
+        store,
+        on_event,
+    )
 }
 
-/// The trainer reports every environment step, warm-up included, to DQN (SB3's `_on_step`).
+fn run(cfg: &AlgoConfig, discrete: bool, seed: u64, steps: u64) -> Trained {
+    let (seed_steps, s) = ((seed, steps), settings());
+    train_on(cfg, &s, discrete, seed_steps, &mut Ephemeral, &mut |_| {}).unwrap()
+}
+
+/// The loop reports every environment step, warm-up included, to DQN (SB3's `_on_step`).
 #[test]
-fn dqn_epsilon_follows_the_trainers_env_steps_from_step_zero() {
+fn dqn_epsilon_follows_the_loops_env_steps_from_step_zero() {
     for (cfg, discrete) in configs() {
         if let AlgoConfig::Dqn(c) = &cfg {
-            let mut t = run(&cfg, discrete, 5, 70);
-            let steps = t.steps();
-            match t.learner() {
+            let t = run(&cfg, discrete, 5, 70);
+            let steps = t.steps;
+            match &t.learner {
                 Learner::Dqn(a) => assert_eq!(a.epsilon(), c.epsilon(steps)),
                 _ => unreachable!(),
             }
@@ -174,101 +198,90 @@ fn same_seed_gives_bit_identical_runs_and_another_seed_does_not() {
         let mut a = run(&cfg, discrete, 7, 210);
         let mut b = run(&cfg, discrete, 7, 210);
         let name = cfg.algo().name();
-        assert!(a.updates() > 0, "{name}: no update happened");
-        assert_eq!(a.log().evals.len(), 3, "{name}");
-        assert_eq!(a.log(), b.log(), "{name}: logs differ");
+        assert!(a.updates > 0, "{name}: no update happened");
+        // Every 70 steps; the last one is also the final evaluation.
+        assert_eq!(a.log.evals.len(), 3, "{name}");
+        assert_eq!(a.log, b.log, "{name}: logs differ");
         assert_eq!(params(&mut a), params(&mut b), "{name}: parameters differ");
         let mut c = run(&cfg, discrete, 8, 210);
         assert_ne!(params(&mut a), params(&mut c), "{name}: seed has no effect");
     }
 }
 
-#[test]
-fn a_run_saved_mid_episode_and_resumed_equals_an_uninterrupted_one() {
-    for (cfg, discrete) in configs() {
-        let name = cfg.algo().name();
-        let mut whole = run(&cfg, discrete, 3, 230);
+/// A store that notes the step at which each checkpoint was saved.
+struct Noting<'a> {
+    store: InMemory,
+    step: &'a Cell<u64>,
+    saved_at: Vec<u64>,
+}
 
-        // 97 steps: in the middle of an episode (at most 30 steps each), between trainings.
-        let (mut env, mut eval) = (PointMass::new(discrete), PointMass::new(discrete));
-        let mut first = Trainer::new(cfg.clone(), settings(), &env, 3).unwrap();
-        first.run(&mut env, &mut eval, 97, &mut |_| {}).unwrap();
-        let bytes = first.save(&env).unwrap().to_bytes().unwrap();
-        drop(first);
-
-        let (mut env, mut eval) = (PointMass::new(discrete), PointMass::new(discrete));
-        let mut resumed = Trainer::new(cfg.clone(), settings(), &env, 3).unwrap();
-        let ckpt = tandem_nn::Checkpoint::from_bytes(&bytes).unwrap();
-        resumed.load(&ckpt, &mut env).unwrap();
-        assert_eq!(resumed.steps(), 97);
-        resumed.run(&mut env, &mut eval, 230, &mut |_| {}).unwrap();
-
-        assert_eq!(
-            whole.log(),
-            resumed.log(),
-            "{name}: logs differ after resume"
-        );
-        assert_eq!(
-            params(&mut whole),
-            params(&mut resumed),
-            "{name}: parameters differ"
-        );
-        assert_eq!(whole.updates(), resumed.updates());
+impl Checkpoints for Noting<'_> {
+    fn load(&mut self, key: &str) -> Result<Option<Checkpoint>> {
+        self.store.load(key)
+    }
+    fn save(&mut self, key: &str, ckpt: &Checkpoint) -> Result<()> {
+        self.saved_at.push(self.step.get());
+        self.store.save(key, ckpt)
+    }
+    fn stop_requested(&self) -> bool {
+        self.store.stop_requested()
     }
 }
 
-/// Pausing at every checkpoint point, stopping at an arbitrary step and resuming from the bytes
-/// saved there changes nothing: the final checkpoints are the same bytes.
+/// Checkpoints at every evaluation, every `checkpoint_interval` steps and at the end; a stop
+/// requested at any step (here mid-episode, between trainings) saves that step, and the run
+/// resumed from it ends with the same log, parameters and final checkpoint bytes.
 #[test]
-fn pauses_and_a_stop_resumed_from_bytes_give_the_same_final_checkpoint() {
+fn a_run_stopped_at_any_step_saves_it_and_resumes_to_the_uninterrupted_run() {
     for (cfg, discrete) in configs() {
         let name = cfg.algo().name();
         let settings = TrainSettings {
             checkpoint_interval: 40,
             ..settings()
         };
-        let (mut env, mut eval) = (PointMass::new(discrete), PointMass::new(discrete));
-        let mut whole = Trainer::new(cfg.clone(), settings.clone(), &env, 3).unwrap();
-        let mut pauses = Vec::new();
-        loop {
-            let go_on = &mut |_: &Trainer| ControlFlow::Continue(());
-            match whole
-                .run_until_pause(&mut env, &mut eval, 230, go_on)
-                .unwrap()
-            {
-                Pause::Checkpoint => pauses.push(whole.steps()),
-                Pause::Finished => break,
-                Pause::Stopped => unreachable!("never asked to stop"),
-            }
-        }
-        // Evaluations every 70 steps, checkpoints every 40.
-        assert_eq!(pauses, [40, 70, 80, 120, 140, 160, 200, 210], "{name}");
-        let whole_bytes = whole.save(&env).unwrap().to_bytes().unwrap();
-
-        let (mut env, mut eval) = (PointMass::new(discrete), PointMass::new(discrete));
-        let mut first = Trainer::new(cfg.clone(), settings.clone(), &env, 3).unwrap();
-        let stop_at_101 = &mut |t: &Trainer| {
-            if t.steps() == 101 {
-                ControlFlow::Break(())
-            } else {
-                ControlFlow::Continue(())
+        let step = Cell::new(0);
+        let on_step = &mut |e: Event| {
+            if let Event::Step(n) = e {
+                step.set(n);
             }
         };
-        while first
-            .run_until_pause(&mut env, &mut eval, 230, stop_at_101)
-            .unwrap()
-            == Pause::Checkpoint
-        {}
-        assert_eq!(first.steps(), 101, "{name}");
-        let bytes = first.save(&env).unwrap().to_bytes().unwrap();
+        let mut whole = Noting {
+            store: InMemory::default(),
+            step: &step,
+            saved_at: Vec::new(),
+        };
+        let mut w = train_on(&cfg, &settings, discrete, (3, 230), &mut whole, on_step).unwrap();
+        // Evaluations every 70 steps, checkpoints every 40, and the end.
+        assert_eq!(
+            whole.saved_at,
+            [40, 70, 80, 120, 140, 160, 200, 210, 230],
+            "{name}"
+        );
+        assert_eq!(w.log.evals.last().map(|e| e.step), Some(230), "{name}");
 
-        let (mut env, mut eval) = (PointMass::new(discrete), PointMass::new(discrete));
-        let mut resumed = Trainer::new(cfg.clone(), settings.clone(), &env, 3).unwrap();
-        let ckpt = tandem_nn::Checkpoint::from_bytes(&bytes).unwrap();
-        resumed.load(&ckpt, &mut env).unwrap();
-        resumed.run(&mut env, &mut eval, 230, &mut |_| {}).unwrap();
+        // 101 steps: in the middle of an episode (at most 30 steps each).
+        let mut cut = Noting {
+            store: InMemory::default(),
+            step: &step,
+            saved_at: Vec::new(),
+        };
+        let stop = cut.store.stop_flag();
+        let stop_at_101 = &mut |e: Event| {
+            on_step(e.clone());
+            stop.set(e == Event::Step(101));
+        };
+        let e = train_on(&cfg, &settings, discrete, (3, 230), &mut cut, stop_at_101);
+        assert!(matches!(e, Err(AlgoError::Stopped)), "{name}");
+        assert_eq!(cut.saved_at, [40, 70, 80, 101], "{name}");
+        stop.set(false);
+        let mut store = cut.store;
+        let mut r = train_on(&cfg, &settings, discrete, (3, 230), &mut store, &mut |_| {});
+        let r = r.as_mut().unwrap();
+        assert_eq!(w.log, r.log, "{name}: logs differ after resume");
+        assert_eq!(params(&mut w), params(r), "{name}: parameters differ");
+        assert_eq!((w.steps, w.updates), (r.steps, r.updates), "{name}");
         assert!(
-            resumed.save(&env).unwrap().to_bytes().unwrap() == whole_bytes,
+            whole.store.files[name] == store.files[name],
             "{name}: final checkpoints differ"
         );
     }
@@ -279,12 +292,13 @@ fn resuming_into_another_algorithm_or_architecture_is_an_error() {
     let cfgs = configs();
     let (sac, _) = &cfgs[0];
     let (ddpg, _) = &cfgs[1];
-    let mut env = PointMass::new(false);
-    let t = run(sac, false, 1, 50);
-    let ckpt = t.save(&env).unwrap();
-    let mut other = Trainer::new(ddpg.clone(), settings(), &env, 1).unwrap();
-    let e = other.load(&ckpt, &mut env).unwrap_err();
-    assert!(matches!(e, AgentError::Checkpoint(_)), "{e}");
+    let mut store = InMemory::default();
+    let s = settings();
+    train_on(sac, &s, false, (1, 50), &mut store, &mut |_| {}).unwrap();
+    let bytes = store.files["sac"].clone();
+    store.files.insert("ddpg".into(), bytes);
+    let e = train_on(ddpg, &s, false, (1, 50), &mut store, &mut |_| {}).unwrap_err();
+    assert!(matches!(e, AlgoError::Checkpoint(_)), "{e}");
     assert!(e.to_string().contains("sac"), "{e}");
     let wider = AlgoConfig::Sac(SacConfig {
         hidden: vec![32, 16],
@@ -292,8 +306,7 @@ fn resuming_into_another_algorithm_or_architecture_is_an_error() {
         learning_starts: 40,
         ..SacConfig::default()
     });
-    let mut other = Trainer::new(wider, settings(), &env, 1).unwrap();
-    let e = other.load(&ckpt, &mut env).unwrap_err();
+    let e = train_on(&wider, &s, false, (1, 50), &mut store, &mut |_| {}).unwrap_err();
     assert!(e.to_string().contains("architecture"), "{e}");
 }
 
@@ -301,10 +314,9 @@ fn resuming_into_another_algorithm_or_architecture_is_an_error() {
 fn episodes_respect_the_length_limit_and_real_samples_are_counted() {
     let (cfg, d) = &configs()[0];
     let t = run(cfg, *d, 2, 200);
-    assert_eq!(t.steps(), 200);
-    let log = t.log();
-    assert!(log.episodes.iter().all(|e| e.length <= 30));
-    let last = log.episodes.last().unwrap();
-    let total: usize = log.episodes.iter().map(|e| e.length).sum();
+    assert_eq!(t.steps, 200);
+    assert!(t.log.episodes.iter().all(|e| e.length <= 30));
+    let last = t.log.episodes.last().unwrap();
+    let total: usize = t.log.episodes.iter().map(|e| e.length).sum();
     assert_eq!(last.step as usize, total);
 }
