@@ -17,32 +17,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         max_real_episodes: episodes,
         ..P2Config::default()
     };
-    let mut returns = Vec::new();
-    let record = cartpole(
-        Method::WithModel,
-        &cfg,
-        seed,
-        &mut Ephemeral,
-        &mut |event| {
-            if let Event::Real { episode, ret, .. } = event {
-                returns.push(ret);
-                if (episode + 1) % 50 == 0 {
-                    let last = &returns[returns.len().saturating_sub(100)..];
-                    let mean = last.iter().sum::<f64>() / last.len() as f64;
-                    println!(
-                        "{} real episodes: mean return of the last 100 {mean:.1}",
-                        episode + 1
-                    );
-                }
-            }
-        },
-    )?;
-    match record.solved_at {
-        Some(k) => println!(
-            "solved after {k} real episodes ({} imagined)",
-            record.imagined_episodes
-        ),
-        None => println!("not solved in {} real episodes", record.real_returns.len()),
-    }
+    let window = cfg.solved_window;
+    let mut show = |event| match event {
+        Event::Real {
+            episode,
+            window_mean,
+            ..
+        } if (episode + 1) % 50 == 0 => {
+            let n = episode + 1;
+            println!("{n} real episodes: mean return of the last {window} {window_mean:.1}");
+        }
+        _ => {}
+    };
+    let record = cartpole(Method::WithModel, &cfg, seed, &mut Ephemeral, &mut show)?;
+    println!("{record}");
     Ok(())
 }

@@ -197,6 +197,17 @@ pub struct RunRecord {
     pub wall_seconds: f64,
 }
 
+impl std::fmt::Display for RunRecord {
+    /// When the run was solved, and with how many imagined episodes.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let imagined = self.imagined_episodes;
+        match self.solved_at {
+            Some(k) => write!(f, "solved after {k} real episodes ({imagined} imagined)"),
+            None => write!(f, "not solved in {} real episodes", self.real_returns.len()),
+        }
+    }
+}
+
 /// The first episode count `k` (≥ `window`) at which the mean of `returns[k - window..k]`
 /// reaches `target`.
 pub fn solved_at(returns: &[f64], window: usize, target: f64) -> Option<u64> {
@@ -246,6 +257,19 @@ impl Tally {
         (self.method.name(), self.seed)
     }
 
+    /// Counts a real episode of return `ret` that ended with `real_samples` samples so far.
+    pub(super) fn real(&mut self, ret: f64, real_samples: u64, window: usize) -> Event {
+        self.real_returns.push(ret);
+        self.real_samples = real_samples;
+        let last = &self.real_returns[self.real_returns.len().saturating_sub(window)..];
+        Event::Real {
+            episode: self.real_returns.len() as u64 - 1,
+            ret,
+            real_samples,
+            window_mean: last.iter().sum::<f64>() / last.len() as f64,
+        }
+    }
+
     /// The real episode at which the run was solved ([`solved_at`]), if it was.
     pub(super) fn solved_at(&self, window: usize, target: f64) -> Option<u64> {
         solved_at(&self.real_returns, window, target)
@@ -283,6 +307,9 @@ pub enum Event {
         ret: f64,
         /// Real samples after it.
         real_samples: u64,
+        /// The mean return of the last `solved_window` real episodes (all of them, while there
+        /// are fewer), this one included: what "solved" is judged by.
+        window_mean: f64,
     },
     /// An imagined episode ended after `steps` steps with return `ret`.
     Imagined {
@@ -513,13 +540,11 @@ where
         let mut b = TransitionsBuilder::new(task.state_dim(), self.control_dim);
         let rec = self.model_env.is_some().then_some((task, &mut b));
         let ep = play(&mut self.env, &mut self.agent, obs, rec)?;
-        self.p.t.real_returns.push(ep.total_reward());
-        self.p.t.real_samples = self.count.get();
-        on_event(Event::Real {
-            episode: k,
-            ret: ep.total_reward(),
-            real_samples: self.count.get(),
-        });
+        let real = self
+            .p
+            .t
+            .real(ep.total_reward(), self.count.get(), cfg.solved_window);
+        on_event(real);
         self.learn(ep)?;
         let done_real = k + 1;
         if self.model_env.is_some() {

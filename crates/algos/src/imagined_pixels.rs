@@ -399,13 +399,8 @@ impl Algorithm for PixelDqn<'_> {
             StepOptions::real(),
             keep,
         )?;
-        self.p.t.real_returns.push(ret);
-        self.p.t.real_samples = self.count.get();
-        on_event(Event::Real {
-            episode: k,
-            ret,
-            real_samples: self.count.get(),
-        });
+        let real = self.p.t.real(ret, self.count.get(), self.cfg.solved_window);
+        on_event(real);
         let done_real = k + 1;
         if self.imagination.is_some() {
             self.hold_out(&frames, terminated)?;
