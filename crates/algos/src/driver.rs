@@ -1,10 +1,10 @@
 //! The one resumable driver: an algorithm is a value holding its whole state (agent, model,
 //! buffers, generators, counters, the episode in progress) that [`drive`] steps until it is done.
 //! MBPO's loop ([`crate::mbpo::Mbpo`], also M-DeMoRL's and p1's), p2's
-//! ([`crate::imagined_episodes::ImaginedEpisodes`], [`crate::imagined_pixels::PixelDqn`]) and p0's
-//! ([`crate::difference_models::DifferenceModels`]) run on it; GPS and MDGPS, whose runs take
-//! minutes and restart when stopped, keep their own loops. The driver owns the bookkeeping the
-//! algorithms share: restoring a saved run (refusing another run's checkpoint), stop requests,
+//! ([`crate::imagined_episodes::ImaginedEpisodes`], [`crate::imagined_pixels::PixelDqn`]), p0's
+//! ([`crate::difference_models::DifferenceModels`]) and p4's local controllers and MDGPS
+//! ([`crate::gps::LocalGps`], [`crate::mdgps::Mdgps`]) run on it. The driver owns the bookkeeping
+//! the algorithms share: restoring a saved run (refusing another run's checkpoint), stop requests,
 //! checkpoints when the algorithm says one is due, and the wall time (summed over every process
 //! that ran it, for the algorithms that ask).
 //!
