@@ -2,16 +2,16 @@
 //! buffers, generators, counters, the episode in progress) that [`drive`] steps until it is done.
 //! MBPO's loop ([`crate::mbpo::Mbpo`], also M-DeMoRL's and p1's), p2's
 //! ([`crate::imagined_episodes::ImaginedEpisodes`], [`crate::imagined_pixels::PixelDqn`]), p0's
-//! ([`crate::difference_models::DifferenceModels`]) and model-free training
-//! ([`crate::model_free::ModelFree`], also under p4's DDPG baseline) run on it; GPS and MDGPS,
-//! whose runs take minutes and restart when stopped, keep their own loops. The driver owns the bookkeeping the
-//! algorithms share: restoring a saved run (refusing another run's checkpoint), stop requests,
-//! checkpoints when the algorithm says one is due, and the wall time (summed over every process
-//! that ran it, for the algorithms that ask).
+//! ([`crate::difference_models::DifferenceModels`]), p4's local controllers and MDGPS
+//! ([`crate::gps::LocalGps`], [`crate::mdgps::Mdgps`]) and model-free training
+//! ([`crate::model_free::ModelFree`], also under p4's DDPG baseline) run on it. The driver owns
+//! the bookkeeping the algorithms share: restoring a saved run (refusing another run's
+//! checkpoint), stop requests, checkpoints when the algorithm says one is due, and the wall time
+//! (summed over every process that ran it, for the algorithms that ask).
 //!
 //! An algorithm's [`Algorithm::step`] is then its paper's loop body and nothing else. Equal
-//! runs save equal bytes, and a resumed run gives exactly the numbers of an uninterrupted one:
-//! an algorithm saves everything its later steps read.
+//! runs save equal bytes (unless they sum wall time), and a resumed run gives exactly the numbers
+//! of an uninterrupted one: an algorithm saves everything its later steps read.
 
 use std::time::Instant;
 

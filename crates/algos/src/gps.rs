@@ -17,20 +17,24 @@
 //! trajectories, at `(i + 1)·samples` samples of that condition; the last point is the
 //! controller the run ends with. No evaluation episodes are drawn besides.
 //!
-//! A run is minutes long, so it keeps no checkpoints: it polls [`Checkpoints::stop_requested`]
-//! between iterations, and a resumed study reruns an unfinished run from its start (with the same
-//! numbers: the run is a function of its seed).
+//! A run is one [`LocalGps`] on the [`drive`]r: it saves itself under its method's name after
+//! every iteration (the controllers, their dynamics fits with the GMM prior's data, the step
+//! rules' state, the generator, the curves) and resumes from there with exactly the numbers of an
+//! uninterrupted run.
 
 use ndarray::s;
 use serde::{Deserialize, Serialize};
 use tandem_core::seeding::rng_from_seed;
+use tandem_core::Rng;
 use tandem_models::{DynamicsModel, TvlgConfig, TvlgDynamics, TvlgFit};
+use tandem_nn::Checkpoint;
 use tandem_planners::{
     classic_step_mult, pi2_update, quadratize_cost, sample_trajectories, LqrFlm, Objective, Pilqr,
     PilqrConfig, QuadraticCost, SampleConfig, TrajectorySamples, TvlgController,
 };
 
 use super::{AlgoError, Checkpoints, Result};
+use crate::driver::{drive, Algorithm};
 
 /// How a local controller is updated from its samples.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -166,9 +170,12 @@ pub struct LocalRun {
     pub failed_updates: Vec<usize>,
     /// The controllers after the last update.
     pub controllers: Vec<TvlgController>,
+    /// Wall time of the run, seconds, summed over every process that ran it.
+    pub wall_seconds: f64,
 }
 
 /// The previous LQR-FLM iteration, for GPS's step rule.
+#[derive(Clone, Serialize, Deserialize)]
 struct LqrState {
     mult: f64,
     prev: Option<(TvlgController, TvlgDynamics, Vec<QuadraticCost>)>,
@@ -286,6 +293,22 @@ impl Local {
         Ok(self.replace(next))
     }
 
+    /// What a checkpoint keeps of it: all but the optimizers' settings, which the run is given.
+    fn saved(&self) -> SavedLocal {
+        SavedLocal {
+            controller: self.controller.clone(),
+            fit: self.fit.clone(),
+            lqr: self.lqr.clone(),
+            pilqr_mult: self.pilqr.step_mult().to_vec(),
+        }
+    }
+
+    /// Restores what [`Local::saved`] returned.
+    fn restore(&mut self, s: SavedLocal) {
+        (self.controller, self.fit, self.lqr) = (s.controller, s.fit, s.lqr);
+        self.pilqr.set_step_mult(s.pilqr_mult);
+    }
+
     /// Takes `next` if there is one; whether it was taken.
     fn replace(&mut self, next: Option<TvlgController>) -> bool {
         match next {
@@ -344,6 +367,38 @@ impl Local {
     }
 }
 
+/// A [`Local`] in a checkpoint.
+#[derive(Serialize, Deserialize)]
+struct SavedLocal {
+    controller: TvlgController,
+    fit: TvlgFit,
+    lqr: LqrState,
+    /// PILQR's per-step multipliers.
+    pilqr_mult: Vec<f64>,
+}
+
+/// Saves the local controllers and their optimizers' state under `key` (shared with MDGPS).
+pub(crate) fn save_locals(locals: &[Local], key: &str, ckpt: &mut Checkpoint) -> Result<()> {
+    let saved: Vec<SavedLocal> = locals.iter().map(Local::saved).collect();
+    Ok(ckpt.put_json(key, &saved)?)
+}
+
+/// Restores what [`save_locals`] wrote into `locals` (one per condition).
+pub(crate) fn load_locals(locals: &mut [Local], key: &str, ckpt: &Checkpoint) -> Result<()> {
+    let saved: Vec<SavedLocal> = ckpt.get_json(key)?;
+    if saved.len() != locals.len() {
+        return Err(AlgoError::Checkpoint(format!(
+            "{} local controllers saved, {} conditions",
+            saved.len(),
+            locals.len()
+        )));
+    }
+    for (l, s) in locals.iter_mut().zip(saved) {
+        l.restore(s);
+    }
+    Ok(())
+}
+
 /// The dynamics fitted to a batch of samples and the cost's quadratic expansion around them.
 pub(crate) type LocalModel = (TvlgDynamics, Vec<QuadraticCost>);
 
@@ -358,7 +413,8 @@ fn numerical<T>(r: Result<T>) -> Result<Option<T>> {
 }
 
 /// Trains one local controller per condition of `problem` with `method`, `seed` drawing all
-/// noise. `progress` is called with the samples drawn so far over all conditions.
+/// noise, from the checkpoint `store` holds under the method's name if any, saving after every
+/// iteration. `progress` is called with the samples drawn so far over all conditions.
 pub fn train_local(
     method: LocalMethod,
     problem: &LocalProblem,
@@ -367,38 +423,117 @@ pub fn train_local(
     store: &mut dyn Checkpoints,
     progress: &mut dyn FnMut(u64),
 ) -> Result<LocalRun> {
-    cfg.validate()?;
-    check_problem(problem)?;
-    let (system, conditions) = (&*problem.system, &problem.conditions);
-    let (lqr, mut locals) = start_locals(problem, cfg)?;
-    let mut rng = rng_from_seed(seed);
-    let mut curves = vec![Vec::with_capacity(cfg.iterations); conditions.len()];
-    let mut failed = vec![0; conditions.len()];
-    let mut drawn = 0u64;
-    for it in 0..cfg.iterations {
-        if store.stop_requested() {
-            return Err(AlgoError::Stopped);
-        }
-        for (c, (cond, local)) in conditions.iter().zip(locals.iter_mut()).enumerate() {
-            let samples = local.sample(system, cond, cfg, &mut rng)?;
-            drawn += cfg.samples as u64;
-            progress(drawn);
-            curves[c].push(point(&samples, (it + 1) * cfg.samples, |x| {
+    drive(LocalGps::new(method, problem, cfg, seed)?, store, progress)
+}
+
+/// A run of the local-controller loop as one checkpointable value, stepped one iteration (all
+/// conditions) at a time by [`drive`]: the controllers with their optimizers' state, the
+/// generator, the curves and the counts. Its events are the samples drawn so far.
+pub struct LocalGps<'a> {
+    method: LocalMethod,
+    problem: &'a LocalProblem,
+    cfg: &'a LocalConfig,
+    seed: u64,
+    lqr: LqrFlm,
+    locals: Vec<Local>,
+    s: LocalState,
+}
+
+/// Where a [`LocalGps`] run stands, besides its controllers.
+#[derive(Serialize, Deserialize)]
+struct LocalState {
+    /// Iterations done.
+    iteration: usize,
+    rng: Rng,
+    curves: Vec<Vec<LocalPoint>>,
+    failed: Vec<usize>,
+    drawn: u64,
+}
+
+const STATE: &str = "gps.state";
+const LOCALS: &str = "gps.locals";
+
+impl<'a> LocalGps<'a> {
+    /// A fresh run of `method` on `problem` for `seed`.
+    pub fn new(
+        method: LocalMethod,
+        problem: &'a LocalProblem,
+        cfg: &'a LocalConfig,
+        seed: u64,
+    ) -> Result<Self> {
+        cfg.validate()?;
+        check_problem(problem)?;
+        let (lqr, locals) = start_locals(problem, cfg)?;
+        let k = problem.conditions.len();
+        Ok(Self {
+            method,
+            problem,
+            cfg,
+            seed,
+            lqr,
+            locals,
+            s: LocalState {
+                iteration: 0,
+                rng: rng_from_seed(seed),
+                curves: vec![Vec::with_capacity(cfg.iterations); k],
+                failed: vec![0; k],
+                drawn: 0,
+            },
+        })
+    }
+}
+
+impl Algorithm for LocalGps<'_> {
+    type Event = u64;
+    type Record = LocalRun;
+    const SUMS_WALL_TIME: bool = true;
+
+    fn id(&self) -> (&str, u64) {
+        (self.method.name(), self.seed)
+    }
+
+    fn done(&self) -> bool {
+        self.s.iteration >= self.cfg.iterations
+    }
+
+    /// One iteration: every condition's batch, its point on the curve, and (but after the last
+    /// batch) the controller's update.
+    fn step(&mut self, progress: &mut dyn FnMut(u64), _stop: &dyn Checkpoints) -> Result<bool> {
+        let (problem, cfg, s) = (self.problem, self.cfg, &mut self.s);
+        let last = s.iteration + 1 == cfg.iterations;
+        for (c, (cond, local)) in problem.conditions.iter().zip(&mut self.locals).enumerate() {
+            let samples = local.sample(&*problem.system, cond, cfg, &mut s.rng)?;
+            s.drawn += cfg.samples as u64;
+            progress(s.drawn);
+            s.curves[c].push(point(&samples, (s.iteration + 1) * cfg.samples, |x| {
                 (problem.measure)(c, x)
             }));
-            if it + 1 == cfg.iterations {
-                continue;
-            }
-            if !local.improve(method, &samples, &cond.objective, &lqr, cfg)? {
-                failed[c] += 1;
+            if !last && !local.improve(self.method, &samples, &cond.objective, &self.lqr, cfg)? {
+                s.failed[c] += 1;
             }
         }
+        s.iteration += 1;
+        Ok(true)
     }
-    Ok(LocalRun {
-        curves,
-        failed_updates: failed,
-        controllers: locals.into_iter().map(|l| l.controller).collect(),
-    })
+
+    fn save(&self, ckpt: &mut Checkpoint) -> Result<()> {
+        ckpt.put_json(STATE, &self.s)?;
+        save_locals(&self.locals, LOCALS, ckpt)
+    }
+
+    fn load(&mut self, ckpt: &Checkpoint) -> Result<()> {
+        self.s = ckpt.get_json(STATE)?;
+        load_locals(&mut self.locals, LOCALS, ckpt)
+    }
+
+    fn finish(self, wall_seconds: f64) -> Result<LocalRun> {
+        Ok(LocalRun {
+            curves: self.s.curves,
+            failed_updates: self.s.failed,
+            controllers: self.locals.into_iter().map(|l| l.controller).collect(),
+            wall_seconds,
+        })
+    }
 }
 
 /// What both loops (the local controllers alone, MDGPS) start from: LQR-FLM with the configured
@@ -640,5 +775,50 @@ pub(crate) mod tests {
             &mut |_| {},
         );
         assert!(e.unwrap_err().to_string().contains("condition 0"));
+    }
+
+    /// A run stopped after any iteration resumes from its checkpoint, not from its start, and
+    /// ends exactly as an uninterrupted one, for every method: the GMM prior's data, LQR-FLM's
+    /// step rule, PILQR's multipliers and the generator travel with it. Checkpoints are keyed by
+    /// method; one of another seed is refused.
+    #[test]
+    fn a_run_stopped_after_any_iteration_resumes_to_the_same_record() {
+        let p = problem(&[[1.0, 0.0], [-0.5, 1.0]]);
+        let mut c = cfg(4);
+        c.samples = 6;
+        c.dynamics = TvlgConfig::default();
+        let batch = (2 * c.samples) as u64;
+        for method in LocalMethod::ALL {
+            let whole = train_local(method, &p, &c, 7, &mut Ephemeral, &mut |_| {}).unwrap();
+            for stop_after in 1..c.iterations as u64 {
+                let mut store = InMemory::default();
+                let stop = store.stop_flag();
+                let e = train_local(method, &p, &c, 7, &mut store, &mut |n| {
+                    stop.set(n == stop_after * batch)
+                })
+                .unwrap_err();
+                assert!(matches!(e, AlgoError::Stopped), "{e}");
+                assert_eq!(store.saves() as u64, stop_after);
+                stop.set(false);
+                let mut first = None;
+                let resumed = train_local(method, &p, &c, 7, &mut store, &mut |n| {
+                    first.get_or_insert(n);
+                })
+                .unwrap();
+                let case = format!("{} stopped after {stop_after}", method.name());
+                assert_eq!(first, Some(stop_after * batch + c.samples as u64), "{case}");
+                assert_eq!(resumed.curves, whole.curves, "{case}");
+                assert_eq!(resumed.failed_updates, whole.failed_updates, "{case}");
+                assert_eq!(resumed.controllers, whole.controllers, "{case}");
+            }
+        }
+        let mut store = InMemory::default();
+        train_local(LocalMethod::Pi2, &p, &c, 7, &mut store, &mut |_| {}).unwrap();
+        let e = train_local(LocalMethod::Pi2, &p, &c, 8, &mut store, &mut |_| {}).unwrap_err();
+        assert!(matches!(e, AlgoError::Checkpoint(_)), "{e}");
+        assert!(e.to_string().contains("pi2 seed 7"), "{e}");
+        let other = train_local(LocalMethod::Pilqr, &p, &c, 8, &mut store, &mut |_| {}).unwrap();
+        let fresh = train_local(LocalMethod::Pilqr, &p, &c, 8, &mut Ephemeral, &mut |_| {});
+        assert_eq!(other.curves, fresh.unwrap().curves);
     }
 }

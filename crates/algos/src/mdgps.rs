@@ -24,6 +24,11 @@
 //! After each iteration the global policy's deterministic mean is rolled out from every test
 //! start and the task's measure of the final states averaged: p4 Fig. 4 and 5's "averaged across
 //! N random test conditions per iteration". Test rollouts are evaluation, not counted samples.
+//!
+//! A run is one [`Mdgps`] on the [`drive`]r: it saves itself under `mdgps_<method>` after every
+//! iteration (the local controllers and their optimizers' state, the global policy and its Adam
+//! state, the step rule's, the generator, the curve) and resumes from there with exactly the
+//! numbers of an uninterrupted run.
 
 use nalgebra::{DMatrix, DVector};
 use ndarray::{s, Array2};
@@ -33,11 +38,15 @@ pub use tandem_agents::{PolicyConfig, Weighting};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
 use tandem_models::{DynamicsModel, ModelInput};
-use tandem_nn::{Adam, AdamConfig};
-use tandem_planners::{adjust_step_mult, laplace_cost, TrajectorySamples, TvlgController};
+use tandem_nn::{Adam, AdamConfig, Checkpoint, Checkpointable};
+use tandem_planners::{adjust_step_mult, laplace_cost, LqrFlm, TrajectorySamples, TvlgController};
 
-use super::gps::{start_locals, Local, LocalConfig, LocalMethod, LocalModel, LocalProblem};
+use super::gps::{
+    load_locals, save_locals, start_locals, Local, LocalConfig, LocalMethod, LocalModel,
+    LocalProblem,
+};
 use super::{AlgoError, Checkpoints, Result};
+use crate::driver::{drive, Algorithm};
 
 /// MDGPS's step rule for LQR-FLM local updates (GPS's `AlgorithmMDGPS._stepadjust`, rule
 /// `laplace`): one multiplier `m` of the KL bound `ε m` for all conditions. After each update,
@@ -180,10 +189,13 @@ pub struct MdgpsRun {
     pub failed_updates: usize,
     /// The global policy at the end.
     pub policy: GlobalPolicy,
+    /// Wall time of the run, seconds, summed over every process that ran it.
+    pub wall_seconds: f64,
 }
 
 /// Trains a global policy with MDGPS on `problem`'s conditions, the local controllers updated by
-/// `method`, evaluating it on `test` after every iteration. `progress` receives the samples
+/// `method`, evaluating it on `test` after every iteration, from the checkpoint `store` holds
+/// under `mdgps_<method>` if any, saving after every iteration. `progress` receives the samples
 /// drawn so far.
 pub fn train_mdgps(
     method: LocalMethod,
@@ -194,64 +206,151 @@ pub fn train_mdgps(
     store: &mut dyn Checkpoints,
     progress: &mut dyn FnMut(u64),
 ) -> Result<MdgpsRun> {
-    cfg.validate()?;
-    super::gps::check_problem(problem)?;
-    if test
-        .starts
-        .iter()
-        .any(|x| x.len() != problem.system.state_dim())
-        || test.starts.is_empty()
-    {
-        return Err(AlgoError::Config(
-            "the test set needs at least one start of the system's state dimension".into(),
-        ));
-    }
-    let local = &cfg.local;
-    let (system, horizon) = (&*problem.system, problem.horizon);
-    let (n, m) = (system.state_dim(), system.action_dim());
-    let mut rng = rng_from_seed(seed);
-    let mut policy = GlobalPolicy::new(
-        n,
-        m,
-        &cfg.policy.hidden,
-        local.init_variance,
-        problem.policy_input.clone(),
-        &mut rng,
-    )?;
-    let mut opt = Adam::new(
-        AdamConfig::with_lr(cfg.policy.learning_rate),
-        policy.net().num_params(),
-    )?;
-    let k = problem.conditions.len();
-    let (lqr, mut locals) = start_locals(problem, local)?;
-    let mut curve = Vec::with_capacity(local.iterations);
-    let mut failed = 0;
-    let mut drawn = 0u64;
-    // MDGPS's step rule: the multiplier, and per condition the last anchor and model.
-    let mut mult = 1.0;
-    let mut prev: Vec<Option<(TvlgController, LocalModel)>> = (0..k).map(|_| None).collect();
-    for it in 0..local.iterations {
-        if store.stop_requested() {
-            return Err(AlgoError::Stopped);
+    drive(
+        Mdgps::new(method, problem, test, cfg, seed)?,
+        store,
+        progress,
+    )
+}
+
+/// An MDGPS run as one checkpointable value, stepped one iteration at a time by [`drive`]: the
+/// local controllers with their optimizers' state, the global policy and its optimizer, the step
+/// rule's state, the generator, the curve and the counts. Its events are the samples drawn so far.
+pub struct Mdgps<'a> {
+    method: LocalMethod,
+    /// `mdgps_<method>`: the checkpoint's key.
+    name: String,
+    problem: &'a LocalProblem,
+    test: &'a TestSet,
+    cfg: &'a MdgpsConfig,
+    seed: u64,
+    lqr: LqrFlm,
+    locals: Vec<Local>,
+    policy: GlobalPolicy,
+    opt: Adam,
+    s: MdgpsState,
+}
+
+/// Where an [`Mdgps`] run stands, besides its controllers, policy and optimizer.
+#[derive(Serialize, Deserialize)]
+struct MdgpsState {
+    /// Iterations done.
+    iteration: usize,
+    rng: Rng,
+    curve: Vec<MdgpsPoint>,
+    failed: usize,
+    drawn: u64,
+    /// MDGPS's step rule: the multiplier, and per condition the last anchor and model.
+    mult: f64,
+    prev: Vec<Option<(TvlgController, LocalModel)>>,
+}
+
+const STATE: &str = "mdgps.state";
+const LOCALS: &str = "mdgps.locals";
+const POLICY: &str = "mdgps.policy";
+const OPT: &str = "mdgps.adam";
+
+impl<'a> Mdgps<'a> {
+    /// A fresh run of MDGPS with `method` on `problem` for `seed`, tested on `test`.
+    pub fn new(
+        method: LocalMethod,
+        problem: &'a LocalProblem,
+        test: &'a TestSet,
+        cfg: &'a MdgpsConfig,
+        seed: u64,
+    ) -> Result<Self> {
+        cfg.validate()?;
+        super::gps::check_problem(problem)?;
+        if test
+            .starts
+            .iter()
+            .any(|x| x.len() != problem.system.state_dim())
+            || test.starts.is_empty()
+        {
+            return Err(AlgoError::Config(
+                "the test set needs at least one start of the system's state dimension".into(),
+            ));
         }
+        let (n, m) = (problem.system.state_dim(), problem.system.action_dim());
+        let mut rng = rng_from_seed(seed);
+        let policy = GlobalPolicy::new(
+            n,
+            m,
+            &cfg.policy.hidden,
+            cfg.local.init_variance,
+            problem.policy_input.clone(),
+            &mut rng,
+        )?;
+        let opt = Adam::new(
+            AdamConfig::with_lr(cfg.policy.learning_rate),
+            policy.net().num_params(),
+        )?;
+        let k = problem.conditions.len();
+        let (lqr, locals) = start_locals(problem, &cfg.local)?;
+        Ok(Self {
+            method,
+            name: format!("mdgps_{}", method.name()),
+            problem,
+            test,
+            cfg,
+            seed,
+            lqr,
+            locals,
+            policy,
+            opt,
+            s: MdgpsState {
+                iteration: 0,
+                rng,
+                curve: Vec::with_capacity(cfg.local.iterations),
+                failed: 0,
+                drawn: 0,
+                mult: 1.0,
+                prev: (0..k).map(|_| None).collect(),
+            },
+        })
+    }
+}
+
+impl Algorithm for Mdgps<'_> {
+    type Event = u64;
+    type Record = MdgpsRun;
+    const SUMS_WALL_TIME: bool = true;
+
+    fn id(&self) -> (&str, u64) {
+        (&self.name, self.seed)
+    }
+
+    fn done(&self) -> bool {
+        self.s.iteration >= self.cfg.local.iterations
+    }
+
+    /// One iteration (steps 1 to 4 of the module docs) and the test of the policy it leaves.
+    fn step(&mut self, progress: &mut dyn FnMut(u64), _stop: &dyn Checkpoints) -> Result<bool> {
+        let (method, problem, cfg) = (self.method, self.problem, self.cfg);
+        let (lqr, locals, policy, st) =
+            (&self.lqr, &mut self.locals, &mut self.policy, &mut self.s);
+        let local = &cfg.local;
+        let (system, horizon) = (&*problem.system, problem.horizon);
+        let (n, m) = (system.state_dim(), system.action_dim());
+        let k = problem.conditions.len();
         let mut batches = Vec::with_capacity(k);
         let mut local_sum = 0.0;
         for (c, cond) in problem.conditions.iter().enumerate() {
-            let samples = locals[c].sample(system, cond, local, &mut rng)?;
-            drawn += local.samples as u64;
-            progress(drawn);
+            let samples = locals[c].sample(system, cond, local, &mut st.rng)?;
+            st.drawn += local.samples as u64;
+            progress(st.drawn);
             for i in 0..samples.len() {
                 let x = samples.states.slice(s![i, horizon, ..]).to_vec();
                 local_sum += (problem.measure)(c, &x);
             }
             batches.push(samples);
         }
-        if it == 0 || method == LocalMethod::Pi2 {
+        if st.iteration == 0 || method == LocalMethod::Pi2 {
             // Before the global policy has been trained, plain trajectory optimization; PI²
             // reweights its own samples.
             for (c, cond) in problem.conditions.iter().enumerate() {
-                if !locals[c].improve(method, &batches[c], &cond.objective, &lqr, local)? {
-                    failed += 1;
+                if !locals[c].improve(method, &batches[c], &cond.objective, lqr, local)? {
+                    st.failed += 1;
                 }
             }
         } else {
@@ -259,13 +358,13 @@ pub fn train_mdgps(
             let mut cur = Vec::with_capacity(k);
             for (c, cond) in problem.conditions.iter().enumerate() {
                 let model = locals[c].model(&batches[c], &cond.objective)?;
-                cur.push((linearize(&policy, &batches[c])?, model));
+                cur.push((linearize(policy, &batches[c])?, model));
             }
             let kl_step = if method == LocalMethod::LqrFlm {
                 if cfg.step.adjust {
-                    mult = step_mult(mult, &prev, &cur, &locals, &cfg.step)?;
+                    st.mult = step_mult(st.mult, &st.prev, &cur, locals, &cfg.step)?;
                 }
-                Some(local.trajopt.lqr.kl_step * mult)
+                Some(local.trajopt.lqr.kl_step * st.mult)
             } else {
                 None
             };
@@ -275,17 +374,17 @@ pub fn train_mdgps(
                         method,
                         &batches[c],
                         model,
-                        &lqr,
+                        lqr,
                         anchor,
                         kl_step,
                     )?,
                     None => false,
                 };
                 if !updated {
-                    failed += 1;
+                    st.failed += 1;
                 }
             }
-            prev = cur
+            st.prev = cur
                 .into_iter()
                 .map(|(anchor, model)| model.map(|m| (anchor, m)))
                 .collect();
@@ -313,7 +412,14 @@ pub fn train_mdgps(
         }
         let policy_loss = match cfg.policy.weighting {
             Weighting::Uniform => {
-                let loss = policy.fit(&states, &targets, None, &cfg.policy, &mut opt, &mut rng)?;
+                let loss = policy.fit(
+                    &states,
+                    &targets,
+                    None,
+                    &cfg.policy,
+                    &mut self.opt,
+                    &mut st.rng,
+                )?;
                 // σ²: the local controllers' mean action variance.
                 for a in 0..m {
                     let sum: f64 = locals
@@ -344,24 +450,44 @@ pub fn train_mdgps(
                     &targets,
                     Some(&precisions),
                     &cfg.policy,
-                    &mut opt,
-                    &mut rng,
+                    &mut self.opt,
+                    &mut st.rng,
                 )?
             }
         };
-        curve.push(MdgpsPoint {
-            samples: drawn,
-            test_measure: evaluate(&policy, system, test, horizon, &mut rng)?,
+        st.curve.push(MdgpsPoint {
+            samples: st.drawn,
+            test_measure: evaluate(policy, system, self.test, horizon, &mut st.rng)?,
             local_measure: local_sum / (k * local.samples) as f64,
             policy_loss,
-            step_mult: mult,
+            step_mult: st.mult,
         });
+        st.iteration += 1;
+        Ok(true)
     }
-    Ok(MdgpsRun {
-        curve,
-        failed_updates: failed,
-        policy,
-    })
+
+    fn save(&self, ckpt: &mut Checkpoint) -> Result<()> {
+        ckpt.put_json(STATE, &self.s)?;
+        save_locals(&self.locals, LOCALS, ckpt)?;
+        self.policy.save_to(POLICY, ckpt)?;
+        Ok(self.opt.save_to(OPT, ckpt)?)
+    }
+
+    fn load(&mut self, ckpt: &Checkpoint) -> Result<()> {
+        self.s = ckpt.get_json(STATE)?;
+        load_locals(&mut self.locals, LOCALS, ckpt)?;
+        self.policy.load_from(POLICY, ckpt)?;
+        Ok(self.opt.load_from(OPT, ckpt)?)
+    }
+
+    fn finish(self, wall_seconds: f64) -> Result<MdgpsRun> {
+        Ok(MdgpsRun {
+            curve: self.s.curve,
+            failed_updates: self.s.failed,
+            policy: self.policy,
+            wall_seconds,
+        })
+    }
 }
 
 /// MDGPS's step rule ([`MdgpsStep`]) over the conditions that have both a previous and a current
@@ -449,7 +575,7 @@ impl TestSet {
 mod tests {
     use super::*;
     use crate::gps::tests::{a, b, cfg, problem, riccati_cost, T};
-    use crate::Ephemeral;
+    use crate::{Ephemeral, InMemory};
     use tandem_planners::{sample_trajectories, SampleConfig};
 
     /// The cost of the global policy's mean actions from `x0` on the exact double integrator.
@@ -637,5 +763,73 @@ mod tests {
             }
         }
         assert!(policy.mean(&[0.0; 3], &mut ws).is_err());
+    }
+
+    /// An MDGPS run stopped after any iteration resumes from its checkpoint and ends exactly as
+    /// an uninterrupted one (curve, failures, the policy's parameters and variances), for every
+    /// local method: the local controllers, the policy's network, standardization and Adam state,
+    /// the step rule's multiplier and anchors, and the generator travel with it. A checkpoint of
+    /// another seed is refused.
+    #[test]
+    fn a_run_stopped_after_any_iteration_resumes_to_the_same_record() {
+        let p = problem(&[[1.0, 0.0], [0.0, -1.0]]);
+        let test = TestSet {
+            starts: vec![vec![0.7, 0.3], vec![-0.4, -0.8]],
+            measure: Box::new(|x| x[0].abs()),
+        };
+        let mut c = MdgpsConfig {
+            local: cfg(4),
+            policy: PolicyConfig {
+                hidden: vec![8],
+                epochs: 5,
+                batch_size: 32,
+                learning_rate: 3e-3,
+                weighting: Weighting::Uniform,
+            },
+            step: MdgpsStep {
+                adjust: true,
+                ..Default::default()
+            },
+        };
+        c.local.samples = 5;
+        let batch = (2 * c.local.samples) as u64;
+        for (method, weighting) in [
+            (LocalMethod::LqrFlm, Weighting::Uniform),
+            (LocalMethod::Pi2, Weighting::Precision),
+            (LocalMethod::Pilqr, Weighting::Uniform),
+        ] {
+            c.policy.weighting = weighting;
+            let run = |store: &mut dyn Checkpoints, on: &mut dyn FnMut(u64)| {
+                train_mdgps(method, &p, &test, &c, 3, store, on)
+            };
+            let whole = run(&mut Ephemeral, &mut |_| {}).unwrap();
+            for stop_after in 1..c.local.iterations as u64 {
+                let mut store = InMemory::default();
+                let stop = store.stop_flag();
+                let e = run(&mut store, &mut |n| stop.set(n == stop_after * batch))
+                    .err()
+                    .unwrap();
+                assert!(matches!(e, AlgoError::Stopped), "{e}");
+                stop.set(false);
+                let mut first = None;
+                let resumed = run(&mut store, &mut |n| {
+                    first.get_or_insert(n);
+                })
+                .unwrap();
+                let case = format!("{} stopped after {stop_after}", method.name());
+                assert_eq!(first, Some(stop_after * batch + c.local.samples as u64));
+                assert_eq!(resumed.curve, whole.curve, "{case}");
+                assert_eq!(resumed.failed_updates, whole.failed_updates, "{case}");
+                assert_eq!(resumed.policy.net().params(), whole.policy.net().params());
+                assert_eq!(resumed.policy.variance, whole.policy.variance, "{case}");
+            }
+        }
+        let mut store = InMemory::default();
+        let pi2 = |seed, store: &mut dyn Checkpoints| {
+            train_mdgps(LocalMethod::Pi2, &p, &test, &c, seed, store, &mut |_| {})
+        };
+        pi2(3, &mut store).unwrap();
+        let e = pi2(4, &mut store).err().unwrap();
+        assert!(e.to_string().contains("mdgps_pi2 seed 3"), "{e}");
     }
 }

@@ -12,7 +12,7 @@ use tandem_core::Rng;
 use crate::model::ModelError;
 
 /// A fitted Gaussian mixture over `D`-dimensional points.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Gmm {
     /// Cluster means, `K` vectors of length `D`.
     pub means: Vec<DVector<f64>>,

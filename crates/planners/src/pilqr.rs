@@ -146,6 +146,11 @@ impl Pilqr {
         self.step_mult.clear();
     }
 
+    /// Restores multipliers that [`Pilqr::step_mult`] returned (a resumed run).
+    pub fn set_step_mult(&mut self, step_mult: Vec<f64>) {
+        self.step_mult = step_mult;
+    }
+
     /// One update of `prev` from its `samples` and the dynamics fitted to them, on the quadratic
     /// expansion of `objective` around the samples' mean ([`quadratize_cost`]): the default cost
     /// of [`Pilqr::update_with_cost`].

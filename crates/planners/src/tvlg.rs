@@ -13,7 +13,12 @@ use crate::mpc::fill_normal;
 use crate::objective::{Objective, QuadCost};
 
 /// A TVLG controller `p(u_t | x_t) = N(K_t x_t + k_t, Σ_t)`, `t = 0..T`.
-#[derive(Debug, Clone, PartialEq)]
+///
+/// Serialized as its gains, offsets and covariances; reading it back goes through
+/// [`TvlgController::new`], which checks them and recomputes the factors bit for bit (the
+/// covariances it keeps are already symmetric).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(into = "TvlgParts", try_from = "TvlgParts")]
 pub struct TvlgController {
     /// Gains `K_t` (`A x S`).
     pub gains: Vec<DMatrix<f64>>,
@@ -23,6 +28,31 @@ pub struct TvlgController {
     pub cov: Vec<DMatrix<f64>>,
     chol: Vec<DMatrix<f64>>,
     inv_cov: Vec<DMatrix<f64>>,
+}
+
+/// What a [`TvlgController`] is serialized as.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct TvlgParts {
+    gains: Vec<DMatrix<f64>>,
+    offsets: Vec<DVector<f64>>,
+    cov: Vec<DMatrix<f64>>,
+}
+
+impl From<TvlgController> for TvlgParts {
+    fn from(c: TvlgController) -> Self {
+        Self {
+            gains: c.gains,
+            offsets: c.offsets,
+            cov: c.cov,
+        }
+    }
+}
+
+impl TryFrom<TvlgParts> for TvlgController {
+    type Error = PlanError;
+    fn try_from(p: TvlgParts) -> Result<Self> {
+        Self::new(p.gains, p.offsets, p.cov)
+    }
 }
 
 impl TvlgController {
@@ -313,7 +343,7 @@ pub fn sample_trajectories(
 
 /// A quadratic cost in absolute coordinates, `c(z) ≈ ½ zᵀ C z + cᵀ z + c₀` with `z = [x; u]`
 /// (for the terminal step `z = x`).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct QuadraticCost {
     /// `C_t`, `(S+A) x (S+A)` (terminal: `S x S`).
     pub hess: DMatrix<f64>,

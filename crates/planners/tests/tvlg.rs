@@ -637,3 +637,31 @@ fn pilqr_with_an_externally_supplied_per_step_cost() {
         .is_err());
     assert!(shifted_samples.add_quadratic_costs(&shift[..T]).is_err());
 }
+
+/// A controller read back from JSON equals the one written, factors included (a resumed run
+/// samples with them); covariances that are not positive definite are refused on reading.
+#[test]
+fn a_controller_round_trips_through_json_and_bad_covariances_are_refused() {
+    let t = 4;
+    let gains = (0..t)
+        .map(|i| DMatrix::from_fn(2, 3, |r, c| 0.1 * (i + r) as f64 - 0.3 * c as f64))
+        .collect();
+    let offsets = (0..t)
+        .map(|i| DVector::from_vec(vec![0.7 / (i + 1) as f64, -0.2]))
+        .collect();
+    // Not exactly symmetric on input: the controller keeps the symmetric part.
+    let cov = (0..t)
+        .map(|i| DMatrix::from_row_slice(2, 2, &[1.3 + i as f64, 0.1, 0.1 + 1e-13, 0.7]))
+        .collect();
+    let c = TvlgController::new(gains, offsets, cov).unwrap();
+    let text = serde_json::to_string(&c).unwrap();
+    let back: TvlgController = serde_json::from_str(&text).unwrap();
+    assert_eq!(back, c);
+    assert_eq!(back.chol(2), c.chol(2));
+    assert_eq!(back.inv_cov(3), c.inv_cov(3));
+    let mut bad: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let indefinite = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 1.0]);
+    bad["cov"][1] = serde_json::to_value(indefinite).unwrap();
+    let e = serde_json::from_value::<TvlgController>(bad).unwrap_err();
+    assert!(e.to_string().contains("positive definite"), "{e}");
+}

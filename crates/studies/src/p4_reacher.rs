@@ -14,8 +14,9 @@
 //!   the samples MDGPS-PILQR needs (`ddpg_over_mdgps_pilqr`);
 //! - `fig4.svg`: the test distance against log₁₀ of the samples.
 //!
-//! MDGPS runs take minutes and keep no checkpoints (a resumed study reruns an unfinished one from
-//! its start, with the same numbers); DDPG checkpoints at every measurement.
+//! MDGPS runs take minutes and checkpoint after every iteration ([`tandem_algos::mdgps::Mdgps`]);
+//! DDPG checkpoints at every measurement. A resumed study continues an unfinished run from its
+//! last checkpoint, with the numbers of an uninterrupted run.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -125,7 +126,8 @@ pub struct ReacherRecord {
     pub local_measure: Vec<f64>,
     /// MDGPS: local updates that failed numerically (the controller was kept).
     pub failed_updates: usize,
-    /// Wall time of the run, seconds.
+    /// Wall time of the run, seconds (MDGPS: summed over every process that ran it; DDPG: of the
+    /// last process).
     pub wall_seconds: f64,
 }
 
@@ -196,10 +198,10 @@ impl Study for ReacherStudy {
         progress: &mut dyn FnMut(u64),
     ) -> std::result::Result<ReacherRecord, JobError> {
         let test = reacher_test_set(s.test_conditions, s.test_seed);
-        let start = std::time::Instant::now();
-        let (curve, local_measure, failed_updates) = if run_name == "ddpg" {
+        let (curve, local_measure, failed_updates, wall_seconds) = if run_name == "ddpg" {
+            let start = std::time::Instant::now();
             let curve = train_ddpg_reacher(s.cost, &s.ddpg, &test, seed, store, progress)?;
-            (curve, Vec::new(), 0)
+            (curve, Vec::new(), 0, start.elapsed().as_secs_f64())
         } else {
             let method = run_name
                 .strip_prefix("mdgps_")
@@ -225,7 +227,7 @@ impl Study for ReacherStudy {
                 })
                 .collect();
             let local = run.curve.iter().map(|p| p.local_measure).collect();
-            (curve, local, run.failed_updates)
+            (curve, local, run.failed_updates, run.wall_seconds)
         };
         Ok(ReacherRecord {
             method: run_name.into(),
@@ -233,7 +235,7 @@ impl Study for ReacherStudy {
             curve,
             local_measure,
             failed_updates,
-            wall_seconds: start.elapsed().as_secs_f64(),
+            wall_seconds,
         })
     }
 
