@@ -8,6 +8,14 @@
 //! `return_mean_elites = false`), or the final mean with `return_mean`; the warm start of the next
 //! call is the final mean either way. The sampling noise may be time-correlated (`correlation`)
 //! and drawn at [`Knots`] (held or interpolated between them); mean and σ stay per step.
+//!
+//! With `particles = P > 1`, each sequence is rolled out `P` times and scored by the mean of its
+//! costs (PETS's trajectory sampling). The particles of a sequence are consecutive rows of one
+//! batch: through a [`tandem_models::ProbabilisticEnsemble`] propagating with `FixedMember`
+//! (TS-∞) they are dealt over the elites as evenly as `P` allows (each elite `P/E` times when
+//! `P` is a multiple of the elite count `E`), with `RandomMember` (TS-1) each particle draws a
+//! member at every step, and with `Expectation` they differ only by the model's sampling. The
+//! propagation is the model's setting. Defaults: one particle (PETS uses 20).
 
 use ndarray::{s, Array2, Array3, Axis};
 use tandem_core::{seeding::rng_from_seed, Rng};
@@ -16,7 +24,7 @@ use tandem_models::DynamicsModel;
 use crate::error::Result;
 use crate::mpc::{
     check_problem, clamp_opt, fraction, lowest_k, nonzero, plan_from_actions, positive,
-    rollout_population, warm_start, Bounds, Knots, Plan, Planner,
+    rollout_particles, warm_start, Bounds, Knots, Plan, Planner,
 };
 use crate::objective::Objective;
 
@@ -29,6 +37,9 @@ pub struct CemConfig {
     pub horizon: usize,
     /// Sequences sampled per iteration `N`.
     pub population: usize,
+    /// Rollouts per sequence `P`, its cost their mean (PETS's particles; see
+    /// [`Cem`]'s docs for how they meet an ensemble's members).
+    pub particles: usize,
     /// Fraction of the population kept as elites.
     pub elite_fraction: f64,
     /// Refits per plan.
@@ -58,6 +69,7 @@ impl Default for CemConfig {
         Self {
             horizon: 30,
             population: 500,
+            particles: 1,
             elite_fraction: 0.1,
             iterations: 5,
             alpha: 0.1,
@@ -85,6 +97,7 @@ impl Cem {
     pub fn new(cfg: CemConfig) -> Result<Self> {
         nonzero("horizon", cfg.horizon)?;
         nonzero("population", cfg.population)?;
+        nonzero("particles", cfg.particles)?;
         nonzero("iterations", cfg.iterations)?;
         crate::mpc::correlation(cfg.correlation)?;
         cfg.knots.validate()?;
@@ -173,15 +186,13 @@ impl Planner for Cem {
                 }
                 clamp_opt(&self.cfg.bounds, acts.slice_mut(s![t, .., ..]));
             }
-            let (costs, _) = rollout_population(
+            let costs = rollout_particles(
                 x0,
                 model,
                 objective,
                 &mut self.rng,
                 &mut acts,
-                |_, _, _| Ok(()),
-                None,
-                None,
+                self.cfg.particles,
             )?;
             let elites = lowest_k(&costs, n_elite);
             if best.as_ref().is_none_or(|(c, _)| costs[elites[0]] < *c) {

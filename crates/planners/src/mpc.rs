@@ -482,6 +482,42 @@ pub(crate) fn rollout_population(
     )
 }
 
+/// [`rollout_population`] of open-loop sequences with `particles` rows per sequence, its cost
+/// the mean over them (PETS's trajectory sampling). A sequence's particles are consecutive rows,
+/// so a model that deals its members by row index (the ensemble's `FixedMember`, PETS's TS-∞)
+/// spreads them over its members as evenly as the count allows; one that draws a member per row
+/// and step (`RandomMember`, TS-1) averages over its draws. With one particle this is
+/// [`rollout_population`] itself.
+pub(crate) fn rollout_particles(
+    x0: &[f64],
+    model: &dyn DynamicsModel,
+    objective: &Objective,
+    rng: &mut Rng,
+    actions: &mut Array3<f64>,
+    particles: usize,
+) -> Result<Array1<f64>> {
+    let open_loop = |_: usize, _: ArrayView2<'_, f64>, _: ArrayViewMut2<'_, f64>| Ok(());
+    if particles == 1 {
+        let (costs, _) =
+            rollout_population(x0, model, objective, rng, actions, open_loop, None, None)?;
+        return Ok(costs);
+    }
+    let (h, n, a) = actions.dim();
+    let mut rows = Array3::from_shape_fn((h, n * particles, a), |(t, r, j)| {
+        actions[(t, r / particles, j)]
+    });
+    let (costs, _) =
+        rollout_population(x0, model, objective, rng, &mut rows, open_loop, None, None)?;
+    Ok(Array1::from_iter(
+        costs
+            .as_slice()
+            .expect("a fresh array is contiguous")
+            .chunks(particles)
+            // Shifted by the first particle's cost, so equal costs average to themselves.
+            .map(|c| c[0] + c.iter().map(|v| v - c[0]).sum::<f64>() / particles as f64),
+    ))
+}
+
 /// A slice as a `1 x len` matrix.
 pub(crate) fn one_row(x: &[f64]) -> ArrayView2<'_, f64> {
     ArrayView2::from_shape((1, x.len()), x).expect("a slice is one row")

@@ -17,7 +17,7 @@ use tandem_models::DynamicsModel;
 
 use crate::error::Result;
 use crate::mpc::{
-    add_noise, check_problem, clamp_opt, nonzero, plan_from_actions, positive, rollout_population,
+    add_noise, check_problem, clamp_opt, nonzero, plan_from_actions, positive, rollout_particles,
     warm_start, Bounds, Knots, Noise, Plan, Planner,
 };
 use crate::objective::Objective;
@@ -31,6 +31,9 @@ pub struct MppiConfig {
     pub horizon: usize,
     /// Sampled sequences `N` per update.
     pub samples: usize,
+    /// Rollouts per sequence, its cost their mean (PETS's particles, dealt over an ensemble's
+    /// members as [`crate::Cem`]'s docs say).
+    pub particles: usize,
     /// Temperature `λ > 0`; how it scales with the costs is set by `temperature`.
     pub lambda: f64,
     /// How `λ` enters the weights `exp(−(S_i − min S)/λ_eff)`.
@@ -59,6 +62,7 @@ impl Default for MppiConfig {
         Self {
             horizon: 30,
             samples: 500,
+            particles: 1,
             lambda: 1.0,
             temperature: Temperature::Fixed,
             noise: Noise::Isotropic(1.0),
@@ -152,6 +156,7 @@ impl Mppi {
     pub fn new(cfg: MppiConfig) -> Result<Self> {
         nonzero("horizon", cfg.horizon)?;
         nonzero("samples", cfg.samples)?;
+        nonzero("particles", cfg.particles)?;
         nonzero("iterations", cfg.iterations)?;
         crate::mpc::correlation(cfg.correlation)?;
         cfg.knots.validate()?;
@@ -209,15 +214,13 @@ impl Planner for Mppi {
                 );
                 clamp_opt(&self.cfg.bounds, acts.slice_mut(s![t, .., ..]));
             }
-            let (mut costs, _) = rollout_population(
+            let mut costs = rollout_particles(
                 x0,
                 model,
                 objective,
                 &mut self.rng,
                 &mut acts,
-                |_, _, _| Ok(()),
-                None,
-                None,
+                self.cfg.particles,
             )?;
             if self.cfg.control_cost {
                 for i in 0..n {
