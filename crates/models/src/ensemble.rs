@@ -547,7 +547,7 @@ impl DynamicsModel for ProbabilisticEnsemble {
             Ok(bufs) => bufs,
             Err(_) => &mut fresh,
         };
-        match self.propagation {
+        match input.propagation.unwrap_or(self.propagation) {
             Propagation::Expectation => {
                 self.elite_forwards(&x, b, None, bufs)?;
                 // Mixture moments in original units.
@@ -965,6 +965,12 @@ mod tests {
         let pe = ens.predict(&input, &mut rng_from_seed(4)).unwrap();
         let mean: f64 = (0..4).map(|r| p1.next_states[[r, 0]]).sum::<f64>() / 4.0;
         assert!((pe.next_states[[0, 0]] - mean).abs() < 1e-9);
+        // A batch's own propagation overrides the model's setting, for that call only.
+        let fixed = input
+            .clone()
+            .with_propagation(Some(Propagation::FixedMember));
+        assert_eq!(ens.predict(&fixed, &mut rng_from_seed(6)).unwrap(), p1);
+        assert_eq!(ens.predict(&input, &mut rng_from_seed(6)).unwrap(), pe);
         // Sampling adds noise of the member's variance.
         ens.cfg.sample = true;
         ens.set_propagation(Propagation::FixedMember);

@@ -5,6 +5,7 @@ use ndarray::{Array1, Array2, ArrayView2};
 use tandem_core::Rng;
 
 use crate::data::check_input;
+use crate::ensemble::Propagation;
 
 /// Errors of models: bad data, bad dimensions, a fit that diverged.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -71,12 +72,27 @@ pub struct ModelInput<'a> {
     pub states: ArrayView2<'a, f64>,
     /// Actions, `B x A`.
     pub actions: ArrayView2<'a, f64>,
+    /// How a model of several members propagates this batch, in place of its own setting (a
+    /// planner's choice of PETS's TS-1, TS-∞ or expectation); a model of one member ignores it.
+    pub propagation: Option<Propagation>,
 }
 
 impl<'a> ModelInput<'a> {
-    /// A batch of states and actions.
+    /// A batch of states and actions, propagated as the model is set to.
     pub fn new(states: ArrayView2<'a, f64>, actions: ArrayView2<'a, f64>) -> Self {
-        Self { states, actions }
+        Self {
+            states,
+            actions,
+            propagation: None,
+        }
+    }
+
+    /// The same batch, propagated with `propagation` whatever the model's own setting.
+    pub fn with_propagation(self, propagation: Option<Propagation>) -> Self {
+        Self {
+            propagation,
+            ..self
+        }
     }
 }
 

@@ -15,11 +15,12 @@
 //! (TS-∞) they are dealt over the elites as evenly as `P` allows (each elite `P/E` times when
 //! `P` is a multiple of the elite count `E`), with `RandomMember` (TS-1) each particle draws a
 //! member at every step, and with `Expectation` they differ only by the model's sampling. The
-//! propagation is the model's setting. Defaults: one particle (PETS uses 20).
+//! propagation is the model's own setting unless `propagation` names one. Defaults: one particle
+//! (PETS uses 20), the model's propagation.
 
 use ndarray::{s, Array2, Array3, Axis};
 use tandem_core::{seeding::rng_from_seed, Rng};
-use tandem_models::DynamicsModel;
+use tandem_models::{DynamicsModel, Propagation};
 
 use crate::error::Result;
 use crate::mpc::{
@@ -40,6 +41,9 @@ pub struct CemConfig {
     /// Rollouts per sequence `P`, its cost their mean (PETS's particles; see
     /// [`Cem`]'s docs for how they meet an ensemble's members).
     pub particles: usize,
+    /// How an ensemble propagates the rollouts (`fixed_member`: TS-∞, `random_member`: TS-1,
+    /// `expectation`); `None` keeps the model's own setting.
+    pub propagation: Option<Propagation>,
     /// Fraction of the population kept as elites.
     pub elite_fraction: f64,
     /// Refits per plan.
@@ -70,6 +74,7 @@ impl Default for CemConfig {
             horizon: 30,
             population: 500,
             particles: 1,
+            propagation: None,
             elite_fraction: 0.1,
             iterations: 5,
             alpha: 0.1,
@@ -193,6 +198,7 @@ impl Planner for Cem {
                 &mut self.rng,
                 &mut acts,
                 self.cfg.particles,
+                self.cfg.propagation,
             )?;
             let elites = lowest_k(&costs, n_elite);
             if best.as_ref().is_none_or(|(c, _)| costs[elites[0]] < *c) {

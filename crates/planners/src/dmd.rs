@@ -26,7 +26,7 @@ use tandem_models::DynamicsModel;
 use crate::error::{check_len, PlanError, Result};
 use crate::mpc::{
     add_noise, check_problem, clamp_opt, fraction, lowest_k, nonzero, one_row, plans_from_actions,
-    positive, rollout_starts, warm_start, Bounds, Knots, Noise, Plan, Planner,
+    positive, rollout_starts, warm_start, Bounds, Knots, Noise, Plan, Planner, Rollout,
 };
 use crate::objective::Objective;
 
@@ -295,16 +295,13 @@ impl DmdMpc {
                 clamp_opt(&bounds, u);
                 Ok(())
             };
-            let (costs, _) = rollout_starts(
-                starts,
+            let rollout = Rollout {
                 model,
                 objective,
-                &mut self.rng,
-                &mut acts,
-                act,
-                None,
-                None,
-            )?;
+                propagation: None,
+            };
+            let (costs, _) =
+                rollout_starts(starts, &rollout, &mut self.rng, &mut acts, act, None, None)?;
             let al = self.cfg.step_size;
             for k in 0..p {
                 let rows = s![.., k * n..(k + 1) * n, ..];

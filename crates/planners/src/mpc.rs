@@ -14,7 +14,7 @@ use ndarray::{s, Array1, Array2, Array3, ArrayView2, ArrayViewMut2, Axis};
 use rand::Rng as _;
 use rand_distr::StandardNormal;
 use tandem_core::Rng;
-use tandem_models::{DynamicsModel, ModelInput, Transitions};
+use tandem_models::{DynamicsModel, ModelInput, Propagation, Transitions};
 
 use crate::error::{check_finite, check_len, PlanError, Result};
 use crate::objective::Objective;
@@ -453,41 +453,14 @@ pub(crate) fn predict(
     Ok(pred)
 }
 
-/// Rolls a population out through `model`, one `predict` per step, and returns each sample's
-/// objective value `Σ γ^h c(x_h, u_h) + γ^H c_H(x_H)`.
-///
-/// `actions` is `H x N x A`. Before step `h` the callback `act(h, states, actions_h)` may write
-/// the actions of that step from the current states (a policy proposal); pass a no-op for
-/// open-loop sequences. `states_out`, when given (`(H+1) x N x S`), records the states.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn rollout_population(
-    x0: &[f64],
-    model: &dyn DynamicsModel,
-    objective: &Objective,
-    rng: &mut Rng,
-    actions: &mut Array3<f64>,
-    act: impl FnMut(usize, ArrayView2<'_, f64>, ArrayViewMut2<'_, f64>) -> Result<()>,
-    states_out: Option<&mut Array3<f64>>,
-    running_out: Option<&mut Array2<f64>>,
-) -> Result<(Array1<f64>, Vec<f64>)> {
-    rollout_starts(
-        one_row(x0),
-        model,
-        objective,
-        rng,
-        actions,
-        act,
-        states_out,
-        running_out,
-    )
-}
-
-/// [`rollout_population`] of open-loop sequences with `particles` rows per sequence, its cost
-/// the mean over them (PETS's trajectory sampling). A sequence's particles are consecutive rows,
+/// Rolls open-loop sequences (`actions`, `H x N x A`) out from `x0` with `particles` rows per
+/// sequence and returns each sequence's objective value, the mean over its particles (PETS's
+/// trajectory sampling), the batches propagated as `propagation` says (the model's own setting
+/// when `None`). A sequence's particles are consecutive rows,
 /// so a model that deals its members by row index (the ensemble's `FixedMember`, PETS's TS-∞)
 /// spreads them over its members as evenly as the count allows; one that draws a member per row
-/// and step (`RandomMember`, TS-1) averages over its draws. With one particle this is
-/// [`rollout_population`] itself.
+/// and step (`RandomMember`, TS-1) averages over its draws.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn rollout_particles(
     x0: &[f64],
     model: &dyn DynamicsModel,
@@ -495,19 +468,24 @@ pub(crate) fn rollout_particles(
     rng: &mut Rng,
     actions: &mut Array3<f64>,
     particles: usize,
+    propagation: Option<Propagation>,
 ) -> Result<Array1<f64>> {
     let open_loop = |_: usize, _: ArrayView2<'_, f64>, _: ArrayViewMut2<'_, f64>| Ok(());
+    let start = one_row(x0);
+    let rollout = Rollout {
+        model,
+        objective,
+        propagation,
+    };
     if particles == 1 {
-        let (costs, _) =
-            rollout_population(x0, model, objective, rng, actions, open_loop, None, None)?;
+        let (costs, _) = rollout_starts(start, &rollout, rng, actions, open_loop, None, None)?;
         return Ok(costs);
     }
     let (h, n, a) = actions.dim();
     let mut rows = Array3::from_shape_fn((h, n * particles, a), |(t, r, j)| {
         actions[(t, r / particles, j)]
     });
-    let (costs, _) =
-        rollout_population(x0, model, objective, rng, &mut rows, open_loop, None, None)?;
+    let (costs, _) = rollout_starts(start, &rollout, rng, &mut rows, open_loop, None, None)?;
     Ok(Array1::from_iter(
         costs
             .as_slice()
@@ -523,19 +501,36 @@ pub(crate) fn one_row(x: &[f64]) -> ArrayView2<'_, f64> {
     ArrayView2::from_shape((1, x.len()), x).expect("a slice is one row")
 }
 
-/// [`rollout_population`] from `P` start states at once (`starts`, `P x S`): the `N` samples of `actions` (`H x N x A`, `N` a multiple of
-/// `P`) are start-major, rows `p·N/P .. (p+1)·N/P` starting at `starts[p]`.
-#[allow(clippy::too_many_arguments)]
+/// What a population is rolled out through: the model, the objective that scores it, and how
+/// the model propagates the batches (its own setting when `None`).
+pub(crate) struct Rollout<'a> {
+    pub(crate) model: &'a dyn DynamicsModel,
+    pub(crate) objective: &'a Objective,
+    pub(crate) propagation: Option<Propagation>,
+}
+
+/// Rolls a population out, one `predict` per step, from `P` start states at once (`starts`,
+/// `P x S`), and returns each sample's objective value `Σ γ^h c(x_h, u_h) + γ^H c_H(x_H)`. The
+/// `N` samples of `actions` (`H x N x A`, `N` a multiple of `P`) are start-major, rows
+/// `p·N/P .. (p+1)·N/P` starting at `starts[p]`.
+///
+/// Before step `h` the callback `act(h, states, actions_h)` may write the actions of that step
+/// from the current states (a policy proposal); pass a no-op for open-loop sequences.
+/// `states_out`, when given (`(H+1) x N x S`), records the states.
 pub(crate) fn rollout_starts(
     starts: ArrayView2<'_, f64>,
-    model: &dyn DynamicsModel,
-    objective: &Objective,
+    rollout: &Rollout<'_>,
     rng: &mut Rng,
     actions: &mut Array3<f64>,
     mut act: impl FnMut(usize, ArrayView2<'_, f64>, ArrayViewMut2<'_, f64>) -> Result<()>,
     mut states_out: Option<&mut Array3<f64>>,
     running_out: Option<&mut Array2<f64>>,
 ) -> Result<(Array1<f64>, Vec<f64>)> {
+    let Rollout {
+        model,
+        objective,
+        propagation,
+    } = *rollout;
     let (h_len, n, _) = actions.dim();
     let (p, s_dim) = starts.dim();
     if p == 0 || n % p != 0 {
@@ -557,7 +552,8 @@ pub(crate) fn rollout_starts(
         act(h, states.view(), actions.slice_mut(s![h, .., ..]))?;
         let u = actions.slice(s![h, .., ..]);
         objective.running_batch(states.view(), u, h, &mut step_cost)?;
-        let pred = predict(model, &ModelInput::new(states.view(), u), rng)?;
+        let input = ModelInput::new(states.view(), u).with_propagation(propagation);
+        let pred = predict(model, &input, rng)?;
         if objective.uses_model_reward() {
             let r = pred.rewards.as_ref().ok_or_else(|| {
                 PlanError::Config(
@@ -629,10 +625,14 @@ pub(crate) fn plans_from_actions(
     let (h, p, _) = actions.dim();
     let mut states = Array3::zeros((h + 1, p, starts.ncols()));
     let mut running = Array2::zeros((h, p));
-    let (total, term) = rollout_starts(
-        starts,
+    let rollout = Rollout {
         model,
         objective,
+        propagation: None,
+    };
+    let (total, term) = rollout_starts(
+        starts,
+        &rollout,
         rng,
         &mut actions,
         |_, _, _| Ok(()),

@@ -13,7 +13,7 @@
 
 use ndarray::{s, Array1, Array2, Array3};
 use tandem_core::{seeding::rng_from_seed, Rng};
-use tandem_models::DynamicsModel;
+use tandem_models::{DynamicsModel, Propagation};
 
 use crate::error::Result;
 use crate::mpc::{
@@ -34,6 +34,8 @@ pub struct MppiConfig {
     /// Rollouts per sequence, its cost their mean (PETS's particles, dealt over an ensemble's
     /// members as [`crate::Cem`]'s docs say).
     pub particles: usize,
+    /// How an ensemble propagates the rollouts; `None` keeps the model's own setting.
+    pub propagation: Option<Propagation>,
     /// Temperature `λ > 0`; how it scales with the costs is set by `temperature`.
     pub lambda: f64,
     /// How `λ` enters the weights `exp(−(S_i − min S)/λ_eff)`.
@@ -63,6 +65,7 @@ impl Default for MppiConfig {
             horizon: 30,
             samples: 500,
             particles: 1,
+            propagation: None,
             lambda: 1.0,
             temperature: Temperature::Fixed,
             noise: Noise::Isotropic(1.0),
@@ -221,6 +224,7 @@ impl Planner for Mppi {
                 &mut self.rng,
                 &mut acts,
                 self.cfg.particles,
+                self.cfg.propagation,
             )?;
             if self.cfg.control_cost {
                 for i in 0..n {

@@ -6,9 +6,12 @@ mod common;
 
 use common::LinearModel;
 use ndarray::Array2;
+use std::sync::Mutex;
 use tandem_core::Rng;
+
 use tandem_models::{
-    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
+    DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Propagation,
+    Transitions,
 };
 use tandem_planners::{Bounds, Cem, CemConfig, Mppi, MppiConfig, Noise, Objective, Planner};
 
@@ -120,4 +123,59 @@ fn zero_particles_are_refused() {
         ..MppiConfig::default()
     });
     assert!(mppi.unwrap_err().to_string().contains("particles"));
+}
+
+/// [`TwoWorlds`] that notes how each batch asked to be propagated.
+#[derive(Default)]
+struct Noting(Mutex<Vec<Option<Propagation>>>);
+
+impl DynamicsModel for Noting {
+    fn state_dim(&self) -> usize {
+        1
+    }
+    fn action_dim(&self) -> usize {
+        1
+    }
+    fn predict(&self, input: &ModelInput<'_>, rng: &mut Rng) -> Result<Prediction, ModelError> {
+        self.0.lock().unwrap().push(input.propagation);
+        TwoWorlds.predict(input, rng)
+    }
+    fn fit(&mut self, _: &Transitions, _: &FitConfig) -> Result<FitReport, ModelError> {
+        Ok(FitReport::default())
+    }
+}
+
+#[test]
+fn the_configured_propagation_reaches_every_sampled_batch() {
+    let obj = objective();
+    for propagation in [None, Some(Propagation::Expectation)] {
+        let cem = CemConfig {
+            horizon: H,
+            population: 10,
+            particles: 2,
+            propagation,
+            iterations: 2,
+            ..CemConfig::default()
+        };
+        let mppi = MppiConfig {
+            horizon: H,
+            samples: 10,
+            particles: 2,
+            propagation,
+            ..MppiConfig::default()
+        };
+        let planners: [Box<dyn Planner>; 2] = [
+            Box::new(Cem::new(cem).unwrap()),
+            Box::new(Mppi::new(mppi).unwrap()),
+        ];
+        for (iterations, mut p) in [2, 1].into_iter().zip(planners) {
+            let model = Noting::default();
+            p.plan(&[0.0], &model, &obj).unwrap();
+            let seen = model.0.into_inner().unwrap();
+            // H batches per iteration, then the chosen plan's own rollout (as the model is set).
+            assert_eq!(seen.len(), H * iterations + H);
+            assert!(seen[..H * iterations].iter().all(|p| *p == propagation));
+            assert!(seen[H * iterations..].iter().all(Option::is_none));
+        }
+    }
 }
