@@ -21,6 +21,10 @@
 //!
 //! [`make_env`] and [`registered_envs`] are the registry of every environment: `tandem-envs`'s,
 //! then `tandem-robots`' and gymnasium's MuJoCo tasks (made with the feature `mujoco`).
+//!
+//! [`prelude`] brings the traits and the common types into scope, and the facade re-exports the
+//! versions of [`nalgebra`], [`ndarray`] and [`rand`] that the public API speaks, so a crate that
+//! composes its own pipeline can depend on `tandem` alone.
 
 pub use tandem_agents as agents;
 pub use tandem_algos as algos;
@@ -33,6 +37,55 @@ pub use tandem_nn as nn;
 pub use tandem_planners as planners;
 pub use tandem_robots as robots;
 pub use tandem_studies as studies;
+
+pub use nalgebra;
+pub use ndarray;
+pub use rand;
+
+/// The traits and the types most pipelines use, in one import.
+///
+/// ```
+/// use tandem::prelude::*;
+///
+/// // CEM with 4 particles per sequence plans a pendulum swing through its exact model.
+/// let model = PlantModel::new(GymPendulum::new(GymPendulumParams::default()));
+/// let objective = Objective::new(2, 1, |x, u| 1.0 - x[0].cos() + 1e-3 * u[0] * u[0]);
+/// let mut cem = Cem::new(CemConfig {
+///     horizon: 10,
+///     population: 50,
+///     particles: 4,
+///     bounds: Some(Bounds::symmetric(1, 2.0)),
+///     ..CemConfig::default()
+/// })
+/// .unwrap();
+/// let plan = cem.plan(&[3.0, 0.0], &model, &objective).unwrap();
+/// assert_eq!(plan.actions.dim(), (10, 1));
+/// assert!(plan.total_cost.is_finite());
+/// ```
+pub mod prelude {
+    pub use crate::{make_env, registered_envs};
+    pub use nalgebra::{DMatrix, DVector};
+    pub use ndarray::{Array1, Array2, ArrayView2};
+    pub use rand::{Rng as _, SeedableRng as _};
+    pub use tandem_agents::{
+        Agent, BatchPolicy, Critic, Ddpg, DdpgConfig, Dqn, DqnConfig, EpisodicAgent, Mode,
+        OffPolicyAgent, OffPolicyLoop, Reinforce, ReinforceConfig, ReplayBuffer, Sac, SacConfig,
+    };
+    pub use tandem_algos::driver::{drive, Algorithm};
+    pub use tandem_algos::{AlgoError, Checkpoints, Ephemeral, InMemory, MakeEnv, Problem};
+    pub use tandem_core::seeding::rng_from_seed;
+    pub use tandem_core::{Action, Rng, SeedStream, Space};
+    pub use tandem_dynamics::classic::{CartPole, CartPoleParams, GymPendulum, GymPendulumParams};
+    pub use tandem_dynamics::Plant;
+    pub use tandem_envs::{Env, PlantEnv, Step, Task, TimeLimit};
+    pub use tandem_models::{
+        DynamicsModel, EnsembleConfig, FitConfig, MlpModel, MlpModelConfig, ModelInput, PlantModel,
+        Prediction, ProbabilisticEnsemble, Propagation, Transitions, TransitionsBuilder,
+    };
+    pub use tandem_planners::{
+        Bounds, Cem, CemConfig, Ilqr, IlqrConfig, Mppi, MppiConfig, Objective, Plan, Planner,
+    };
+}
 
 /// The registered environment `id` with its time limit: `tandem-envs`'s own ([`envs::make`]),
 /// then the papers' ([`robots::make`]), then gymnasium's MuJoCo tasks ([`mujoco::make`]; without
