@@ -72,6 +72,7 @@ fn one_epoch(holdout_fraction: f64) -> FitConfig {
         batch_size: 256,
         holdout_fraction,
         seed: 0,
+        early_stop: None,
     }
 }
 

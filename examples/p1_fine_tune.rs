@@ -89,6 +89,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         batch_size: 256,
         holdout_fraction: 0.1,
         seed: seeds.derive("fit"),
+        early_stop: None,
     };
     let report = model.fit(&data, &fit)?;
     println!(

@@ -69,6 +69,7 @@ fn main() -> Result<(), Box<dyn Error>> {
             batch_size: BATCH,
             holdout_fraction: 0.0,
             seed: 0,
+            early_stop: None,
         };
         let mut mlp = MlpModel::new(
             s,

@@ -72,6 +72,7 @@ fn main() -> Result<(), Box<dyn Error>> {
             batch_size: 256,
             holdout_fraction: 0.1,
             seed: refit,
+            early_stop: None,
         };
         model.fit(&train, &fit)?;
         if refit % 5 == 4 {

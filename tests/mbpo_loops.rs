@@ -385,6 +385,7 @@ fn incremental_rollouts_predict_from_the_real_previous_control() {
         batch_size: 32,
         holdout_fraction: 0.2,
         seed: 0,
+        early_stop: None,
     };
     model.fit(&data, &fit).unwrap();
     let mut lp = tiny_sac_loop(task);

@@ -187,6 +187,7 @@ impl Default for P0Config {
                 batch_size: 128,
                 holdout_fraction: 0.1,
                 seed: 0,
+                early_stop: None,
             },
         }
     }

@@ -118,6 +118,7 @@ impl Default for P2Config {
                 batch_size: 32,
                 holdout_fraction: 0.0,
                 seed: 0,
+                early_stop: None,
             },
             judges: Judges::model(),
             max_real_episodes: 2000,

@@ -221,6 +221,7 @@ impl Default for FineTuneConfig {
                 batch_size: 256,
                 holdout_fraction: 0.1,
                 seed: 0,
+                early_stop: None,
             },
         }
     }

@@ -134,6 +134,7 @@ impl Default for MbpoConfig {
                 batch_size: 256,
                 holdout_fraction: 0.2,
                 seed: 0,
+                early_stop: None,
             },
             model_min_updates: 200,
             model_max_updates: None,

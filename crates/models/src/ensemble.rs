@@ -19,7 +19,8 @@ use crate::model::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Transitions,
 };
 use crate::train::{
-    nn_other, nn_train, FitRows, FitSpec, Opt, OptimizerConfig, Standardized, Standardizer, Targets,
+    nn_other, nn_train, FitRows, FitSpec, Opt, OptimizerConfig, Standardized, Standardizer,
+    Stopper, Targets,
 };
 
 /// How a batch is propagated through the ensemble (PETS, Sec. 4.2).
@@ -757,6 +758,9 @@ fn train_members(
         }
         Ok((train_nll, Some((nll, mse))))
     };
+    let mut stop = Stopper::of(cfg, fits.len());
+    let mut kept: Option<(Vec<Member>, Vec<f64>)> = None;
+    let mut hold_nll = vec![f64::NAN; fits.len()];
     for epoch in 0..cfg.epochs {
         let results = map_side_by_side(&mut fits, |fit| member_epoch(epoch, fit));
         // Summed in member order, as one member after the other would.
@@ -767,7 +771,7 @@ fn train_members(
             epoch_train += train_nll;
             if let Some((nll, mse)) = hold {
                 epoch_hold += nll;
-                hold_mse[k] = mse;
+                (hold_nll[k], hold_mse[k]) = (nll, mse);
             }
         }
         let kf = fits.len() as f64;
@@ -775,6 +779,20 @@ fn train_members(
         if !data.holdout.is_empty() {
             report.holdout_loss.push(epoch_hold / kf);
         }
+        if let Some(stop) = stop.as_mut() {
+            if stop.improved(&hold_nll) {
+                let members = fits.iter().map(|f| (*f.member).clone()).collect();
+                kept = Some((members, hold_mse.clone()));
+            }
+            if stop.done() {
+                break;
+            }
+        }
+    }
+    drop(fits);
+    if let Some((best, mse)) = kept {
+        members.clone_from_slice(&best);
+        hold_mse = mse;
     }
     // Elites: lowest held-out MSE (training MSE without a holdout).
     if data.holdout.is_empty() {
@@ -835,6 +853,7 @@ mod tests {
             batch_size: 64,
             holdout_fraction: 0.1,
             seed: 0,
+            early_stop: None,
         };
         let mut ens = ProbabilisticEnsemble::new(1, 1, small(0)).unwrap();
         let rep = ens.fit(&train, &fit).unwrap();
@@ -918,6 +937,44 @@ mod tests {
         assert!(far_hi > 1.2 * hi, "std at 4 {far_hi}, at 0.9 {hi}");
     }
 
+    /// Early stopping over members: the ensemble stops `patience` epochs after the last epoch
+    /// in which some member improved, and keeps all members (and the elites they give) as they
+    /// were then, as a plain fit of that many epochs leaves them.
+    #[test]
+    fn early_stopping_keeps_every_member_at_the_last_improving_epoch() {
+        let data = noisy(300, 4);
+        let patience = 2;
+        let stopping = FitConfig {
+            epochs: 300,
+            batch_size: 32,
+            holdout_fraction: 0.3,
+            early_stop: Some(crate::EarlyStop {
+                patience,
+                improvement_threshold: 0.05,
+            }),
+            ..FitConfig::default()
+        };
+        let mut ens = ProbabilisticEnsemble::new(1, 1, small(2)).unwrap();
+        let rep = ens.fit(&data, &stopping).unwrap();
+        let n = rep.holdout_loss.len();
+        assert!(n < 300, "never stopped");
+        let plain = FitConfig {
+            epochs: n - patience,
+            early_stop: None,
+            ..stopping.clone()
+        };
+        let mut p = ProbabilisticEnsemble::new(1, 1, small(2)).unwrap();
+        let plain_rep = p.fit(&data, &plain).unwrap();
+        assert_eq!(plain_rep.holdout_loss[..], rep.holdout_loss[..n - patience]);
+        assert_eq!(ens.elites(), p.elites());
+        assert_eq!(ens.member_holdout_mse(), p.member_holdout_mse());
+        let s = ndarray::Array2::from_elem((8, 1), 0.3);
+        let a = ndarray::Array2::from_elem((8, 1), -0.2);
+        let input = ModelInput::new(s.view(), a.view());
+        let predict = |m: &ProbabilisticEnsemble| m.predict(&input, &mut rng_from_seed(9)).unwrap();
+        assert_eq!(predict(&ens), predict(&p));
+    }
+
     #[test]
     fn propagation_modes_and_elites() {
         let data = noisy(400, 3);
@@ -927,6 +984,7 @@ mod tests {
             batch_size: 64,
             holdout_fraction: 0.2,
             seed: 0,
+            early_stop: None,
         };
         ens.fit(&data, &fit).unwrap();
         // Elites are the members with the lowest held-out MSE, best first.
@@ -986,6 +1044,7 @@ mod tests {
             batch_size: 32,
             holdout_fraction: 0.2,
             seed: 1,
+            early_stop: None,
         };
         let mut a = ProbabilisticEnsemble::new(1, 1, small(7)).unwrap();
         a.fit(&data, &fit).unwrap();
@@ -1025,6 +1084,7 @@ mod tests {
             batch_size: 64,
             holdout_fraction: 0.2,
             seed: 3,
+            early_stop: None,
         };
         let (s, a) = (
             Array2::from_shape_fn((1200, 1), |(i, _)| (i as f64 / 600.0) - 1.0),
@@ -1125,6 +1185,7 @@ mod tests {
             batch_size: 32,
             holdout_fraction: 0.2,
             seed: 5,
+            early_stop: None,
         };
         let run = |seed: u64| {
             let mut e = ProbabilisticEnsemble::new(1, 1, small(seed)).unwrap();

@@ -492,6 +492,7 @@ mod tests {
             batch_size: 32,
             holdout_fraction: 0.1,
             seed: 0,
+            early_stop: None,
         };
         m.fit(&data, &fit).unwrap();
         let test = static_linear_data(&b, &[0.1, -0.2, 0.3], 10, 10, 2);
@@ -515,6 +516,7 @@ mod tests {
             batch_size: 32,
             holdout_fraction: 0.2,
             seed: 0,
+            early_stop: None,
         };
         let mut m = IncrementalModel::new(3, 2, fast(GainStructure::Full, None)).unwrap();
         m.fit(&data, &fit).unwrap();
@@ -631,6 +633,7 @@ mod tests {
             batch_size: 64,
             holdout_fraction: 0.1,
             seed: 0,
+            early_stop: None,
         };
         m.fit(&train, &fit).unwrap();
         let gains = m.gain(test.states.view()).unwrap();
@@ -669,6 +672,7 @@ mod tests {
             batch_size: 32,
             holdout_fraction: 0.1,
             seed: 0,
+            early_stop: None,
         };
         let rep = m.fit(&data, &fit).unwrap();
         assert!(rep.holdout_loss.last().unwrap() < &1e-3, "{rep:?}");

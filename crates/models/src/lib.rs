@@ -129,8 +129,8 @@ pub use in_actions::InActions;
 pub use incremental::{GainStructure, IncrementalModel, IncrementalModelConfig};
 pub use mlp_model::{MlpModel, MlpModelConfig};
 pub use model::{
-    linearize_fd, DynamicsModel, FitConfig, FitReport, Linearization, ModelError, ModelInput,
-    Prediction, Transitions,
+    linearize_fd, DynamicsModel, EarlyStop, FitConfig, FitReport, Linearization, ModelError,
+    ModelInput, Prediction, Transitions,
 };
 pub use model_env::{
     branched_rollouts, canonical_pair, Imagined, Judge, Judges, ModelEnv, RolloutPolicy,

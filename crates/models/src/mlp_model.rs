@@ -325,6 +325,58 @@ mod tests {
         }
     }
 
+    /// With early stopping, the fit ends `patience` epochs after its last improvement and keeps
+    /// that epoch's weights: it predicts exactly as a plain fit of that many epochs, whose
+    /// losses it repeats. Bad settings and a missing holdout are errors.
+    #[test]
+    fn early_stopping_keeps_the_last_improving_epoch() {
+        let plant = true_pendulum();
+        let (train, test) = (pendulum_data(&plant, 300, 1), pendulum_data(&plant, 100, 2));
+        let patience = 3;
+        let stopping = FitConfig {
+            epochs: 400,
+            batch_size: 32,
+            holdout_fraction: 0.3,
+            early_stop: Some(crate::EarlyStop {
+                patience,
+                improvement_threshold: 0.05,
+            }),
+            ..FitConfig::default()
+        };
+        let mut m = MlpModel::new(2, 1, small(0)).unwrap();
+        let rep = m.fit(&train, &stopping).unwrap();
+        let n = rep.holdout_loss.len();
+        assert!(n < 400, "never stopped");
+        let kept = n - patience;
+        let plain = FitConfig {
+            epochs: kept,
+            early_stop: None,
+            ..stopping.clone()
+        };
+        let mut p = MlpModel::new(2, 1, small(0)).unwrap();
+        let plain_rep = p.fit(&train, &plain).unwrap();
+        assert_eq!(plain_rep.holdout_loss[..], rep.holdout_loss[..kept]);
+        assert_eq!(rmse(&m, &test), rmse(&p, &test));
+        // The epochs after the kept one did not improve it by 5 %.
+        let best = rep.holdout_loss[kept - 1];
+        assert!(rep.holdout_loss[kept..]
+            .iter()
+            .all(|h| (best - h) / best.abs() <= 0.05));
+
+        for (stop, holdout) in [(0, 0.3), (3, 0.0)] {
+            let bad = FitConfig {
+                holdout_fraction: holdout,
+                early_stop: Some(crate::EarlyStop {
+                    patience: stop,
+                    ..Default::default()
+                }),
+                ..stopping.clone()
+            };
+            let e = m.fit(&train, &bad).unwrap_err().to_string();
+            assert!(e.contains("early stopping"), "{e}");
+        }
+    }
+
     #[test]
     fn one_step_error_on_the_pendulum() {
         let plant = true_pendulum();
@@ -336,6 +388,7 @@ mod tests {
             batch_size: 64,
             holdout_fraction: 0.1,
             seed: 0,
+            early_stop: None,
         };
         let rep = m.fit(&train, &fit).unwrap();
         assert_eq!(rep.train_loss.len(), 60);
@@ -355,6 +408,7 @@ mod tests {
             batch_size: 64,
             holdout_fraction: 0.1,
             seed: 1,
+            early_stop: None,
         };
         m.fit(&train, &fit).unwrap();
         let (e, e0) = (rmse(&m, &test), zero_change_rmse(&test));
@@ -427,6 +481,7 @@ mod tests {
             batch_size: 32,
             holdout_fraction: 0.2,
             seed: 9,
+            early_stop: None,
         };
         let run = |seed: u64, fit_seed: u64| {
             let mut m = MlpModel::new(2, 1, small(seed)).unwrap();

@@ -134,6 +134,10 @@ pub struct FitConfig {
     pub holdout_fraction: f64,
     /// Seed for shuffling, dropout and holdout selection.
     pub seed: u64,
+    /// Stop when the held-out loss stops improving, keeping the weights of the last epoch that
+    /// improved it (needs a holdout); `None` trains every epoch and keeps the last.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub early_stop: Option<EarlyStop>,
 }
 
 impl Default for FitConfig {
@@ -143,6 +147,30 @@ impl Default for FitConfig {
             batch_size: 256,
             holdout_fraction: 0.1,
             seed: 0,
+            early_stop: None,
+        }
+    }
+}
+
+/// Early stopping of a fit, as mbrl-lib's `ModelTrainer` does it: an epoch improves when the
+/// held-out loss of some member (the only one, for a single network) falls below that member's
+/// best by more than `improvement_threshold` of its size; after `patience` epochs without one
+/// the fit stops, and the model goes back to the weights of the last epoch that improved.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EarlyStop {
+    /// Epochs without an improvement before the fit stops (at least 1).
+    pub patience: usize,
+    /// The relative drop `(best − loss) / |best|` that counts as an improvement.
+    pub improvement_threshold: f64,
+}
+
+impl Default for EarlyStop {
+    /// mbrl-lib's threshold (0.01) with a patience of 5 epochs.
+    fn default() -> Self {
+        Self {
+            patience: 5,
+            improvement_threshold: 0.01,
         }
     }
 }
@@ -174,7 +202,8 @@ pub struct Linearization {
 ///   previous action, is a model of `[s, a_{t−1}]` (see [`crate::IncrementalModel`]).
 /// * Stochastic behaviour (the ensemble's member choice and sampling) draws from the `rng`
 ///   argument only; its mode is a setting of the model
-///   (`ProbabilisticEnsemble::set_propagation`), so planners stay model-agnostic.
+///   (`ProbabilisticEnsemble::set_propagation`), which a batch may override
+///   ([`ModelInput::with_propagation`]: a planner's particles), so planners stay model-agnostic.
 /// * Linearization ([`DynamicsModel::linearize`]) is what trajectory optimizers (iLQR) need on
 ///   top of stepping: central finite differences of `predict` by default, analytic where a model
 ///   knows better (a [`crate::PlantModel`] uses [`tandem_dynamics::Plant::linearize`]).

@@ -269,6 +269,7 @@ mod tests {
             batch_size: 64,
             holdout_fraction: 0.1,
             seed: 0,
+            early_stop: None,
         };
         let (e_idl, e_res) = residual_gain(cfg, &fit);
         eprintln!(
@@ -286,6 +287,7 @@ mod tests {
             batch_size: 64,
             holdout_fraction: 0.1,
             seed: 0,
+            early_stop: None,
         };
         let (e_idl, e_res) = residual_gain(ResidualModelConfig::default(), &fit);
         eprintln!(

@@ -9,7 +9,7 @@ use tandem_nn::{
 };
 
 use crate::data::holdout_indices;
-use crate::model::{FitConfig, FitReport, ModelError, Transitions};
+use crate::model::{EarlyStop, FitConfig, FitReport, ModelError, Transitions};
 
 /// Which optimizer trains a network, with its settings (serde: `{ adam = { lr = 1e-3, ... } }`).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -203,6 +203,48 @@ impl Standardizer {
     }
 }
 
+/// [`EarlyStop`] as a fit goes: each member's best held-out loss and the epochs since one
+/// improved.
+pub(crate) struct Stopper {
+    cfg: EarlyStop,
+    best: Vec<f64>,
+    since: usize,
+}
+
+impl Stopper {
+    /// The fit's early stopping over `members` held-out losses, if it has one.
+    pub(crate) fn of(cfg: &FitConfig, members: usize) -> Option<Self> {
+        cfg.early_stop.clone().map(|cfg| Self {
+            cfg,
+            best: vec![f64::INFINITY; members],
+            since: 0,
+        })
+    }
+
+    /// Notes an epoch's held-out losses (one per member); whether it improved, so that the
+    /// caller keeps its weights.
+    pub(crate) fn improved(&mut self, losses: &[f64]) -> bool {
+        let mut any = false;
+        for (best, &loss) in self.best.iter_mut().zip(losses) {
+            let better = match best.is_finite() {
+                true => (*best - loss) / best.abs() > self.cfg.improvement_threshold,
+                false => loss.is_finite(),
+            };
+            if better {
+                *best = loss;
+                any = true;
+            }
+        }
+        self.since = if any { 0 } else { self.since + 1 };
+        any
+    }
+
+    /// Whether `patience` epochs went by without an improvement.
+    pub(crate) fn done(&self) -> bool {
+        self.since >= self.cfg.patience
+    }
+}
+
 /// A network with its optimizer state: what a one-network model trains. Checkpointed as
 /// `{prefix}.net` and `{prefix}.opt`.
 #[derive(Debug, Clone)]
@@ -231,6 +273,8 @@ impl Network {
         let mut s = Scratch::default();
         let mut order = rows.train.clone();
         let mut report = FitReport::default();
+        let mut stop = Stopper::of(cfg, 1);
+        let mut kept = None;
         for epoch in 0..cfg.epochs {
             order.shuffle(rng);
             let l = self.run_epoch(obj, rows, &order, cfg.batch_size, rng, epoch, &mut s)?;
@@ -243,7 +287,18 @@ impl Network {
                     return Err(ModelError::Diverged { epoch, step: 0 });
                 }
                 report.holdout_loss.push(h);
+                if let Some(stop) = stop.as_mut() {
+                    if stop.improved(&[h]) {
+                        kept = Some(self.clone());
+                    }
+                    if stop.done() {
+                        break;
+                    }
+                }
             }
+        }
+        if let Some(best) = kept {
+            *self = best;
         }
         Ok(report)
     }
@@ -476,6 +531,21 @@ impl<T: Clone> Standardized<T> {
             holdout.retain(|&i| f.keep[i]);
             if train_rows.is_empty() {
                 return Err(ModelError::Other(f.none_kept.into()));
+            }
+        }
+        if let Some(stop) = &cfg.early_stop {
+            let threshold = stop.improvement_threshold;
+            if stop.patience == 0 || !(threshold >= 0.0 && threshold.is_finite()) {
+                return Err(ModelError::Other(format!(
+                    "early stopping with patience {} and improvement threshold {threshold}: the \
+                     patience must be at least 1 and the threshold finite and at least 0",
+                    stop.patience
+                )));
+            }
+            if holdout.is_empty() {
+                return Err(ModelError::Other(
+                    "early stopping needs held-out rows: raise holdout_fraction above 0".into(),
+                ));
             }
         }
         let [first, second] = spec.inputs;
