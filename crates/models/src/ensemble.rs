@@ -944,27 +944,13 @@ mod tests {
     fn early_stopping_keeps_every_member_at_the_last_improving_epoch() {
         let data = noisy(300, 4);
         let patience = 2;
-        let stopping = FitConfig {
-            epochs: 300,
-            batch_size: 32,
-            holdout_fraction: 0.3,
-            early_stop: Some(crate::EarlyStop {
-                patience,
-                improvement_threshold: 0.05,
-            }),
-            ..FitConfig::default()
-        };
+        let (stopping, plain) = crate::testutil::early_stopping(patience, 300);
         let mut ens = ProbabilisticEnsemble::new(1, 1, small(2)).unwrap();
         let rep = ens.fit(&data, &stopping).unwrap();
         let n = rep.holdout_loss.len();
         assert!(n < 300, "never stopped");
-        let plain = FitConfig {
-            epochs: n - patience,
-            early_stop: None,
-            ..stopping.clone()
-        };
         let mut p = ProbabilisticEnsemble::new(1, 1, small(2)).unwrap();
-        let plain_rep = p.fit(&data, &plain).unwrap();
+        let plain_rep = p.fit(&data, &plain(n - patience)).unwrap();
         assert_eq!(plain_rep.holdout_loss[..], rep.holdout_loss[..n - patience]);
         assert_eq!(ens.elites(), p.elites());
         assert_eq!(ens.member_holdout_mse(), p.member_holdout_mse());

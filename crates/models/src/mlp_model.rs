@@ -333,28 +333,14 @@ mod tests {
         let plant = true_pendulum();
         let (train, test) = (pendulum_data(&plant, 300, 1), pendulum_data(&plant, 100, 2));
         let patience = 3;
-        let stopping = FitConfig {
-            epochs: 400,
-            batch_size: 32,
-            holdout_fraction: 0.3,
-            early_stop: Some(crate::EarlyStop {
-                patience,
-                improvement_threshold: 0.05,
-            }),
-            ..FitConfig::default()
-        };
+        let (stopping, plain) = crate::testutil::early_stopping(patience, 400);
         let mut m = MlpModel::new(2, 1, small(0)).unwrap();
         let rep = m.fit(&train, &stopping).unwrap();
         let n = rep.holdout_loss.len();
         assert!(n < 400, "never stopped");
         let kept = n - patience;
-        let plain = FitConfig {
-            epochs: kept,
-            early_stop: None,
-            ..stopping.clone()
-        };
         let mut p = MlpModel::new(2, 1, small(0)).unwrap();
-        let plain_rep = p.fit(&train, &plain).unwrap();
+        let plain_rep = p.fit(&train, &plain(kept)).unwrap();
         assert_eq!(plain_rep.holdout_loss[..], rep.holdout_loss[..kept]);
         assert_eq!(rmse(&m, &test), rmse(&p, &test));
         // The epochs after the kept one did not improve it by 5 %.

@@ -6,7 +6,7 @@ use tandem_core::seeding::rng_from_seed;
 use tandem_dynamics::classic::{CartPole, GymPendulum, GymPendulumParams};
 use tandem_dynamics::Plant;
 
-use crate::{DynamicsModel, ModelInput, Transitions, TransitionsBuilder};
+use crate::{DynamicsModel, EarlyStop, FitConfig, ModelInput, Transitions, TransitionsBuilder};
 
 /// Gymnasium's pendulum (1 kg), the idealized plant of the tests' idealized/true pair.
 pub(crate) fn idealized_pendulum() -> GymPendulum {
@@ -91,4 +91,31 @@ pub(crate) fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) 
         .build()
         .unwrap()
         .install(f)
+}
+
+/// A fit of up to `epochs` epochs on minibatches of 32 with 30 % held out, stopping early after
+/// `patience` epochs without a 5 % improvement; and the plain fit of its first `kept` epochs.
+pub(crate) fn early_stopping(
+    patience: usize,
+    epochs: usize,
+) -> (FitConfig, impl Fn(usize) -> FitConfig) {
+    let stopping = FitConfig {
+        epochs,
+        batch_size: 32,
+        holdout_fraction: 0.3,
+        early_stop: Some(EarlyStop {
+            patience,
+            improvement_threshold: 0.05,
+        }),
+        ..FitConfig::default()
+    };
+    let plain = {
+        let stopping = stopping.clone();
+        move |kept| FitConfig {
+            epochs: kept,
+            early_stop: None,
+            ..stopping.clone()
+        }
+    };
+    (stopping, plain)
 }
