@@ -21,12 +21,13 @@
 
 use ndarray::{s, Array1, Array2, Array3, ArrayView1, ArrayView2, ArrayView3, ArrayViewMut2, Axis};
 use tandem_core::{seeding::rng_from_seed, Rng};
-use tandem_models::DynamicsModel;
+use tandem_models::{DynamicsModel, Propagation};
 
 use crate::error::{check_len, PlanError, Result};
 use crate::mpc::{
-    add_noise, check_problem, clamp_opt, fraction, lowest_k, nonzero, one_row, plans_from_actions,
-    positive, rollout_starts, warm_start, Bounds, Knots, Noise, Plan, Planner, Rollout,
+    add_noise, check_problem, clamp_opt, fraction, lowest_k, mean_per, nonzero, one_row,
+    plans_from_actions, positive, rollout_starts, warm_start, Bounds, Knots, Noise, Plan, Planner,
+    Rollout,
 };
 use crate::objective::Objective;
 
@@ -66,6 +67,14 @@ pub struct DmdMpcConfig {
     pub horizon: usize,
     /// Sampled sequences `M` per round.
     pub samples: usize,
+    /// Rollouts per sequence, its cost their mean (PETS's particles, dealt over an ensemble's
+    /// members as [`crate::Cem`]'s docs say). With a policy proposal each particle acts on its
+    /// own state, and the sequence's actions are its first particle's.
+    #[serde(skip_serializing_if = "is_one")]
+    pub particles: usize,
+    /// How an ensemble propagates the rollouts; `None` keeps the model's own setting.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub propagation: Option<Propagation>,
     /// Mirror-descent step size `α ∈ (0, 1]` (eq. 9).
     pub step_size: f64,
     /// Utility that weights the samples.
@@ -98,6 +107,8 @@ impl Default for DmdMpcConfig {
         Self {
             horizon: 15,
             samples: 100,
+            particles: 1,
+            propagation: None,
             step_size: 0.8,
             utility: Utility::CemElite {
                 elite_fraction: 0.1,
@@ -137,6 +148,7 @@ impl DmdMpc {
     pub fn new(cfg: DmdMpcConfig) -> Result<Self> {
         nonzero("horizon", cfg.horizon)?;
         nonzero("samples", cfg.samples)?;
+        nonzero("particles", cfg.particles)?;
         nonzero("iterations", cfg.iterations)?;
         crate::mpc::correlation(cfg.correlation)?;
         cfg.knots.validate()?;
@@ -249,8 +261,10 @@ impl DmdMpc {
         let std0: Vec<f64> = (0..a).map(|j| l.row(j).norm()).collect();
         let mut stds = vec![Array2::from_shape_fn((h, a), |(_, j)| std0[j]); p];
         let adapt = self.cfg.adapt_covariance;
+        // Rows are start-major, then sample, then particle.
+        let q = self.cfg.particles;
         let mut z = Array3::zeros((h, n * p, a));
-        let mut acts = Array3::zeros((h, n * p, a));
+        let mut acts = Array3::zeros((h, n * p * q, a));
         for it in 0..self.cfg.iterations {
             crate::mpc::fill_knot_noise(
                 &mut self.rng,
@@ -262,6 +276,16 @@ impl DmdMpc {
             for k in 0..p {
                 z.slice_mut(s![.., k * n, ..]).fill(0.0);
             }
+            // A sample's particles share its noise.
+            let particle_noise;
+            let z = match q {
+                1 => &z,
+                _ => {
+                    particle_noise =
+                        Array3::from_shape_fn((h, n * p * q, a), |(t, r, j)| z[(t, r / q, j)]);
+                    &particle_noise
+                }
+            };
             let bounds = self.cfg.bounds.clone();
             let policy = if it == 0 { proposal } else { None };
             let (means_ref, stds_ref) = (&means, &stds);
@@ -277,14 +301,14 @@ impl DmdMpc {
                         c
                     }
                     None => Array2::from_shape_fn((states.nrows(), a), |(i, j)| {
-                        means_ref[i / n][(t, j)]
+                        means_ref[i / (n * q)][(t, j)]
                     }),
                 };
                 if adapt {
                     let zt = z.slice(s![t, .., ..]);
                     u.zip_mut_with(&centre, |o, c| *o = *c);
                     for i in 0..u.nrows() {
-                        let sd = &stds_ref[i / n];
+                        let sd = &stds_ref[i / (n * q)];
                         for j in 0..a {
                             u[(i, j)] += sd[(t, j)] * zt[(i, j)];
                         }
@@ -298,14 +322,17 @@ impl DmdMpc {
             let rollout = Rollout {
                 model,
                 objective,
-                propagation: None,
+                propagation: self.cfg.propagation,
             };
             let (costs, _) =
                 rollout_starts(starts, &rollout, &mut self.rng, &mut acts, act, None, None)?;
+            let costs = mean_per(costs, q);
+            // Each sample's actions: its first particle's.
+            let sampled = acts.slice(s![.., ..;q, ..]);
             let al = self.cfg.step_size;
             for k in 0..p {
                 let rows = s![.., k * n..(k + 1) * n, ..];
-                let acts_k = acts.slice(rows);
+                let acts_k = sampled.slice(rows);
                 let costs_k = costs.slice(s![k * n..(k + 1) * n]);
                 // μ̃: the noise-free sample (the shifted plan, or the policy's own rollout).
                 let shifted = acts_k.index_axis(Axis(1), 0).to_owned();
@@ -409,4 +436,10 @@ impl Planner for DmdMpc {
         self.mean = None;
         self.rng = rng_from_seed(self.cfg.seed);
     }
+}
+
+/// Serde's test for the default particle count, so settings written before particles existed
+/// stay byte for byte.
+fn is_one(v: &usize) -> bool {
+    *v == 1
 }

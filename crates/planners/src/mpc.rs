@@ -486,14 +486,22 @@ pub(crate) fn rollout_particles(
         actions[(t, r / particles, j)]
     });
     let (costs, _) = rollout_starts(start, &rollout, rng, &mut rows, open_loop, None, None)?;
-    Ok(Array1::from_iter(
+    Ok(mean_per(costs, particles))
+}
+
+/// The mean of each run of `particles` consecutive costs (`costs` itself for one particle).
+pub(crate) fn mean_per(costs: Array1<f64>, particles: usize) -> Array1<f64> {
+    if particles == 1 {
+        return costs;
+    }
+    Array1::from_iter(
         costs
             .as_slice()
             .expect("a fresh array is contiguous")
             .chunks(particles)
             // Shifted by the first particle's cost, so equal costs average to themselves.
             .map(|c| c[0] + c.iter().map(|v| v - c[0]).sum::<f64>() / particles as f64),
-    ))
+    )
 }
 
 /// A slice as a `1 x len` matrix.

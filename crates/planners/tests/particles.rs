@@ -1,4 +1,4 @@
-//! Particles in the sampling planners (PETS's trajectory sampling): a sequence's cost is the mean
+//! Particles in the sampling planners, CEM, MPPI and DMD-MPC (PETS's trajectory sampling): a sequence's cost is the mean
 //! over its rollouts. Truth: a model of two worlds dealt by row index, where only the average
 //! over both has a unique optimum, and a deterministic model, where particles change nothing.
 
@@ -13,7 +13,9 @@ use tandem_models::{
     DynamicsModel, FitConfig, FitReport, ModelError, ModelInput, Prediction, Propagation,
     Transitions,
 };
-use tandem_planners::{Bounds, Cem, CemConfig, Mppi, MppiConfig, Noise, Objective, Planner};
+use tandem_planners::{
+    Bounds, Cem, CemConfig, DmdMpc, DmdMpcConfig, Mppi, MppiConfig, Noise, Objective, Planner,
+};
 
 /// `x' = x + u` in even rows and `x' = x − u` in odd ones: two members dealt by row index, as
 /// an ensemble propagating with `FixedMember` deals its elites.
@@ -72,7 +74,23 @@ fn planners(particles: usize) -> Vec<(&'static str, Box<dyn Planner>)> {
         ..MppiConfig::default()
     })
     .unwrap();
-    vec![("cem", Box::new(cem)), ("mppi", Box::new(mppi))]
+    let dmd = DmdMpc::new(DmdMpcConfig {
+        horizon: H,
+        samples: 300,
+        particles,
+        noise: Noise::Isotropic(0.25),
+        iterations: 6,
+        adapt_covariance: true,
+        bounds: Some(Bounds::symmetric(1, 1.0)),
+        seed: 3,
+        ..DmdMpcConfig::default()
+    })
+    .unwrap();
+    vec![
+        ("cem", Box::new(cem)),
+        ("mppi", Box::new(mppi)),
+        ("dmd", Box::new(dmd)),
+    ]
 }
 
 #[test]
@@ -123,6 +141,11 @@ fn zero_particles_are_refused() {
         ..MppiConfig::default()
     });
     assert!(mppi.unwrap_err().to_string().contains("particles"));
+    let dmd = DmdMpc::new(DmdMpcConfig {
+        particles: 0,
+        ..DmdMpcConfig::default()
+    });
+    assert!(dmd.unwrap_err().to_string().contains("particles"));
 }
 
 /// [`TwoWorlds`] that notes how each batch asked to be propagated.
@@ -164,11 +187,19 @@ fn the_configured_propagation_reaches_every_sampled_batch() {
             propagation,
             ..MppiConfig::default()
         };
-        let planners: [Box<dyn Planner>; 2] = [
+        let dmd = DmdMpcConfig {
+            horizon: H,
+            samples: 10,
+            particles: 2,
+            propagation,
+            ..DmdMpcConfig::default()
+        };
+        let planners: [Box<dyn Planner>; 3] = [
             Box::new(Cem::new(cem).unwrap()),
             Box::new(Mppi::new(mppi).unwrap()),
+            Box::new(DmdMpc::new(dmd).unwrap()),
         ];
-        for (iterations, mut p) in [2, 1].into_iter().zip(planners) {
+        for (iterations, mut p) in [2, 1, 1].into_iter().zip(planners) {
             let model = Noting::default();
             p.plan(&[0.0], &model, &obj).unwrap();
             let seen = model.0.into_inner().unwrap();
