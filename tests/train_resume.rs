@@ -199,7 +199,8 @@ fn sigint_and_sigterm_save_an_interrupted_run_that_resumes_exactly() {
                 .unwrap();
         assert_eq!(summary["status"], "interrupted", "{name}");
         let steps = summary["steps"].as_u64().unwrap();
-        assert!((1..6000).contains(&steps), "{name}: stopped at {steps}");
+        // A signal before the first step stops the run at step 0, saved like any other.
+        assert!(steps < 6000, "{name}: stopped at {steps}");
         assert!(cut.join("checkpoint.safetensors").exists());
 
         let o = resume(&cut, &[]);

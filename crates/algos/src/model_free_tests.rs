@@ -275,6 +275,19 @@ fn a_run_stopped_at_any_step_saves_it_and_resumes_to_the_uninterrupted_run() {
         assert_eq!(cut.saved_at, [40, 70, 80, 101], "{name}");
         stop.set(false);
         let mut store = cut.store;
+        // A stop requested before the first step saves step 0, which resumes like any other.
+        let mut early = InMemory::default();
+        early.stop_flag().set(true);
+        let e = train_on(&cfg, &settings, discrete, (3, 230), &mut early, &mut |_| {});
+        assert!(matches!(e, Err(AlgoError::Stopped)), "{name}");
+        early.stop_flag().set(false);
+        let mut r0 = train_on(&cfg, &settings, discrete, (3, 230), &mut early, &mut |_| {});
+        assert_eq!(
+            r0.as_mut().unwrap().log,
+            w.log,
+            "{name}: resumed from step 0"
+        );
+        assert!(early.files[name] == whole.store.files[name], "{name}");
         let mut r = train_on(&cfg, &settings, discrete, (3, 230), &mut store, &mut |_| {});
         let r = r.as_mut().unwrap();
         assert_eq!(w.log, r.log, "{name}: logs differ after resume");
