@@ -203,8 +203,8 @@ pub struct ModelFree {
     core: Core,
     config: AlgoConfig,
     settings: TrainSettings,
-    steps: u64,
-    seed: u64,
+    /// The step budget.
+    budget: u64,
     seeds: SeedStream,
     env: Box<dyn Env>,
     eval_env: Box<dyn Env>,
@@ -269,8 +269,7 @@ impl ModelFree {
                 pending: Vec::new(),
             },
             settings,
-            steps,
-            seed,
+            budget: steps,
             seeds,
             env,
             eval_env,
@@ -422,11 +421,11 @@ impl Algorithm for ModelFree {
     const SAVES_ON_STOP: bool = true;
 
     fn id(&self) -> (&str, u64) {
-        (self.config.algo().name(), self.seed)
+        (self.config.algo().name(), self.seeds.seed())
     }
 
     fn done(&self) -> bool {
-        self.steps() >= self.steps
+        self.steps() >= self.budget
             || self
                 .settings
                 .max_episodes
