@@ -6,7 +6,7 @@ use tandem_core::{Action, Space};
 use tandem_dynamics::classic::CartPole;
 
 use crate::env::round_to_f32;
-use crate::{PlantEnv, Task};
+use crate::{ObservedTask, PlantEnv, Task};
 
 /// Gymnasium's `CartPole-v1` task over the [`CartPole`] plant:
 ///
@@ -83,6 +83,16 @@ impl Task for CartPoleTask {
     }
     fn max_episode_steps(&self) -> Option<usize> {
         Some(500)
+    }
+}
+
+/// The observation is the state (rounded to `f32`), so the reward and termination read it alike.
+impl ObservedTask for CartPoleTask {
+    fn observation_reward(&self, obs: &[f64], u: &[f64], next_obs: &[f64]) -> f64 {
+        self.reward(obs, u, next_obs)
+    }
+    fn observation_terminated(&self, next_obs: &[f64]) -> bool {
+        self.terminated(next_obs)
     }
 }
 

@@ -30,7 +30,7 @@ pub use pendulum::{angle_normalize, pendulum_reward, PendulumEnv, PendulumTask};
 pub use prev_action::WithPrevAction;
 pub use registry::{make, make_from, make_unwrapped, registered, specs_of, EnvSpec, Registry};
 pub use tandem_core::{Action, Space};
-pub use task::{clip_to, control_dim, PlantEnv, Task, TaskEpisodes};
+pub use task::{clip_to, control_dim, ObservedTask, PlantEnv, Task, TaskEpisodes};
 pub use wrappers::{
     ClipAction, NormalizeObservation, ObservationHook, RescaleAction, RunningNormalizer,
     SampleCount, SampleCounter, TimeLimit, TransformObservation,

@@ -7,7 +7,7 @@ use tandem_core::{Action, Space};
 use tandem_dynamics::classic::{GymPendulum, GymPendulumParams};
 
 use crate::task::clip_to;
-use crate::{PlantEnv, Task};
+use crate::{ObservedTask, PlantEnv, Task};
 
 /// Gymnasium's `angle_normalize`: `((x + π) mod 2π) − π` with numpy's floor modulo, in
 /// `[-π, π)`.
@@ -92,6 +92,14 @@ impl Task for PendulumTask {
     }
 }
 
+/// The reward read off `(cos θ, sin θ, θ̇)`: `θ = atan2(sin θ, cos θ)`, which is already
+/// normalized; it equals [`Task::reward`] up to the observation's `f32` rounding.
+impl ObservedTask for PendulumTask {
+    fn observation_reward(&self, obs: &[f64], u: &[f64], _next_obs: &[f64]) -> f64 {
+        pendulum_reward(&[obs[1].atan2(obs[0]), obs[2]], u[0])
+    }
+}
+
 /// Gymnasium's `Pendulum-v1` without its time limit ([`crate::make`] adds the 200-step
 /// [`crate::TimeLimit`]): a [`PlantEnv`] of [`PendulumTask`] over [`GymPendulum`].
 pub type PendulumEnv = PlantEnv<GymPendulum, PendulumTask>;
@@ -127,6 +135,24 @@ mod tests {
         assert!((angle_normalize(-7.0) - (-7.0 + 2.0 * PI)).abs() < 1e-15);
         let r = angle_normalize(-1e-300);
         assert!((-PI..PI).contains(&r));
+    }
+
+    #[test]
+    fn the_reward_read_off_observations_is_the_steps_reward() {
+        let task = PendulumTask::new(&GymPendulumParams::default());
+        let mut env = PendulumEnv::new();
+        let mut obs = env.reset(Some(3));
+        for t in 0..200 {
+            // Far outside the bounds at times, and unwrapped angles after many turns.
+            let a = 5.0 * (t as f64 * 0.37).sin();
+            let step = env.step(&Action::Continuous(vec![a])).unwrap();
+            let u = task.control(&Action::Continuous(vec![a]));
+            let r = task.observation_reward(&obs, &u, &step.observation);
+            // Equal up to the observation's f32 rounding.
+            assert!((r - step.reward).abs() < 1e-5, "{r} vs {}", step.reward);
+            assert!(!task.observation_terminated(&step.observation));
+            obs = step.observation;
+        }
     }
 
     #[test]

@@ -74,6 +74,23 @@ pub trait Task {
     fn max_episode_steps(&self) -> Option<usize>;
 }
 
+/// A [`Task`] whose reward and termination can also be read off observations, so that a model
+/// learned on observations (PETS's) can be planned through with the task's own score
+/// (`tandem_planners::Objective::from_task_observations`); mbrl-lib's `reward_fns` and
+/// `termination_fns` play this part.
+///
+/// Where an observation leaves out what the reward reads (a locomotion task's x position), the
+/// implementation says how it approximates it.
+pub trait ObservedTask: Task {
+    /// Reward of the transition `obs --u--> next_obs`, `u` being [`Task::control`]'s output.
+    fn observation_reward(&self, obs: &[f64], u: &[f64], next_obs: &[f64]) -> f64;
+
+    /// Whether `next_obs` is terminal. Default: never.
+    fn observation_terminated(&self, _next_obs: &[f64]) -> bool {
+        false
+    }
+}
+
 /// `Task` through a pointer: a boxed task and a borrowed one are tasks.
 macro_rules! forward_task {
     ($($ptr:ty),*) => {$(
@@ -116,6 +133,21 @@ macro_rules! forward_task {
 }
 
 forward_task!(Box<T>, &T);
+
+macro_rules! forward_observed_task {
+    ($($ptr:ty),*) => {$(
+        impl<T: ObservedTask + ?Sized> ObservedTask for $ptr {
+            fn observation_reward(&self, obs: &[f64], u: &[f64], next_obs: &[f64]) -> f64 {
+                (**self).observation_reward(obs, u, next_obs)
+            }
+            fn observation_terminated(&self, next_obs: &[f64]) -> bool {
+                (**self).observation_terminated(next_obs)
+            }
+        }
+    )*};
+}
+
+forward_observed_task!(Box<T>, &T);
 
 /// Clips a continuous action into a box space's bounds (infinite bounds leave it as it is); the
 /// usual [`Task::control`] of a continuous task.

@@ -4,7 +4,7 @@
 
 mod common;
 
-use tandem_envs::{Action, Task};
+use tandem_envs::{Action, ObservedTask, Task};
 use tandem_mujoco::{GymTask, Readout, TaskKind};
 
 fn check(kind: TaskKind) {
@@ -128,4 +128,39 @@ fn the_gym_task_starts_near_qpos0() {
         .all(|(a, b)| (a - b).abs() <= 0.005));
     assert!(!task.terminated(&x));
     assert_eq!(task.max_episode_steps(), Some(1000));
+}
+
+/// The reward and termination read off gymnasium's recorded observations: termination and
+/// InvertedPendulum's reward exactly; the locomotion tasks' forward reward, whose x position the
+/// observation leaves out, within the error of the velocity approximation.
+#[test]
+fn the_gym_task_over_recorded_observations_scores_as_gymnasium() {
+    for (kind, tolerance) in [
+        (TaskKind::HalfCheetah, 0.6),
+        (TaskKind::Hopper, 0.02),
+        (TaskKind::Walker2d, 0.04),
+        (TaskKind::InvertedPendulum, 0.0),
+    ] {
+        let fx = common::load(kind.spec().id);
+        let task = GymTask::new(kind, fx.init_qpos.clone()).unwrap();
+        let mut worst: f64 = 0.0;
+        for ep in &fx.episodes {
+            let mut obs = ep.reset_obs.clone();
+            for (t, s) in ep.steps.iter().enumerate() {
+                let at = format!("{} seed {} step {t}", kind.spec().id, ep.seed);
+                let u = task.control(&Action::Continuous(s.action.clone()));
+                assert_eq!(
+                    task.observation_terminated(&s.obs),
+                    s.terminated,
+                    "{at}: terminated"
+                );
+                if s.action.iter().all(|a| a.abs() <= kind.spec().action_bound) {
+                    let r = task.observation_reward(&obs, &u, &s.obs);
+                    worst = worst.max((r - s.reward).abs());
+                }
+                obs.clone_from(&s.obs);
+            }
+        }
+        assert!(worst <= tolerance, "{}: {worst}", kind.spec().id);
+    }
 }

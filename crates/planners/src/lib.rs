@@ -3,8 +3,9 @@
 //! LQR-FLM, PI², PILQR).
 //!
 //! This crate owns
-//! - [`Objective`]: running cost (optionally time-varying, `c(x, u, t)`), terminal cost, terminal value (`−V`, p3), derivatives
-//!   (analytic or finite differences);
+//! - [`Objective`]: running cost (optionally time-varying, `c(x, u, t)`), transition cost
+//!   `c(x, u, x')` and termination (a task's reward and termination, [`Objective::from_task`]),
+//!   terminal cost, terminal value (`−V`, p3), derivatives (analytic or finite differences);
 //! - [`Planner`] and its implementations [`Cem`], [`Mppi`], [`DmdMpc`], all batched over the
 //!   population (one `predict` call per time step), warm-started by shifting, bounded;
 //! - [`Ilqr`] (also a [`Planner`]) through any [`tandem_models::DynamicsModel`], linearized by
@@ -19,6 +20,7 @@
 //!   ([`Pilqr::update_with_cost`]; by default [`quadratize_cost`] of the [`Objective`]).
 //!
 //! Dependencies: `tandem-models` (the models planned through), `tandem-dynamics` (plants),
+//! `tandem-envs` (tasks, whose reward and termination become objectives),
 //! `ndarray` (populations, horizon x samples x dim), `nalgebra` (gains and small matrices),
 //! `rand`/`rand_distr` (seeded sampling), `serde`, `thiserror`.
 
@@ -47,7 +49,8 @@ pub use lqr_flm::{
 pub use mpc::{Bounds, Interpolation, Knots, Noise, Plan, Planner};
 pub use mppi::{Mppi, MppiConfig, Temperature};
 pub use objective::{
-    CostFn, Objective, QuadCost, QuadTerminal, RunningDerivFn, TerminalDerivFn, TerminalFn, ValueFn,
+    CostFn, Objective, QuadCost, QuadTerminal, RunningDerivFn, TerminalDerivFn, TerminalFn,
+    TerminationFn, TransitionFn, ValueFn,
 };
 pub use pi2::{pi2_update, pi2_update_with_temperatures, pi2_weights, Pi2Config, Pi2Step};
 pub use pilqr::{model_cost_to_go, reparametrize, Pilqr, PilqrConfig, PilqrStep};

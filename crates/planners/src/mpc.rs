@@ -26,8 +26,12 @@ pub struct Plan {
     pub actions: Array2<f64>,
     /// Predicted states `x_0 .. x_H` along `actions`, `(H+1) x S`.
     pub states: Array2<f64>,
-    /// Undiscounted running costs `c(x_h, u_h)` along the plan, length `H`.
+    /// Undiscounted step costs `c(x_h, u_h) + c(x_h, u_h, x_{h+1})` along the plan, length `H`
+    /// (zero after a terminal state).
     pub costs: Array1<f64>,
+    /// The step `h` whose next state `x_{h+1}` is terminal under the objective's termination,
+    /// if the plan reaches one (the states stay there after it).
+    pub terminal_step: Option<usize>,
     /// Terminal cost (including `−V`) at `x_H`.
     pub terminal_cost: f64,
     /// The objective value `Σ γ^h c_h + γ^H c_H` of the plan.
@@ -35,6 +39,22 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// Rolls the action sequence `actions` (`H x A`) out from `x0` through `model` and scores it
+    /// under `objective`: what a planner does for each candidate, for one sequence of the
+    /// caller's.
+    pub fn rollout(
+        x0: &[f64],
+        model: &dyn DynamicsModel,
+        objective: &Objective,
+        actions: &Array2<f64>,
+        rng: &mut Rng,
+    ) -> Result<Plan> {
+        let (_, a) = check_problem(x0, model, objective)?;
+        check_len("actions (columns)", a, actions.ncols())?;
+        nonzero("horizon", actions.nrows())?;
+        plan_from_actions(x0, model, objective, rng, actions)
+    }
+
     /// The action to apply now, `u_0`.
     pub fn first_action(&self) -> Vec<f64> {
         self.actions.row(0).to_vec()
@@ -46,15 +66,20 @@ impl Plan {
     }
 
     /// The planned transitions `(x_h, u_h, r_h = −c_h, x_{h+1})` as a dataset a pipeline can add to
-    /// a replay buffer (p3 Algorithm 1, lines 14–15). Nothing is terminal.
+    /// a replay buffer (p3 Algorithm 1, lines 14–15), up to and including the
+    /// [`Plan::terminal_step`], the one transition marked terminal.
     pub fn transitions(&self) -> Transitions {
-        let h = self.horizon();
+        let h = self.terminal_step.map_or(self.horizon(), |t| t + 1);
+        let mut terminated = Array1::from_elem(h, false);
+        if self.terminal_step.is_some() {
+            terminated[h - 1] = true;
+        }
         Transitions {
             states: self.states.slice(s![..h, ..]).to_owned(),
-            actions: self.actions.clone(),
-            next_states: self.states.slice(s![1.., ..]).to_owned(),
-            rewards: self.costs.mapv(|c| -c),
-            terminated: Array1::from_elem(h, false),
+            actions: self.actions.slice(s![..h, ..]).to_owned(),
+            next_states: self.states.slice(s![1..=h, ..]).to_owned(),
+            rewards: self.costs.slice(s![..h]).mapv(|c| -c),
+            terminated,
         }
     }
 }
@@ -518,7 +543,8 @@ pub(crate) struct Rollout<'a> {
 }
 
 /// Rolls a population out, one `predict` per step, from `P` start states at once (`starts`,
-/// `P x S`), and returns each sample's objective value `Σ γ^h c(x_h, u_h) + γ^H c_H(x_H)`. The
+/// `P x S`), and returns each sample's objective value `Σ γ^h c(x_h, u_h, x_{h+1}) + γ^H
+/// c_H(x_H)`, a sample that reaches a terminal state costing nothing after that step. The
 /// `N` samples of `actions` (`H x N x A`, `N` a multiple of `P`) are start-major, rows
 /// `p·N/P .. (p+1)·N/P` starting at `starts[p]`.
 ///
@@ -553,6 +579,7 @@ pub(crate) fn rollout_starts(
     let gamma = objective.discount();
     let mut disc = 1.0;
     let mut running_out = running_out;
+    let mut ended = objective.has_termination().then(|| vec![false; n]);
     if let Some(so) = states_out.as_deref_mut() {
         so.slice_mut(s![0, .., ..]).assign(&states);
     }
@@ -581,6 +608,19 @@ pub(crate) fn rollout_starts(
                 *c -= rv;
             }
         }
+        let mut next = pred.next_states;
+        objective.add_transition_batch(states.view(), u, next.view(), h, &mut step_cost)?;
+        if let Some(ended) = ended.as_mut() {
+            for (i, done) in ended.iter_mut().enumerate() {
+                if *done {
+                    // An ended sample stays where it ended and costs nothing more.
+                    step_cost[i] = 0.0;
+                    next.row_mut(i).assign(&states.row(i));
+                } else {
+                    *done = objective.terminated(&next.row(i).to_vec());
+                }
+            }
+        }
         for (t, c) in total.iter_mut().zip(&step_cost) {
             *t += disc * c;
         }
@@ -589,7 +629,7 @@ pub(crate) fn rollout_starts(
                 .assign(&ndarray::ArrayView1::from(&step_cost[..]));
         }
         disc *= gamma;
-        states = pred.next_states;
+        states = next;
         if let Some(so) = states_out.as_deref_mut() {
             so.slice_mut(s![h + 1, .., ..]).assign(&states);
         }
@@ -597,6 +637,11 @@ pub(crate) fn rollout_starts(
     let mut term = vec![0.0; n];
     if objective.has_terminal() {
         objective.terminal_batch(states.view(), h_len, &mut term)?;
+        for (i, done) in ended.iter().flatten().enumerate() {
+            if *done {
+                term[i] = 0.0;
+            }
+        }
         for (t, c) in total.iter_mut().zip(&term) {
             *t += disc * c;
         }
@@ -648,12 +693,17 @@ pub(crate) fn plans_from_actions(
         Some(&mut running),
     )?;
     Ok((0..p)
-        .map(|i| Plan {
-            actions: actions.index_axis(Axis(1), i).to_owned(),
-            states: states.index_axis(Axis(1), i).to_owned(),
-            costs: running.column(i).to_owned(),
-            terminal_cost: term[i],
-            total_cost: total[i],
+        .map(|i| {
+            let states = states.index_axis(Axis(1), i).to_owned();
+            let terminal_step = (0..h).find(|&t| objective.terminated(&states.row(t + 1).to_vec()));
+            Plan {
+                actions: actions.index_axis(Axis(1), i).to_owned(),
+                states,
+                costs: running.column(i).to_owned(),
+                terminal_step,
+                terminal_cost: term[i],
+                total_cost: total[i],
+            }
         })
         .collect())
 }

@@ -11,6 +11,14 @@
 //! steps from the start of the plan or trajectory (`h = 0` at `x_0`); a receding-horizon caller
 //! whose cost depends on absolute time builds the objective for the current time at each call.
 //!
+//! A cost may also depend on where a step lands, `c(x_h, u_h, x_{h+1})`
+//! ([`Objective::with_transition_cost`]), and a rollout may end early
+//! ([`Objective::with_termination`]): a sample whose state is terminal accrues no cost after the
+//! step that reached it, as an episode that ends earns no more reward. Both are how a task's
+//! reward and termination become a planning objective ([`Objective::from_task`],
+//! [`Objective::from_task_observations`]). MPC rollouts honour them; the trajectory optimizers,
+//! which expand costs of `(x, u)`, refuse them.
+//!
 //! Derivatives for iLQR and LQR-FLM: analytic when given
 //! ([`Objective::with_running_derivatives`], [`Objective::with_terminal_derivatives`]), central
 //! finite differences otherwise (the numerical twin is also the test oracle of the analytic
@@ -19,10 +27,17 @@
 use nalgebra::{DMatrix, DVector};
 use ndarray::{Array1, Array2, ArrayView2};
 
+use tandem_core::{Action, Space};
+use tandem_envs::{ObservedTask, Task};
+
 use crate::error::{check_finite, check_len, PlanError, Result};
 
 /// Running cost `c(x, u, t)` at time step `t`.
 pub type CostFn = Box<dyn Fn(&[f64], &[f64], usize) -> f64 + Send + Sync>;
+/// Cost of a transition `c(x, u, x')`, added to the running cost of the step.
+pub type TransitionFn = Box<dyn Fn(&[f64], &[f64], &[f64]) -> f64 + Send + Sync>;
+/// Whether a state ends a rollout (a task's termination).
+pub type TerminationFn = Box<dyn Fn(&[f64]) -> bool + Send + Sync>;
 /// Terminal cost `c_H(x)`.
 pub type TerminalFn = Box<dyn Fn(&[f64]) -> f64 + Send + Sync>;
 /// Terminal value over a batch of states (`B x S` in, `B` values out), e.g. a critic `V(x)`.
@@ -76,6 +91,8 @@ pub struct Objective {
     state_dim: usize,
     action_dim: usize,
     running: CostFn,
+    transition: Option<TransitionFn>,
+    termination: Option<TerminationFn>,
     terminal: Option<TerminalFn>,
     value: Option<ValueFn>,
     running_derivs: Option<RunningDerivFn>,
@@ -89,6 +106,8 @@ impl std::fmt::Debug for Objective {
         f.debug_struct("Objective")
             .field("state_dim", &self.state_dim)
             .field("action_dim", &self.action_dim)
+            .field("transition_cost", &self.transition.is_some())
+            .field("termination", &self.termination.is_some())
             .field("terminal", &self.terminal.is_some())
             .field("terminal_value", &self.value.is_some())
             .field(
@@ -127,6 +146,8 @@ impl Objective {
             state_dim,
             action_dim,
             running: Box::new(running),
+            transition: None,
+            termination: None,
             terminal: None,
             value: None,
             running_derivs: None,
@@ -143,6 +164,72 @@ impl Objective {
         reward: impl Fn(&[f64], &[f64]) -> f64 + Send + Sync + 'static,
     ) -> Self {
         Self::new(state_dim, action_dim, move |x, u| -reward(x, u))
+    }
+
+    /// An objective whose cost is the negated reward of each transition, `c(x, u, x') =
+    /// −r(x, u, x')`, for rewards that depend on where a step lands (a forward velocity).
+    pub fn from_transition_reward(
+        state_dim: usize,
+        action_dim: usize,
+        reward: impl Fn(&[f64], &[f64], &[f64]) -> f64 + Send + Sync + 'static,
+    ) -> Self {
+        Self::new(state_dim, action_dim, |_, _| 0.0)
+            .with_transition_cost(move |x, u, next| -reward(x, u, next))
+    }
+
+    /// `task`'s reward (negated) and termination as an objective over the task's states, for a
+    /// model that predicts them (the plant itself, or a model learned on states). Actions are
+    /// the agent's, turned into the plant's input by [`Task::control`] as the environment does.
+    /// An error for a task with discrete actions.
+    pub fn from_task<T: Task + Send + Sync + 'static>(task: T) -> Result<Self> {
+        let action_dim = continuous_dim(task.id(), task.action_space())?;
+        let task = std::sync::Arc::new(task);
+        let ends = task.clone();
+        Ok(
+            Self::from_transition_reward(task.state_dim(), action_dim, move |x, a, next| {
+                task.reward(x, &task.control(&Action::Continuous(a.to_vec())), next)
+            })
+            .with_termination(move |next| ends.terminated(next)),
+        )
+    }
+
+    /// `task`'s reward (negated) and termination read off observations
+    /// ([`ObservedTask`]), as an objective for a model learned on observations (PETS's). An
+    /// error for a task with discrete actions.
+    pub fn from_task_observations<T: ObservedTask + Send + Sync + 'static>(
+        task: T,
+    ) -> Result<Self> {
+        let action_dim = continuous_dim(task.id(), task.action_space())?;
+        let task = std::sync::Arc::new(task);
+        let ends = task.clone();
+        Ok(Self::from_transition_reward(
+            task.observation_space().flat_dim(),
+            action_dim,
+            move |obs, a, next| {
+                let u = task.control(&Action::Continuous(a.to_vec()));
+                task.observation_reward(obs, &u, next)
+            },
+        )
+        .with_termination(move |next| ends.observation_terminated(next)))
+    }
+
+    /// Adds a transition cost `c(x_h, u_h, x_{h+1})` to every step's cost (see the module docs).
+    pub fn with_transition_cost(
+        mut self,
+        cost: impl Fn(&[f64], &[f64], &[f64]) -> f64 + Send + Sync + 'static,
+    ) -> Self {
+        self.transition = Some(Box::new(cost));
+        self
+    }
+
+    /// Ends a rollout's sample at the first state where `terminated` holds: its later steps and
+    /// its terminal cost count zero (see the module docs).
+    pub fn with_termination(
+        mut self,
+        terminated: impl Fn(&[f64]) -> bool + Send + Sync + 'static,
+    ) -> Self {
+        self.termination = Some(Box::new(terminated));
+        self
     }
 
     /// Adds a terminal cost `c_H(x_H)`.
@@ -221,6 +308,63 @@ impl Objective {
     /// Whether rollouts add the model's predicted reward; see [`Objective::with_model_reward`].
     pub fn uses_model_reward(&self) -> bool {
         self.model_reward
+    }
+
+    /// Whether the cost depends only on `(x, u)` at each step and rollouts never end early: what
+    /// the trajectory optimizers, which expand costs of `(x, u)`, require. An error naming what
+    /// they cannot use otherwise.
+    pub fn check_stagewise(&self) -> Result<()> {
+        let what = match (&self.transition, &self.termination) {
+            (Some(_), _) => "a transition cost c(x, u, x')",
+            (None, Some(_)) => "a termination",
+            (None, None) => return Ok(()),
+        };
+        Err(PlanError::Config(format!(
+            "this objective has {what}; trajectory optimizers expand costs of (x, u) only, so \
+             plan it with a sampling planner (CEM, MPPI, DMD-MPC)"
+        )))
+    }
+
+    /// Whether rollouts end a sample at a terminal state; see [`Objective::with_termination`].
+    pub fn has_termination(&self) -> bool {
+        self.termination.is_some()
+    }
+
+    /// Adds the transition costs of a batch (`B x S` states, `B x A` actions, `B x S` next
+    /// states) at time step `step` to `out` (length `B`); nothing without a transition cost.
+    pub fn add_transition_batch(
+        &self,
+        states: ArrayView2<'_, f64>,
+        actions: ArrayView2<'_, f64>,
+        next: ArrayView2<'_, f64>,
+        step: usize,
+        out: &mut [f64],
+    ) -> Result<()> {
+        let Some(cost) = &self.transition else {
+            return Ok(());
+        };
+        check_len(
+            "objective next states (columns)",
+            self.state_dim,
+            next.ncols(),
+        )?;
+        check_len("objective next states (rows)", states.nrows(), next.nrows())?;
+        check_len("objective output", states.nrows(), out.len())?;
+        let mut xb = vec![0.0; self.state_dim];
+        let mut ub = vec![0.0; self.action_dim];
+        let mut nb = vec![0.0; self.state_dim];
+        for (i, o) in out.iter_mut().enumerate() {
+            let x = row_slice(states, i, &mut xb);
+            let u = row_slice(actions, i, &mut ub);
+            let n = row_slice(next, i, &mut nb);
+            *o += finite_cost("transition cost", i, step, cost(x, u, n))?;
+        }
+        Ok(())
+    }
+
+    /// Whether `state` ends a rollout (false without a termination).
+    pub fn terminated(&self, state: &[f64]) -> bool {
+        self.termination.as_ref().is_some_and(|t| t(state))
     }
 
     /// Whether a terminal cost or value is set.
@@ -302,6 +446,7 @@ impl Objective {
     /// given, otherwise central finite differences (step `1e-4·max(1, |z_i|)`, about 1e-7
     /// accurate for smooth costs).
     pub fn running_quadratic(&self, x: &[f64], u: &[f64], t: usize) -> Result<QuadCost> {
+        self.check_stagewise()?;
         check_len("objective state", self.state_dim, x.len())?;
         check_len("objective action", self.action_dim, u.len())?;
         let (n, m) = (self.state_dim, self.action_dim);
@@ -344,6 +489,7 @@ impl Objective {
 
     /// Second-order expansion of the terminal cost (including `−V`) at `x`.
     pub fn terminal_quadratic(&self, x: &[f64]) -> Result<QuadTerminal> {
+        self.check_stagewise()?;
         check_len("objective state", self.state_dim, x.len())?;
         let n = self.state_dim;
         if let Some(d) = &self.terminal_derivs {
@@ -369,6 +515,17 @@ impl Objective {
         })?;
         Ok(QuadTerminal { c, cx, cxx })
     }
+}
+
+/// The length of a continuous action space; an error for a discrete one, which planners over
+/// action sequences cannot search.
+fn continuous_dim(env: &str, space: &Space) -> Result<usize> {
+    if space.is_discrete() {
+        return Err(PlanError::Config(format!(
+            "{env} has discrete actions; the planners search continuous action sequences"
+        )));
+    }
+    Ok(space.flat_dim())
 }
 
 fn finite_cost(what: &'static str, sample: usize, step: usize, value: f64) -> Result<f64> {

@@ -277,6 +277,7 @@ pub fn sample_trajectories(
         system.action_dim(),
     )?;
     check_len("initial state", n, x0.len())?;
+    objective.check_stagewise()?;
     crate::mpc::nonzero("samples", cfg.samples)?;
     let ns = cfg.samples;
     let mut noise = Array3::zeros((ns, t_len, m));
