@@ -77,10 +77,11 @@ pub mod prelude {
     pub use tandem_core::{Action, Rng, SeedStream, Space};
     pub use tandem_dynamics::classic::{CartPole, CartPoleParams, GymPendulum, GymPendulumParams};
     pub use tandem_dynamics::Plant;
-    pub use tandem_envs::{Env, PlantEnv, Step, Task, TimeLimit};
+    pub use tandem_envs::{Env, FnTask, ObservedTask, PlantEnv, Step, Task, TimeLimit};
     pub use tandem_models::{
-        DynamicsModel, EnsembleConfig, FitConfig, MlpModel, MlpModelConfig, ModelInput, PlantModel,
-        Prediction, ProbabilisticEnsemble, Propagation, Transitions, TransitionsBuilder,
+        DynamicsModel, EarlyStop, EnsembleConfig, FitConfig, MlpModel, MlpModelConfig, ModelInput,
+        PlantModel, Prediction, ProbabilisticEnsemble, Propagation, Transitions,
+        TransitionsBuilder,
     };
     pub use tandem_planners::{
         Bounds, Cem, CemConfig, Ilqr, IlqrConfig, Mppi, MppiConfig, Objective, Plan, Planner,
@@ -113,3 +114,9 @@ pub fn registered_envs() -> Vec<envs::EnvSpec> {
     specs.extend(mujoco::registered());
     specs
 }
+
+/// The code of `docs/compose.md`, built and run as doc-tests so the page cannot drift from the
+/// API.
+#[cfg(doctest)]
+#[doc = include_str!("../docs/compose.md")]
+pub struct ComposeDocs;

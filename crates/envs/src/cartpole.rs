@@ -96,8 +96,8 @@ impl ObservedTask for CartPoleTask {
     }
 }
 
-/// Gymnasium's `CartPole-v1` without its time limit ([`crate::make`] adds the 500-step
-/// [`crate::TimeLimit`]): a [`PlantEnv`] of [`CartPoleTask`] over [`CartPole`].
+/// Gymnasium's `CartPole-v1`, truncated at 500 steps by its task: a [`PlantEnv`] of
+/// [`CartPoleTask`] over [`CartPole`].
 pub type CartPoleEnv = PlantEnv<CartPole, CartPoleTask>;
 
 impl Default for CartPoleEnv {

@@ -116,8 +116,8 @@ pub trait Env {
     /// returns its observation.
     fn set_state(&mut self, state: &[f64]) -> Result<Vec<f64>, EnvError>;
 
-    /// The episode length after which the environment truncates, if it has one (set by
-    /// [`crate::TimeLimit`]). Base environments never truncate and return `None`.
+    /// The episode length after which the environment truncates, if it has one (a
+    /// [`crate::PlantEnv`]'s task's, or a [`crate::TimeLimit`]'s). Default: `None`, never.
     fn max_episode_steps(&self) -> Option<usize> {
         None
     }

@@ -100,8 +100,8 @@ impl ObservedTask for PendulumTask {
     }
 }
 
-/// Gymnasium's `Pendulum-v1` without its time limit ([`crate::make`] adds the 200-step
-/// [`crate::TimeLimit`]): a [`PlantEnv`] of [`PendulumTask`] over [`GymPendulum`].
+/// Gymnasium's `Pendulum-v1`, truncated at 200 steps by its task: a [`PlantEnv`] of
+/// [`PendulumTask`] over [`GymPendulum`].
 pub type PendulumEnv = PlantEnv<GymPendulum, PendulumTask>;
 
 impl Default for PendulumEnv {

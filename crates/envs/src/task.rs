@@ -45,18 +45,29 @@ pub trait Task {
     /// Space of actions the agent picks from.
     fn action_space(&self) -> &Space;
 
-    /// Length of the state.
-    fn state_dim(&self) -> usize;
+    /// Length of the state. Default: the observation's, for a task that observes its state as it
+    /// is (the default [`Task::observe`]).
+    fn state_dim(&self) -> usize {
+        self.observation_space().flat_dim()
+    }
 
     /// The plant input for `action` (an element of [`Task::action_space`]): clipped into the
-    /// plant's limits, or a discrete choice turned into a force.
-    fn control(&self, action: &Action) -> Vec<f64>;
+    /// plant's limits, or a discrete choice turned into a force. Default: a continuous action
+    /// clipped into the action space's box ([`clip_to`]), a discrete one as its index.
+    fn control(&self, action: &Action) -> Vec<f64> {
+        match action {
+            Action::Continuous(a) => clip_to(self.action_space(), a),
+            Action::Discrete(i) => vec![*i as f64],
+        }
+    }
 
     /// The state an episode starts from, drawn from `rng` where the start is random.
     fn initial_state(&self, rng: &mut Rng) -> Vec<f64>;
 
-    /// The observation of `state`.
-    fn observe(&self, state: &[f64]) -> Vec<f64>;
+    /// The observation of `state`. Default: the state as it is.
+    fn observe(&self, state: &[f64]) -> Vec<f64> {
+        state.to_vec()
+    }
 
     /// Maps a state to its canonical representative in place (wrapping angles), so that a
     /// learned model sees states from a bounded range. Default: nothing to do.
@@ -70,8 +81,10 @@ pub trait Task {
         false
     }
 
-    /// The episode length after which the registered environment truncates.
-    fn max_episode_steps(&self) -> Option<usize>;
+    /// The episode length after which the environment truncates. Default: `None`, never.
+    fn max_episode_steps(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// A [`Task`] whose reward and termination can also be read off observations, so that a model
@@ -221,9 +234,9 @@ pub fn control_dim<T: Task + ?Sized>(task: &T) -> usize {
     task.control(&probe).len()
 }
 
-/// An environment stepping a [`Plant`] under a [`Task`], with gymnasium's semantics. It does not
-/// truncate by itself: [`crate::make`] (or the caller) adds a [`crate::TimeLimit`] of
-/// [`Task::max_episode_steps`].
+/// An environment stepping a [`Plant`] under a [`Task`], with gymnasium's semantics. It
+/// truncates episodes at [`Task::max_episode_steps`] as gymnasium's `TimeLimit` does: the step
+/// that reaches the limit has `truncated = true`, and stepping again needs a reset.
 ///
 /// `reset(Some(seed))` reseeds the environment's generator, which draws the initial state;
 /// `reset(None)` continues it.
@@ -234,6 +247,7 @@ pub struct PlantEnv<P, T> {
     state: Vec<f64>,
     next: Vec<f64>,
     phase: Phase,
+    elapsed: usize,
 }
 
 impl<P: Plant, T: Task> PlantEnv<P, T> {
@@ -260,6 +274,7 @@ impl<P: Plant, T: Task> PlantEnv<P, T> {
             state: vec![0.0; n],
             next: vec![0.0; n],
             phase: Phase::NotReset,
+            elapsed: 0,
         })
     }
 
@@ -290,25 +305,39 @@ impl<P: Plant, T: Task> Env for PlantEnv<P, T> {
     fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
         self.state = self.episodes.initial_state(seed);
         self.phase = Phase::Running;
+        self.elapsed = 0;
         self.task().observe(&self.state)
     }
 
     fn step(&mut self, action: &Action) -> Result<Step, EnvError> {
         self.phase.check(self.task().id())?;
         let u = self.episodes.control(action)?;
+        if self.state.len() != self.next.len() {
+            // Only a task's initial state can be of the wrong length: set_state checks its own.
+            return Err(EnvError::InvalidState {
+                env: self.task().id().to_string(),
+                reason: format!(
+                    "the task's initial state has {} components, its state_dim is {}",
+                    self.state.len(),
+                    self.next.len()
+                ),
+            });
+        }
         let task = self.episodes.task();
         self.plant.step_into(&self.state, &u, &mut self.next);
         let reward = task.reward(&self.state, &u, &self.next);
         let terminated = task.terminated(&self.next);
         std::mem::swap(&mut self.state, &mut self.next);
-        if terminated {
+        self.elapsed += 1;
+        let truncated = task.max_episode_steps().is_some_and(|m| self.elapsed >= m);
+        if terminated || truncated {
             self.phase = Phase::Ended;
         }
         Ok(Step {
             observation: task.observe(&self.state),
             reward,
             terminated,
-            truncated: false,
+            truncated,
         })
     }
 
@@ -320,7 +349,12 @@ impl<P: Plant, T: Task> Env for PlantEnv<P, T> {
         self.episodes.check_state(state)?;
         self.state.copy_from_slice(state);
         self.phase = Phase::Running;
+        self.elapsed = 0;
         Ok(self.task().observe(&self.state))
+    }
+
+    fn max_episode_steps(&self) -> Option<usize> {
+        self.task().max_episode_steps()
     }
 }
 
@@ -338,6 +372,26 @@ mod tests {
         assert!(err.to_string().contains("states of 2"), "{err}");
         let task = PendulumTask::new(&GymPendulumParams::default());
         assert!(PlantEnv::from_parts(CartPole::default(), task).is_err());
+    }
+
+    #[test]
+    fn a_task_env_truncates_at_its_tasks_limit_and_then_needs_a_reset() {
+        let mut env = crate::PendulumEnv::new();
+        assert_eq!(env.max_episode_steps(), Some(200));
+        for round in 0..2 {
+            env.reset(Some(round));
+            for t in 1..=200 {
+                let st = env.step(&Action::Continuous(vec![0.0])).unwrap();
+                assert_eq!(st.truncated, t == 200, "step {t}");
+            }
+            let err = env.step(&Action::Continuous(vec![0.0])).unwrap_err();
+            assert!(matches!(err, EnvError::NeedsReset { .. }), "{err}");
+        }
+        // Setting the state starts a new episode, with a new count.
+        env.set_state(&[0.1, 0.0]).unwrap();
+        for _ in 0..199 {
+            assert!(!env.step(&Action::Continuous(vec![0.0])).unwrap().truncated);
+        }
     }
 
     #[test]

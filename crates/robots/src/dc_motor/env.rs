@@ -104,8 +104,8 @@ impl Task for DcMotorPendulumTask {
     }
 }
 
-/// The p0 swing-up over [`DcMotorPendulum`], without its time limit ([`crate::make`] adds the
-/// 400-step [`tandem_envs::TimeLimit`]): a [`PlantEnv`] of [`DcMotorPendulumTask`].
+/// The p0 swing-up over [`DcMotorPendulum`], truncated at 400 steps by its task: a [`PlantEnv`]
+/// of [`DcMotorPendulumTask`].
 pub type DcMotorPendulumEnv = PlantEnv<DcMotorPendulum, DcMotorPendulumTask>;
 
 /// The ids and constructors of [`DcMotorPendulumEnv`]. A trait: the environment is `tandem-envs`'

@@ -414,8 +414,8 @@ impl Task for Leg2RTask {
     }
 }
 
-/// p3's leg task without its time limit ([`crate::make`] adds the 1000-step
-/// [`tandem_envs::TimeLimit`]): a [`PlantEnv`] of [`Leg2RTask`] over the [`Clocked`] leg.
+/// p3's leg task, truncated at its configured episode length (1000 steps by default) by its
+/// task: a [`PlantEnv`] of [`Leg2RTask`] over the [`Clocked`] leg.
 pub type Leg2REnv = PlantEnv<Clocked<RigidBodyPlant>, Leg2RTask>;
 
 /// The ids and constructors of [`Leg2REnv`]. A trait: the environment is `tandem-envs`'
