@@ -26,6 +26,8 @@
 //! versions of [`nalgebra`], [`ndarray`] and [`rand`] that the public API speaks, so a crate that
 //! composes its own pipeline can depend on `tandem` alone.
 
+#![warn(missing_docs)]
+
 pub use tandem_agents as agents;
 pub use tandem_algos as algos;
 pub use tandem_core as core;
@@ -114,6 +116,12 @@ pub fn registered_envs() -> Vec<envs::EnvSpec> {
     specs.extend(mujoco::registered());
     specs
 }
+
+/// The README's Rust blocks, compiled and run as doc-tests (`cargo test --doc -p tandem`), so
+/// that its quickstart keeps working.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;
 
 /// The code of `docs/compose.md`, built and run as doc-tests so the page cannot drift from the
 /// API.

@@ -42,6 +42,7 @@
 //! (seeded exploration and sampling), `serde`/`serde_json`/`toml` (configs, checkpoint payloads),
 //! `thiserror`.
 
+#![warn(missing_docs)]
 // Index loops over several parallel columns read closer to the equations than zipped iterators.
 #![allow(clippy::needless_range_loop)]
 

@@ -33,6 +33,8 @@
 //! checkpoint payloads), `thiserror` (the error type), `toml` (p2's maze reads the DQN preset it
 //! shares with `tandem train`).
 
+#![warn(missing_docs)]
+
 pub mod difference_models;
 pub mod driver;
 pub mod dyna;

@@ -9,6 +9,8 @@
 //! checkpoint can store its exact state), `serde` (spaces and actions appear in configs and run
 //! files), `thiserror` (the error type).
 
+#![warn(missing_docs)]
+
 pub mod curve;
 pub mod normalizer;
 pub mod schedule;

@@ -24,6 +24,8 @@
 //! joint angles: inlinable and free of glibc's rounding-mode save and restore, it made the CRBA on
 //! the 7-DoF arm ~7% faster; musl's kernels, under 1 ulp).
 
+#![warn(missing_docs)]
+
 pub mod actuators;
 pub mod classic;
 mod clock;

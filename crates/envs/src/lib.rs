@@ -18,6 +18,8 @@
 //! Dependencies: `tandem-core` (spaces, actions, seeding), `tandem-dynamics` (the plants tasks
 //! run on), `rand` (seeded resets), `thiserror` (errors).
 
+#![warn(missing_docs)]
+
 mod cartpole;
 mod env;
 mod fn_task;

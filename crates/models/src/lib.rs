@@ -105,6 +105,8 @@
 //! so faer is not used), `rand`/`rand_distr` (seeded sampling), `serde`, `thiserror`. An
 //! ensemble's members forward and train side by side through `tandem-nn`'s row dealing.
 
+#![warn(missing_docs)]
+
 mod data;
 mod ensemble;
 mod gmm;

@@ -28,6 +28,8 @@
 //! p4's own MJCF scenes (pusher, door) and their tasks are `tandem-robots`' (`p4`), built on the
 //! `Scene`/`MujocoPlant` here.
 
+#![warn(missing_docs)]
+
 mod gym_task;
 pub mod numpy;
 mod registry;

@@ -111,6 +111,8 @@
 //! `serde_json` (JSON payloads inside checkpoints), `thiserror`, `rayon` (two-thread task
 //! parallelism; already in the tree through candle and gemm).
 
+#![warn(missing_docs)]
+
 pub mod budget;
 pub mod candle_ext;
 pub mod checkpoint;

@@ -24,6 +24,7 @@
 //! `ndarray` (populations, horizon x samples x dim), `nalgebra` (gains and small matrices),
 //! `rand`/`rand_distr` (seeded sampling), `serde`, `thiserror`.
 
+#![warn(missing_docs)]
 // Index loops read closest to the papers' equations in this numeric code.
 #![allow(clippy::needless_range_loop)]
 

@@ -24,6 +24,8 @@
 //! formulas), `nalgebra` (plant vectors), `rand` (seeded resets), `serde` (parameters and costs
 //! in recorded settings).
 
+#![warn(missing_docs)]
+
 pub mod dc_motor;
 pub mod leg2r;
 pub mod leo;

@@ -31,6 +31,8 @@
 //! `clap` so that every study's command line flattens the one [`StudyArgs`], `indicatif` for the
 //! progress bars, `signal-hook` for [`interrupt`], and `thiserror` for [`Error`].
 
+#![warn(missing_docs)]
+
 pub mod harness;
 pub mod interrupt;
 pub mod p0;

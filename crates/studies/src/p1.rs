@@ -15,7 +15,7 @@
 
 use std::path::Path;
 
-use crate::report::{Figure, MarkdownText};
+use crate::report::{words, Figure, MarkdownText};
 use crate::run::RunDir;
 use serde::{Deserialize, Serialize};
 use tandem_algos::incremental_dyna::{run, Method, P1Config};
@@ -229,22 +229,22 @@ fn markdown(t: &crate::report::Table, s: &P1Settings, records: &[RunRecord], wal
     let closing = vec![
         format!(
             "{}, minibatches {} % real data for the model-based methods; models refit every {} \
-             real steps on all real data; MBPO an ensemble of {} ({} elites) of {:?}, {} \
+             real steps on all real data; MBPO an ensemble of {} ({} elites) of {}, {} \
              rollouts per real step of length {} → {}; Dyna-SAC the incremental model \
-             `s + L(s, a_prev) Δa` ({:?} {:?} units, {:?} L), {} one-step rollouts per real \
+             `s + L(s, a_prev) Δa` ({} {} units, {} L), {} one-step rollouts per real \
              step, the task's reward.",
             loop_sentence(b),
             b.real_ratio * 100.0,
             b.model_train_freq,
             b.ensemble.members,
             b.ensemble.elites,
-            b.ensemble.hidden,
+            words::list(&b.ensemble.hidden),
             b.rollouts_per_step,
             b.rollout_length.start,
             b.rollout_length.end,
-            m.hidden,
-            m.activation,
-            m.structure,
+            words::list(&m.hidden),
+            words::activation(m.activation),
+            words::gain_structure(m.structure),
             b.rollouts_per_step,
         ),
         target_sentence(t, s.target_method.as_deref(), &LABELS),

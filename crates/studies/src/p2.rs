@@ -30,7 +30,7 @@
 
 use std::path::Path;
 
-use crate::report::{ensure_finite, to_json_pretty, Curve, Figure, SamplesToTarget};
+use crate::report::{ensure_finite, to_json_pretty, words, Curve, Figure, SamplesToTarget};
 use crate::run::RunDir;
 use serde::{Deserialize, Serialize};
 use tandem_algos::imagined_episodes::{cartpole, Event, Method, P2Config, RunRecord};
@@ -242,19 +242,19 @@ impl Settings {
     fn describe(&self) -> String {
         match self {
             Settings::CartPole(cfg) => format!(
-                "REINFORCE {:?} hidden, Adam {}, γ = {}, {:?} baseline, an update every {} \
-                 episode(s); model {:?} hidden, {:?}; the first {} episodes real only, then {} \
+                "REINFORCE {} hidden, Adam {}, γ = {}, {}, an update every {} \
+                 episode(s); model {} hidden, {}; the first {} episodes real only, then {} \
                  imagined per {} real; model refit every {} real episode(s), {} epoch(s) over at \
                  most {} real transitions drawn from all, minibatch {}; at most {} real episodes \
                  per run, each run stops once solved (later points of the curves average the \
                  seeds still running)",
-                cfg.reinforce.hidden,
+                words::list(&cfg.reinforce.hidden),
                 cfg.reinforce.learning_rate,
                 cfg.reinforce.gamma,
-                cfg.reinforce.baseline,
+                words::baseline(&cfg.reinforce.baseline),
                 cfg.reinforce.episodes_per_update,
-                cfg.model.hidden,
-                cfg.model.optimizer,
+                words::list(&cfg.model.hidden),
+                words::optimizer(&cfg.model.optimizer),
                 cfg.real_only_episodes,
                 cfg.imagined_per_cycle,
                 cfg.real_per_cycle,
@@ -265,18 +265,18 @@ impl Settings {
                 cfg.max_real_episodes,
             ),
             Settings::Maze { runs: c, quality } => format!(
-                "DQN (conv Q-network {:?} channels, {:?} hidden; Adam {}, constant; γ = {}; \
+                "DQN (conv Q-network {} channels, {} hidden; Adam {}, constant; γ = {}; \
                  double DQN; replay {}; ε {} → {} over {} agent steps, imagined steps \
                  included; an update every {} steps after {} warm-up steps; target copy every \
-                 {}); pixel model {:?} channels, {} features, {} factors, {:?}, threshold {}; \
+                 {}); pixel model {} channels, {} features, {} factors, {}, threshold {}; \
                  the first {} episodes real only, then {} imagined per {} real, imagined \
                  transitions in the same replay buffer; model refit every {} real episode(s), \
                  {} minibatches of {} drawn from all real transitions; at most {} real episodes \
                  per run, each run stops once solved. F1 experiment: a with-model run of seed(s) \
-                 {:?} that goes on past solved; copies of the model after {:?} real episodes, \
+                 {} that goes on past solved; copies of the model after {} real episodes, \
                  each scored on the next {} real episodes",
-                c.dqn.conv.channels,
-                c.dqn.hidden,
+                words::list(&c.dqn.conv.channels),
+                words::list(&c.dqn.hidden),
                 c.dqn.learning_rate,
                 c.dqn.gamma,
                 c.dqn.buffer_size,
@@ -286,10 +286,10 @@ impl Settings {
                 c.dqn.train_freq,
                 c.dqn.learning_starts,
                 c.dqn.target_update_interval,
-                c.model.channels,
+                words::list(&c.model.channels),
                 c.model.features,
                 c.model.factors,
-                c.model.optimizer,
+                words::optimizer(&c.model.optimizer),
                 c.model.threshold,
                 c.real_only_episodes,
                 c.imagined_per_cycle,
@@ -298,8 +298,8 @@ impl Settings {
                 c.fit.steps,
                 c.fit.batch_size,
                 c.max_real_episodes,
-                quality.seeds,
-                quality.checkpoints,
+                words::list(&quality.seeds),
+                words::list(&quality.checkpoints),
                 quality.heldout_episodes,
             ),
         }
@@ -959,6 +959,38 @@ mod tests {
             ["after_10", "after_100", "after_300"]
         );
         assert_eq!(to_json_pretty(&t).unwrap().trim_end(), text.trim_end());
+    }
+
+    /// The settings line of every committed p2 table, including those whose runs are not
+    /// committed and so cannot be merged again, is what `describe` writes today for the
+    /// settings its `config.json` records.
+    #[test]
+    fn the_committed_tables_state_their_settings_as_described() {
+        let dirs = [
+            (
+                include_str!("../../../results/p2-cartpole/config.json"),
+                include_str!("../../../results/p2-cartpole/table.md"),
+            ),
+            (
+                include_str!("../../../results/p2-maze/config.json"),
+                include_str!("../../../results/p2-maze/table.md"),
+            ),
+            (
+                include_str!("../../../results/p2-maze-v1/layers/full/config.json"),
+                include_str!("../../../results/p2-maze-v1/layers/full/table.md"),
+            ),
+            (
+                include_str!("../../../results/p2-maze-v1/layers/strided/config.json"),
+                include_str!("../../../results/p2-maze-v1/layers/strided/table.md"),
+            ),
+        ];
+        for (config, table) in dirs {
+            let config: serde_json::Value = serde_json::from_str(config).unwrap();
+            let settings: Settings = serde_json::from_value(config["config"].clone()).unwrap();
+            let line = format!("Settings: {}.", settings.describe());
+            assert!(table.contains(&line), "{line}\nnot in\n{table}");
+            assert!(!line.contains("Config {"), "{line}");
+        }
     }
 
     /// The committed results (`results/p2-cartpole/`) read back as a table.

@@ -15,7 +15,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::report::{Comparison, Figure, MarkdownText, MethodFigures, SeedRun, Table};
+use crate::report::{words, Comparison, Figure, MarkdownText, MethodFigures, SeedRun, Table};
 use crate::run::RunDir;
 use serde::{Deserialize, Serialize};
 use tandem_algos::m_demorl::{run, Method, P3Config};
@@ -515,14 +515,14 @@ pub fn table(records: &[RunRecord], s: &P3Settings) -> Table {
 pub(crate) fn loop_sentence(b: &MbpoConfig) -> String {
     format!(
         "All methods take {} real steps ({} epochs of {}), evaluated every {} with {} \
-         deterministic episodes (not counted); SAC {:?} hidden units, {} random steps, {} \
+         deterministic episodes (not counted); SAC {} hidden units, {} random steps, {} \
          updates per real step",
         b.real_steps,
         b.real_steps / b.epoch_length,
         b.epoch_length,
         b.eval_every,
         b.eval_episodes,
-        b.sac.hidden,
+        words::list(&b.sac.hidden),
         b.sac.learning_starts,
         b.updates_per_step,
     )
@@ -662,14 +662,14 @@ pub fn markdown(t: &Table, s: &P3Settings, records: &[RunRecord], wall: f64) -> 
     let b = &s.p3.base;
     let closing = vec![
         format!(
-            "{}; the model an ensemble of {} ({} elites) of {:?}, refit every {} real steps; \
+            "{}; the model an ensemble of {} ({} elites) of {}, refit every {} real steps; \
              MBPO {} rollouts per real step, {} % real data in SAC's minibatches; M-DeMoRL {} \
              sampled sequences, H {} → {} over epochs {}–{}, up to {} MPC transitions an \
              epoch, {} % real data in SAC's minibatches.{}",
             loop_sentence(b),
             b.ensemble.members,
             b.ensemble.elites,
-            b.ensemble.hidden,
+            words::list(&b.ensemble.hidden),
             b.model_train_freq,
             b.rollouts_per_step,
             b.real_ratio * 100.0,

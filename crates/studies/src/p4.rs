@@ -22,6 +22,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use crate::report::words::reals;
 use crate::report::{mean_stderr, to_json_pretty, Curve, Figure, SamplesToTarget};
 use crate::run::RunDir;
 use serde::de::DeserializeOwned;
@@ -97,13 +98,14 @@ impl P4Task for Pusher {
     fn conditions() -> Vec<String> {
         PUSHER_CONDITIONS
             .iter()
-            .map(|c| format!("block {:?} → goal {:?}", c.block, c.goal))
+            .map(|c| format!("block {} → goal {}", reals(&c.block), reals(&c.goal)))
             .collect()
     }
     fn headline() -> String {
         format!(
-            "the hard condition (p4 Fig. 3): block at {:?}, goal at {:?}",
-            PUSHER_CONDITIONS[PUSHER_HARD].block, PUSHER_CONDITIONS[PUSHER_HARD].goal
+            "the hard condition (p4 Fig. 3): block at {}, goal at {}",
+            reals(&PUSHER_CONDITIONS[PUSHER_HARD].block),
+            reals(&PUSHER_CONDITIONS[PUSHER_HARD].goal)
         )
     }
     fn headline_of(measures: &[f64]) -> f64 {

@@ -18,6 +18,7 @@ use serde_json::Value;
 use crate::run::{svg_chart, Series};
 
 pub mod gait;
+pub mod words;
 
 pub use finite::{ensure_finite, to_json_pretty, NonFinite};
 
