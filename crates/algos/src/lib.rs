@@ -14,6 +14,7 @@
 //! | [`imagined_pixels`] | the same, DQN from pixels (p2) | the same loop for an off-policy agent on p2's maze, with the pixel model; the pixel model's F1 experiment |
 //! | [`gps`] | Chebotar et al., PILQR (and GPS; p4) | one TVLG controller per condition, improved from its own samples by LQR-FLM, PI² or PILQR |
 //! | [`mdgps`] | Montgomery and Levine, MDGPS (p4 §IV) | a neural global policy regressed onto the local controllers, each updated under a KL bound to the linearized global policy |
+//! | [`pets`] | Chua et al., PETS | one random episode, then CEM-MPC through a probabilistic ensemble of the observation change with particles (TS-∞ or TS-1), scored by the task's reward over observations; the ensemble refitted on all data after each episode |
 //! | [`model_free`] | any of the four agents alone (`tandem train`) | DDPG, SAC or DQN on the shared off-policy loop, or REINFORCE on whole episodes; periodic deterministic evaluation |
 //! | [`manipulation`] | p4's tasks | the gripper pusher's, the door's and the reacher's conditions and costs on MuJoCo for [`gps`] and [`mdgps`]; DDPG on the reacher, measured on the same test targets |
 //!
@@ -47,6 +48,7 @@ pub mod manipulation;
 pub mod mbpo;
 pub mod mdgps;
 pub mod model_free;
+pub mod pets;
 
 use tandem_agents::AgentError;
 use tandem_envs::EnvError;
