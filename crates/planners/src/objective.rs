@@ -182,15 +182,8 @@ impl Objective {
     /// the agent's, turned into the plant's input by [`Task::control`] as the environment does.
     /// An error for a task with discrete actions.
     pub fn from_task<T: Task + Send + Sync + 'static>(task: T) -> Result<Self> {
-        let action_dim = continuous_dim(task.id(), task.action_space())?;
-        let task = std::sync::Arc::new(task);
-        let ends = task.clone();
-        Ok(
-            Self::from_transition_reward(task.state_dim(), action_dim, move |x, a, next| {
-                task.reward(x, &task.control(&Action::Continuous(a.to_vec())), next)
-            })
-            .with_termination(move |next| ends.terminated(next)),
-        )
+        let state_dim = task.state_dim();
+        Self::task_objective(task, state_dim, T::reward, T::terminated)
     }
 
     /// `task`'s reward (negated) and termination read off observations
@@ -199,18 +192,33 @@ impl Objective {
     pub fn from_task_observations<T: ObservedTask + Send + Sync + 'static>(
         task: T,
     ) -> Result<Self> {
+        let obs_dim = task.observation_space().flat_dim();
+        Self::task_objective(
+            task,
+            obs_dim,
+            T::observation_reward,
+            T::observation_terminated,
+        )
+    }
+
+    /// The negated `reward(task, x, u, x')` and `terminated(task, x')` of a task over states of
+    /// length `state_dim`, the agent's actions turned into plant inputs by [`Task::control`].
+    fn task_objective<T: Task + Send + Sync + 'static>(
+        task: T,
+        state_dim: usize,
+        reward: fn(&T, &[f64], &[f64], &[f64]) -> f64,
+        terminated: fn(&T, &[f64]) -> bool,
+    ) -> Result<Self> {
         let action_dim = continuous_dim(task.id(), task.action_space())?;
         let task = std::sync::Arc::new(task);
         let ends = task.clone();
-        Ok(Self::from_transition_reward(
-            task.observation_space().flat_dim(),
-            action_dim,
-            move |obs, a, next| {
+        Ok(
+            Self::from_transition_reward(state_dim, action_dim, move |x, a, next| {
                 let u = task.control(&Action::Continuous(a.to_vec()));
-                task.observation_reward(obs, &u, next)
-            },
+                reward(&task, x, &u, next)
+            })
+            .with_termination(move |next| terminated(&ends, next)),
         )
-        .with_termination(move |next| ends.observation_terminated(next)))
     }
 
     /// Adds a transition cost `c(x_h, u_h, x_{h+1})` to every step's cost (see the module docs).
