@@ -94,6 +94,11 @@ fn reproduce_config_survives_mutated_toml() {
 }
 
 #[test]
+fn every_study_config_is_checked_without_a_crash() {
+    fuzz_target("study_config", Vec::new());
+}
+
+#[test]
 fn env_replay_survives_mutated_json() {
     fuzz_target("env_replay", Vec::new());
 }

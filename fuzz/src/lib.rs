@@ -1,5 +1,5 @@
 //! Fuzz targets for the inputs a user hands the `tandem` program: URDF files, the TOML configs
-//! of `tandem train --config` and `tandem reproduce p0-pendulum --config`, the JSON state and
+//! of `tandem train --config` and `tandem reproduce <study> --config`, the JSON state and
 //! actions of `tandem env replay`, and checkpoint bytes (`--resume`).
 //!
 //! Each target is a plain `fn(&[u8])` that runs the program's own code on the input (the
@@ -33,12 +33,13 @@ use tandem::nn::Checkpoint;
 pub type Target = fn(&[u8]);
 
 /// The targets by name, as `cargo fuzz run` and `fuzz/corpus/<name>/` call them.
-pub const TARGETS: [(&str, Target); 5] = [
+pub const TARGETS: [(&str, Target); 6] = [
     ("urdf", urdf),
     ("train_config", train_config),
     ("reproduce_config", reproduce_config),
     ("env_replay", env_replay),
     ("checkpoint", checkpoint),
+    ("study_config", study_config),
 ];
 
 /// Agents whose estimate is below this are built (allocated, initialized) by the config target;
@@ -212,4 +213,136 @@ pub fn checkpoint(data: &[u8]) {
     for mut run in small_runs() {
         let _ = run.load(&ckpt);
     }
+}
+
+/// Values a study-config input sets its chosen settings to: the edges of ranges, of `i64` and of
+/// `f64`, products that wrap around, and strings, arrays and tables where numbers belong.
+const STUDY_VALUES: &[&str] = &[
+    "0",
+    "1",
+    "-1",
+    "2",
+    "7",
+    "0.5",
+    "0.50001",
+    "1e-12",
+    "-1e-12",
+    "1e10",
+    "1e12",
+    "1e300",
+    "-1e300",
+    "inf",
+    "-inf",
+    "nan",
+    "1000000000000",
+    "4611686018427387904",
+    "9223372036854775807",
+    "-9223372036854775808",
+    "true",
+    "\"\"",
+    "\"Nope-v0\"",
+    "\"HalfCheetah-v5\"",
+    "[]",
+    "[0]",
+    "[0.5, 0.50001]",
+    "[100000, 100000, 100000]",
+    "[30000, 30000]",
+    "[2, 1000000]",
+    "{}",
+];
+
+/// The leaves of `v` as TOML key paths (`p3.base.ensemble.members`, array elements as the
+/// array's path), each once.
+fn leaves(prefix: &str, v: &toml::Value, out: &mut Vec<String>) {
+    match v {
+        toml::Value::Table(t) => {
+            for (k, x) in t {
+                let path = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                leaves(&path, x, out);
+            }
+        }
+        _ => out.push(prefix.to_string()),
+    }
+}
+
+/// Every study's settings (quick and full) as key paths, computed once.
+fn study_keys() -> &'static Vec<(String, bool, Vec<String>)> {
+    static KEYS: std::sync::OnceLock<Vec<(String, bool, Vec<String>)>> = std::sync::OnceLock::new();
+    KEYS.get_or_init(|| {
+        let mut all = Vec::new();
+        for name in tandem::studies::study_names() {
+            for quick in [true, false] {
+                let args = tandem::studies::StudyArgs {
+                    quick,
+                    ..Default::default()
+                };
+                let opts = tandem::studies::StudyOptions::default();
+                // Studies that need MuJoCo have no settings without it: their keys stay empty
+                // and their inputs exercise the error paths.
+                let mut keys = Vec::new();
+                if let Ok(c) = tandem::studies::check_study(&name, &opts, &args) {
+                    if let Ok(v) = toml::Value::try_from(&c.settings) {
+                        leaves("", &v, &mut keys);
+                    }
+                }
+                all.push((name.clone(), quick, keys));
+            }
+        }
+        all
+    })
+}
+
+/// `tandem reproduce <study> --config FILE --check` for every study: the whole settings check
+/// (ranges, products of settings, seeds, the memory of the parallel jobs), which must answer
+/// with the settings or an error, never a panic, an overflow or an allocation.
+///
+/// Byte 0 picks the study and `--quick`; byte 1 the seeds (`--first-seed` near `u64::MAX` for
+/// some); then each group of 2 bytes sets one of the study's own settings to one of
+/// [`STUDY_VALUES`], until a byte `0xff`, after which the rest is appended as raw TOML.
+pub fn study_config(data: &[u8]) {
+    let keys = study_keys();
+    let Some((&pick, rest)) = data.split_first() else {
+        return;
+    };
+    let (name, quick, leaves) = &keys[pick as usize % keys.len()];
+    let (seeds, rest) = rest.split_first().unwrap_or((&0, &[]));
+    let (recipe, raw) = match rest.iter().position(|&b| b == 0xff) {
+        Some(k) => (&rest[..k], &rest[k + 1..]),
+        None => (rest, &[][..]),
+    };
+    let mut text = String::new();
+    if !leaves.is_empty() {
+        for pair in recipe.chunks_exact(2) {
+            let key = &leaves[pair[0] as usize % leaves.len()];
+            let value = STUDY_VALUES[pair[1] as usize % STUDY_VALUES.len()];
+            // A dotted key sets one leaf and keeps the rest of its tables.
+            let quoted: Vec<String> = key.split('.').map(|k| format!("\"{k}\"")).collect();
+            text.push_str(&format!("{} = {value}\n", quoted.join(".")));
+        }
+    }
+    text.push_str(&String::from_utf8_lossy(raw));
+    thread_local! {
+        static FILE: std::path::PathBuf = std::env::temp_dir().join(format!(
+            "tandem-fuzz-study-{}-{:?}.toml",
+            std::process::id(),
+            std::thread::current().id()
+        ));
+    }
+    let path = FILE.with(|p| p.clone());
+    if std::fs::write(&path, &text).is_err() {
+        return;
+    }
+    let args = tandem::studies::StudyArgs {
+        quick: *quick,
+        config: Some(path),
+        seeds: Some(u64::from(seeds % 4) + 1),
+        first_seed: (seeds & 0x80 != 0).then(|| u64::MAX - u64::from(seeds % 3)),
+        jobs: u64::from(seeds % 3) + 1,
+        ..Default::default()
+    };
+    let _ = tandem::studies::check_study(name, &tandem::studies::StudyOptions::default(), &args);
 }

@@ -41,6 +41,7 @@ use tandem_robots::{
     DcMotorPendulumTask, LeoModel, LeoStart, LeoWalkTask, LeoWork, LEO_STEPS,
 };
 
+use tandem_nn::budget::MemoryEstimate;
 use tandem_nn::{Checkpoint, Checkpointable};
 
 use tandem_agents::adapter::{feature_dim, Adapted, Feature};
@@ -286,8 +287,33 @@ impl P0Config {
         if self.fit.epochs == 0 || self.fit.batch_size == 0 {
             return bad("fit.epochs and fit.batch_size must be >= 1");
         }
+        self.fit.validate()?;
+        self.residual.validate()?;
         self.ddpg.validate()?;
         Ok(())
+    }
+
+    /// The memory of a run on a plant with `state_dim`-dimensional states and
+    /// `act_dim`-dimensional inputs: the DDPG agent on the features with its replay buffer, the
+    /// difference network, and the real transitions (`real_budget`, in `f64`).
+    pub fn memory(&self, state_dim: usize, act_dim: usize) -> MemoryEstimate {
+        let features = tandem_agents::feature_dim(&self.features);
+        let budget = usize::try_from(self.real_budget).unwrap_or(usize::MAX);
+        MemoryEstimate::new()
+            .with("ddpg.", self.ddpg.memory(features, act_dim))
+            .with(
+                "residual: ",
+                self.residual
+                    .memory(state_dim, act_dim, self.fit.batch_size),
+            )
+            .f32s(
+                "real transitions (real_budget)",
+                &[
+                    2,
+                    budget,
+                    state_dim.saturating_mul(2).saturating_add(act_dim),
+                ],
+            )
     }
 }
 

@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
 use tandem_models::{DynamicsModel, TvlgConfig, TvlgDynamics, TvlgFit};
+use tandem_nn::budget::MemoryEstimate;
 use tandem_nn::Checkpoint;
 use tandem_planners::{
     classic_step_mult, pi2_update, quadratize_cost, sample_trajectories, LqrFlm, Objective, Pilqr,
@@ -119,7 +120,45 @@ impl LocalConfig {
                 return bad(format!("{name} = {v} must be finite and > 0"));
             }
         }
-        Ok(())
+        self.trajopt
+            .validate()
+            .map_err(|e| AlgoError::Config(format!("trajopt: {e}")))?;
+        self.dynamics
+            .validate()
+            .map_err(|e| AlgoError::Config(format!("dynamics: {e}")))
+    }
+
+    /// The memory of the loop on `conditions` conditions of `horizon` steps with
+    /// `state_dim`-dimensional states and `act_dim`-dimensional actions, in `f64`: each
+    /// iteration's samples, and per condition the controller, the previous one and the fitted
+    /// dynamics with their covariances, the prior's kept trajectories, and the learning curve.
+    pub fn memory(
+        &self,
+        conditions: usize,
+        horizon: usize,
+        state_dim: usize,
+        act_dim: usize,
+    ) -> MemoryEstimate {
+        let xu = state_dim.saturating_add(act_dim);
+        let per_step = xu.saturating_mul(xu).saturating_mul(4);
+        let kept = self.dynamics.prior.as_ref().map_or(0, |p| p.max_samples);
+        MemoryEstimate::new()
+            .f32s(
+                "samples (conditions x samples x horizon)",
+                &[2, conditions, self.samples, horizon, xu],
+            )
+            .f32s(
+                "controllers and fitted dynamics (conditions x horizon)",
+                &[2, conditions, horizon, per_step],
+            )
+            .f32s(
+                "dynamics prior's trajectories (conditions x max_samples)",
+                &[2, conditions, kept, horizon, xu],
+            )
+            .f32s(
+                "learning curve (conditions x iterations)",
+                &[4, conditions, self.iterations],
+            )
     }
 }
 
@@ -475,7 +514,7 @@ impl<'a> LocalGps<'a> {
             s: LocalState {
                 iteration: 0,
                 rng: rng_from_seed(seed),
-                curves: vec![Vec::with_capacity(cfg.iterations); k],
+                curves: vec![Vec::new(); k],
                 failed: vec![0; k],
                 drawn: 0,
             },

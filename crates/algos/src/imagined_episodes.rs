@@ -38,6 +38,7 @@ use tandem_nn::{Checkpoint, Checkpointable};
 
 pub use super::{AlgoError, Checkpoints, Ephemeral, Result};
 use crate::driver::{drive, Algorithm};
+use tandem_nn::budget::MemoryEstimate;
 
 /// The two methods of p2's comparison (Fig. 6, the table of Sec. 4.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -148,8 +149,26 @@ impl P2Config {
         if !(self.judges.terminal_threshold > 0.0 && self.judges.terminal_threshold <= 1.0) {
             return bad("judges.terminal_threshold must lie in (0, 1]");
         }
+        self.fit.validate()?;
+        self.model.validate()?;
         self.reinforce.validate()?;
         Ok(())
+    }
+
+    /// The memory of a run on `obs_dim`-dimensional states with `n_actions` actions: the agent,
+    /// the model with its optimizer state, and the real transitions of `max_real_episodes`
+    /// episodes of up to `episode_steps` steps (`f64`).
+    pub fn memory(&self, obs_dim: usize, n_actions: usize, episode_steps: usize) -> MemoryEstimate {
+        let steps = usize::try_from(self.max_real_episodes)
+            .unwrap_or(usize::MAX)
+            .saturating_mul(episode_steps);
+        MemoryEstimate::new()
+            .with("reinforce.", self.reinforce.memory(obs_dim, n_actions))
+            .with("", self.model.memory(obs_dim, 1, self.fit.batch_size))
+            .f32s(
+                "real transitions (max_real_episodes x episode steps)",
+                &[2, steps, obs_dim.saturating_mul(2).saturating_add(3)],
+            )
     }
 }
 
@@ -531,7 +550,7 @@ where
         self.p.t.over(max, window, cfg.solved_return)
     }
 
-    fn step(&mut self, on_event: &mut dyn FnMut(Event), _stop: &dyn Checkpoints) -> Result<bool> {
+    fn step(&mut self, on_event: &mut dyn FnMut(Event), stop: &dyn Checkpoints) -> Result<bool> {
         let (cfg, task) = (self.cfg, self.task);
         // One real episode; with a model, its transitions join the model's data.
         let k = self.p.t.real_returns.len() as u64;
@@ -561,6 +580,11 @@ where
             let after_n = done_real.checked_sub(cfg.real_only_episodes);
             if after_n.is_some_and(|n| n > 0 && n % cfg.real_per_cycle == 0) {
                 for _ in 0..cfg.imagined_per_cycle {
+                    // A cycle may hold many imagined episodes: stop between them (the run
+                    // resumes from its last checkpoint).
+                    if stop.stop_requested() {
+                        return Err(AlgoError::Stopped);
+                    }
                     self.imagined_episode(on_event)?;
                 }
             }

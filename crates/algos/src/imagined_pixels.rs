@@ -38,6 +38,7 @@ use tandem_robots::PixelMazeEnv;
 use super::driver::{drive, Algorithm};
 use super::imagined_episodes::{Event, Method, RunRecord, Tally};
 use super::{AlgoError, Checkpoints, Result};
+use tandem_nn::budget::MemoryEstimate;
 
 /// Settings of a maze run. `Default` follows p2 where it gives a figure and says where a figure
 /// is ours.
@@ -169,6 +170,23 @@ impl MazeConfig {
         self.model.validate()?;
         self.dqn.validate()?;
         Ok(())
+    }
+
+    /// The memory of a run of up to `episodes` real episodes of up to `episode_steps` steps: the
+    /// conv DQN with its replay buffer, the pixel model, and the real frames (kept as bits).
+    pub fn memory(&self, episodes: u64, episode_steps: usize) -> MemoryEstimate {
+        let obs_dim = self.model.stack_len();
+        let frames = usize::try_from(episodes)
+            .unwrap_or(usize::MAX)
+            .saturating_mul(episode_steps.saturating_add(1))
+            .saturating_mul(self.model.frame_len());
+        MemoryEstimate::new()
+            .with("dqn.", self.dqn.memory(obs_dim, self.model.n_actions))
+            .with("model.", self.model.memory(self.fit.batch_size))
+            .part(
+                "real frames (episodes x steps, bits)",
+                Some((frames / 8) as u64),
+            )
     }
 }
 
@@ -388,7 +406,7 @@ impl Algorithm for PixelDqn<'_> {
         self.p.t.over(max, window, cfg.solved_return)
     }
 
-    fn step(&mut self, on_event: &mut dyn FnMut(Event), _stop: &dyn Checkpoints) -> Result<bool> {
+    fn step(&mut self, on_event: &mut dyn FnMut(Event), stop: &dyn Checkpoints) -> Result<bool> {
         let cfg = self.cfg;
         let k = self.p.t.real_returns.len() as u64;
         let keep = self.imagination.is_some();
@@ -429,6 +447,11 @@ impl Algorithm for PixelDqn<'_> {
             let after_n = done_real.checked_sub(cfg.real_only_episodes);
             if after_n.is_some_and(|n| n > 0 && n % cfg.real_per_cycle == 0) {
                 for _ in 0..cfg.imagined_per_cycle {
+                    // A cycle may hold many imagined episodes: stop between them (the run
+                    // resumes from its last checkpoint).
+                    if stop.stop_requested() {
+                        return Err(AlgoError::Stopped);
+                    }
                     let i = self.p.t.imagined_episodes;
                     let (ret, steps, _, _) = episode(
                         &mut self.lp,
@@ -528,7 +551,8 @@ impl QualityConfig {
 
     /// Real episodes of one F1 experiment: the last checkpoint's and its held-out episodes.
     pub fn episodes(&self) -> u64 {
-        self.checkpoints.iter().copied().max().unwrap_or(0) + self.heldout_episodes
+        let last = self.checkpoints.iter().copied().max().unwrap_or(0);
+        last.saturating_add(self.heldout_episodes)
     }
 }
 

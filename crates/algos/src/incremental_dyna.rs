@@ -32,6 +32,7 @@ use tandem_models::{
     DynamicsModel, FitConfig, IncrementalModel, IncrementalModelConfig, Judges, Transitions,
     TransitionsBuilder,
 };
+use tandem_nn::budget::MemoryEstimate;
 
 use super::mbpo::{fitted, run_with, Event, Imagination, Imagine, MbpoConfig, Rollouts, RunRecord};
 use super::{Checkpoints, Problem, Result};
@@ -79,7 +80,40 @@ pub struct P1Config {
 impl P1Config {
     /// Checks the ranges the loops rely on.
     pub fn validate(&self) -> Result<()> {
-        self.base.validate()
+        self.base.validate()?;
+        Ok(self.model.validate()?)
+    }
+
+    /// The memory of `method`'s run on `obs_dim`-dimensional states and `act_dim`-dimensional
+    /// actions ([`MbpoConfig::memory`]; Dyna-SAC's model is the incremental one and its
+    /// rollouts are one step long).
+    pub fn memory(&self, method: Method, obs_dim: usize, act_dim: usize) -> MemoryEstimate {
+        let b = &self.base;
+        match method {
+            Method::Sac => MemoryEstimate::new().with("base.sac.", b.sac.memory(obs_dim, act_dim)),
+            Method::Mbpo => MemoryEstimate::new().with(
+                "base.",
+                b.memory(obs_dim, act_dim, b.max_rollout_capacity()),
+            ),
+            Method::IncrementalDyna => {
+                let rollouts = b
+                    .rollouts_per_step
+                    .checked_mul(usize::try_from(b.epoch_length).unwrap_or(usize::MAX))
+                    .and_then(|n| n.checked_mul(b.retain_epochs));
+                MemoryEstimate::new()
+                    .with("base.sac.", b.sac.memory(obs_dim, act_dim))
+                    .with(
+                        "model: ",
+                        self.model.memory(obs_dim, act_dim, b.model_fit.batch_size),
+                    )
+                    .part(
+                        "base: secondary buffer (one-step rollouts)",
+                        rollouts.and_then(|n| {
+                            tandem_agents::replay::ReplayBuffer::bytes(n, obs_dim, act_dim)
+                        }),
+                    )
+            }
+        }
     }
 }
 

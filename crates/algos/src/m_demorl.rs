@@ -37,6 +37,7 @@ use tandem_agents::{BatchPolicy, Critic, Mode, OffPolicyLoop, Sac, Store};
 use tandem_core::{seeding::rng_from_seed, LinearSchedule, Rng};
 use tandem_envs::{Env, EnvError, Task};
 use tandem_models::{DynamicsModel, InActions, ProbabilisticEnsemble, Propagation, Transitions};
+use tandem_nn::budget::MemoryEstimate;
 use tandem_planners::{Bounds, DmdMpc, DmdMpcConfig, Noise, Objective};
 
 use super::dyna::sample_starts;
@@ -206,6 +207,13 @@ impl P3Config {
                 self.noise_fraction
             )));
         }
+        if self.max_plan_capacity().is_none() {
+            return Err(AlgoError::Config(
+                "the MPC buffer transitions_per_epoch x base.model_train_freq x keep_iterations \
+                 overflows"
+                    .into(),
+            ));
+        }
         // The planner checks the rest of its settings.
         DmdMpc::new(DmdMpcConfig {
             horizon: self.horizon.max(),
@@ -220,6 +228,47 @@ impl P3Config {
             real_ratio: self.mpc_real_ratio.unwrap_or(self.base.real_ratio),
             ..self.base.clone()
         }
+    }
+
+    /// An upper bound on `D_MPC`'s capacity over all epochs (a refit's transitions rounded up to
+    /// whole plans, times `keep_iterations`); `None` on overflow.
+    pub fn max_plan_capacity(&self) -> Option<usize> {
+        let b = &self.base;
+        let n = (self.transitions_per_epoch.max() as u64).checked_mul(b.model_train_freq)?;
+        let per_refit = usize::try_from(n.div_ceil(b.epoch_length.max(1))).ok()?;
+        per_refit
+            .checked_add(self.horizon.max())?
+            .checked_mul(self.keep_iterations)
+    }
+
+    /// The memory of an M-DeMoRL run ([`MbpoConfig::memory`] with `D_MPC` as the secondary
+    /// buffer) and of its planner's population: `plans_per_batch × samples` action sequences of
+    /// `H × act_dim` and `× particles` model states, in `f64`.
+    pub fn memory(&self, obs_dim: usize, act_dim: usize) -> MemoryEstimate {
+        let m = &self.mpc;
+        let rows = [self.plans_per_batch, m.samples];
+        let h = self.horizon.max();
+        // f64 buffers as pairs of f32s: sequences, their noise and the means.
+        let sequences = [&[6][..], &rows, &[h, act_dim]].concat();
+        // States, next states, model inputs and outputs.
+        let states = [
+            &[8][..],
+            &rows,
+            &[m.particles, obs_dim.saturating_add(act_dim)],
+        ]
+        .concat();
+        let costs = [&[2][..], &rows, &[m.particles, h]].concat();
+        MemoryEstimate::new()
+            .with(
+                "base.",
+                self.base.memory(obs_dim, act_dim, self.max_plan_capacity()),
+            )
+            .f32s(
+                "mpc action sequences (plans_per_batch x mpc.samples)",
+                &sequences,
+            )
+            .f32s("mpc model states (x mpc.particles)", &states)
+            .f32s("mpc costs", &costs)
     }
 
     /// Plans per refit at `epoch`.

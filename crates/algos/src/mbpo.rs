@@ -43,6 +43,7 @@ use tandem_models::{
     DynamicsModel, EnsembleConfig, FitConfig, Judge, Judges, ProbabilisticEnsemble, Propagation,
     Transitions, TransitionsBuilder,
 };
+use tandem_nn::budget::MemoryEstimate;
 use tandem_nn::{Checkpoint, Checkpointable};
 use tandem_robots::{Leg2REnv, Leg2REnvExt, Leg2RModel, Leg2RTask};
 
@@ -282,8 +283,48 @@ impl MbpoConfig {
         self.rollout_length
             .validate("rollout_length")
             .map_err(AlgoError::Config)?;
+        self.ensemble.validate()?;
+        self.model_fit.validate()?;
+        if self.max_rollout_capacity().is_none() {
+            return bad(
+                "the rollout buffer rollouts_per_step x epoch_length x rollout_length x \
+                 retain_epochs overflows",
+            );
+        }
         self.sac.validate()?;
         Ok(())
+    }
+
+    /// The largest the rollout buffer gets: `rollouts_per_step × epoch_length × k × retain_epochs`
+    /// at the longest `k`; `None` on overflow.
+    pub fn max_rollout_capacity(&self) -> Option<usize> {
+        self.rollouts_per_step
+            .checked_mul(usize::try_from(self.epoch_length).ok()?)?
+            .checked_mul(self.rollout_length.max())?
+            .checked_mul(self.retain_epochs)
+    }
+
+    /// The memory of one run on `obs_dim`-dimensional states and `act_dim`-dimensional actions:
+    /// the ensemble with its optimizer state, SAC with its replay buffer, and the largest
+    /// secondary buffer (`secondary` transitions: [`Self::max_rollout_capacity`] for MBPO).
+    pub fn memory(
+        &self,
+        obs_dim: usize,
+        act_dim: usize,
+        secondary: Option<usize>,
+    ) -> MemoryEstimate {
+        MemoryEstimate::new()
+            .with(
+                "",
+                self.ensemble
+                    .memory(obs_dim, act_dim, self.model_fit.batch_size),
+            )
+            .with("sac.", self.sac.memory(obs_dim, act_dim))
+            .part(
+                "secondary buffer (model transitions)",
+                secondary
+                    .and_then(|n| tandem_agents::replay::ReplayBuffer::bytes(n, obs_dim, act_dim)),
+            )
     }
 
     /// The epoch (from 0) that real step `t` (from 1) belongs to.
@@ -601,6 +642,7 @@ impl Imagination for Rollouts {
     }
 
     fn capacity(&self, cfg: &MbpoConfig, epoch: u64) -> usize {
+        // Checked by `MbpoConfig::validate` at the longest length.
         self.rollouts_per_step
             * cfg.epoch_length as usize
             * self.length.at(epoch)

@@ -38,6 +38,7 @@ pub use tandem_agents::{PolicyConfig, Weighting};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
 use tandem_models::{DynamicsModel, ModelInput};
+use tandem_nn::budget::MemoryEstimate;
 use tandem_nn::{Adam, AdamConfig, Checkpoint, Checkpointable};
 use tandem_planners::{adjust_step_mult, laplace_cost, LqrFlm, TrajectorySamples, TvlgController};
 
@@ -124,6 +125,33 @@ impl MdgpsConfig {
             )));
         }
         Ok(())
+    }
+}
+
+impl MdgpsConfig {
+    /// The memory of a run ([`LocalConfig::memory`]) with the global policy on
+    /// `policy_dim`-dimensional inputs: its network trained with Adam and its regression data
+    /// (every condition's samples of the iteration, with their precisions).
+    pub fn memory(
+        &self,
+        conditions: usize,
+        horizon: usize,
+        state_dim: usize,
+        act_dim: usize,
+        policy_dim: usize,
+    ) -> MemoryEstimate {
+        let p = &self.policy;
+        let sizes = [&[policy_dim][..], &p.hidden, &[act_dim]].concat();
+        let row = policy_dim
+            .saturating_add(act_dim)
+            .saturating_add(act_dim.saturating_mul(act_dim));
+        self.local
+            .memory(conditions, horizon, state_dim, act_dim)
+            .mlp("policy network", &sizes, 4, p.batch_size)
+            .f32s(
+                "policy regression data (conditions x samples x horizon)",
+                &[conditions, self.local.samples, horizon, row],
+            )
     }
 }
 
@@ -301,7 +329,7 @@ impl<'a> Mdgps<'a> {
             s: MdgpsState {
                 iteration: 0,
                 rng,
-                curve: Vec::with_capacity(cfg.local.iterations),
+                curve: Vec::new(),
                 failed: 0,
                 drawn: 0,
                 mult: 1.0,

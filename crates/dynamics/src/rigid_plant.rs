@@ -216,6 +216,10 @@ impl Work {
     }
 }
 
+/// The most integration steps one control step may take: beyond it a step takes seconds and a
+/// run cannot stop promptly, and no rigid system needs it (0.5 ms steps at 1 kHz control are 2).
+pub const MAX_SUBSTEPS: usize = 100_000;
+
 impl RigidBodyPlant {
     /// A plant with no actuators, URDF joint friction (`<dynamics damping friction>`) and no
     /// contact.
@@ -231,7 +235,15 @@ impl RigidBodyPlant {
         }
         let substeps = (config.control_period / config.internal_step)
             .round()
-            .max(1.0) as usize;
+            .max(1.0);
+        if substeps > MAX_SUBSTEPS as f64 {
+            return Err(RigidPlantError::Config(format!(
+                "internal_step {} makes {substeps:e} integration steps per control step of {} s; \
+                 at most {MAX_SUBSTEPS} (raise internal_step)",
+                config.internal_step, config.control_period
+            )));
+        }
+        let substeps = substeps as usize;
         let friction = model
             .joints
             .iter()

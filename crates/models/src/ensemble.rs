@@ -9,6 +9,7 @@ use rand_distr::{Distribution, StandardNormal};
 use std::sync::Mutex;
 use tandem_core::seeding::SeedStream;
 use tandem_core::Rng;
+use tandem_nn::budget::MemoryEstimate;
 use tandem_nn::{
     gaussian_nll, map_side_by_side, Activation, Checkpoint, Checkpointable, GaussianHead,
     GaussianOutput, Mlp, MlpConfig, MlpWorkspace, NnError, RowBlock, RowDealer,
@@ -105,6 +106,58 @@ impl Default for EnsembleConfig {
     }
 }
 
+impl EnsembleConfig {
+    /// Checks the ranges an ensemble relies on: `1 <= elites <= members`, positive hidden
+    /// widths, finite log-variance bounds with `min_log_var < max_log_var`, the optimizer's.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        let bad = |m: String| Err(ModelError::Other(m));
+        if self.members == 0 || self.elites == 0 || self.elites > self.members {
+            return bad(format!(
+                "ensemble needs 1 <= elites <= members, got {} elites of {} members",
+                self.elites, self.members
+            ));
+        }
+        if self.hidden.contains(&0) {
+            return bad(format!(
+                "ensemble hidden widths {:?} must be positive",
+                self.hidden
+            ));
+        }
+        let (lo, hi) = (self.min_log_var, self.max_log_var);
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return bad(format!(
+                "ensemble log-variance bounds need finite min_log_var < max_log_var, got {lo} and {hi}"
+            ));
+        }
+        self.optimizer.validate()
+    }
+
+    /// The layer widths of each member for `state_dim`-dimensional states and
+    /// `action_dim`-dimensional actions: `[s, a]` in, mean and log-variance of `[Δs, r]` out.
+    pub fn sizes(&self, state_dim: usize, action_dim: usize) -> Vec<usize> {
+        let dim = state_dim.saturating_add(usize::from(self.learn_reward));
+        let mut sizes = vec![state_dim.saturating_add(action_dim)];
+        sizes.extend(&self.hidden);
+        sizes.push(dim.saturating_mul(2));
+        sizes
+    }
+
+    /// The memory of the ensemble trained on minibatches of `batch` rows: every member's
+    /// parameters with their gradients and optimizer state, and one training pass's activations.
+    pub fn memory(&self, state_dim: usize, action_dim: usize, batch: usize) -> MemoryEstimate {
+        let one = MemoryEstimate::new().mlp(
+            "member",
+            &self.sizes(state_dim, action_dim),
+            self.optimizer.copies(),
+            batch,
+        );
+        MemoryEstimate::new().part(
+            format!("ensemble ({} members of {:?})", self.members, self.hidden),
+            one.total().and_then(|b| b.checked_mul(self.members as u64)),
+        )
+    }
+}
+
 /// One Gaussian MLP with its optimizers.
 #[derive(Debug, Clone)]
 struct Member {
@@ -174,16 +227,9 @@ impl ProbabilisticEnsemble {
                 got: 0,
             });
         }
-        if cfg.members == 0 || cfg.elites == 0 || cfg.elites > cfg.members {
-            return Err(ModelError::Other(format!(
-                "ensemble needs 1 <= elites <= members, got {} elites of {} members",
-                cfg.elites, cfg.members
-            )));
-        }
+        cfg.validate()?;
         let dim = state_dim + usize::from(cfg.learn_reward);
-        let mut sizes = vec![state_dim + action_dim];
-        sizes.extend(&cfg.hidden);
-        sizes.push(2 * dim);
+        let sizes = cfg.sizes(state_dim, action_dim);
         let seeds = SeedStream::new(cfg.seed);
         let mut members = Vec::with_capacity(cfg.members);
         for k in 0..cfg.members {

@@ -5,6 +5,7 @@ use nalgebra::DMatrix;
 use ndarray::{s, Array2, ArrayView2};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
+use tandem_nn::budget::MemoryEstimate;
 use tandem_nn::{Activation, Checkpoint, Checkpointable, Mlp, MlpConfig, NnError};
 
 use crate::data::{check_array, check_input};
@@ -48,6 +49,48 @@ pub struct IncrementalModelConfig {
     pub optimizer: OptimizerConfig,
     /// Seed of the weight initialization.
     pub seed: u64,
+}
+
+impl IncrementalModelConfig {
+    /// Checks positive hidden widths, a finite non-negative `min_action_change` and the
+    /// optimizer's ranges (the dimensions are checked by [`IncrementalModel::new`]).
+    pub fn validate(&self) -> Result<(), ModelError> {
+        if self.hidden.contains(&0) {
+            return Err(ModelError::Other(format!(
+                "incremental model hidden widths {:?} must be positive",
+                self.hidden
+            )));
+        }
+        if !(self.min_action_change >= 0.0 && self.min_action_change.is_finite()) {
+            return Err(ModelError::Other(format!(
+                "min_action_change {} must be finite and >= 0",
+                self.min_action_change
+            )));
+        }
+        self.optimizer.validate()
+    }
+
+    /// The memory of the network giving `L_θ` (with its optimizer state) for
+    /// `state_dim`-dimensional states and `action_dim`-dimensional actions, trained on
+    /// minibatches of `batch` rows.
+    pub fn memory(&self, state_dim: usize, action_dim: usize, batch: usize) -> MemoryEstimate {
+        let out = match self.structure {
+            GainStructure::Full => state_dim.saturating_mul(action_dim),
+            GainStructure::Diagonal => state_dim,
+        };
+        let sizes = [
+            &[state_dim.saturating_add(action_dim)][..],
+            &self.hidden,
+            &[out],
+        ]
+        .concat();
+        MemoryEstimate::new().mlp(
+            format!("incremental model {:?}", self.hidden),
+            &sizes,
+            self.optimizer.copies(),
+            batch,
+        )
+    }
 }
 
 impl Default for IncrementalModelConfig {
@@ -130,6 +173,7 @@ impl IncrementalModel {
         action_dim: usize,
         cfg: IncrementalModelConfig,
     ) -> Result<Self, ModelError> {
+        cfg.validate()?;
         let (s, a) = (state_dim, action_dim);
         if s == 0 || a == 0 {
             return Err(ModelError::Dim {

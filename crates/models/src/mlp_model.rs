@@ -4,6 +4,7 @@
 use ndarray::{Array1, Array2};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
+use tandem_nn::budget::MemoryEstimate;
 use tandem_nn::{
     bce_with_logits, sigmoid, Activation, Checkpoint, Checkpointable, Mlp, MlpConfig, NnError,
 };
@@ -60,6 +61,35 @@ impl MlpModelConfig {
             ..Self::default()
         }
     }
+
+    /// Checks positive hidden widths and the optimizer's ranges.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        if self.hidden.contains(&0) {
+            return Err(ModelError::Other(format!(
+                "model hidden widths {:?} must be positive",
+                self.hidden
+            )));
+        }
+        self.optimizer.validate()
+    }
+
+    /// The memory of the network (with its optimizer state) for `state_dim`-dimensional states
+    /// and `action_dim`-dimensional actions, trained on minibatches of `batch` rows.
+    pub fn memory(&self, state_dim: usize, action_dim: usize, batch: usize) -> MemoryEstimate {
+        let out = state_dim + usize::from(self.learn_reward) + usize::from(self.learn_termination);
+        let sizes = [
+            &[state_dim.saturating_add(action_dim)][..],
+            &self.hidden,
+            &[out],
+        ]
+        .concat();
+        MemoryEstimate::new().mlp(
+            format!("model {:?}", self.hidden),
+            &sizes,
+            self.optimizer.copies(),
+            batch,
+        )
+    }
 }
 
 /// p2's dynamics model: an MLP from `[s, a]` to `[Δs, r, logit p(done)]`, trained with p2 eq. (1)
@@ -111,6 +141,7 @@ impl MlpModel {
         action_dim: usize,
         cfg: MlpModelConfig,
     ) -> Result<Self, ModelError> {
+        cfg.validate()?;
         if state_dim == 0 {
             return Err(ModelError::Dim {
                 what: "state_dim (must be positive)".into(),

@@ -152,6 +152,25 @@ impl Default for FitConfig {
     }
 }
 
+impl FitConfig {
+    /// Checks the ranges a fit relies on.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        if self.epochs == 0 || self.batch_size == 0 {
+            return Err(ModelError::Other(format!(
+                "fit epochs {} and batch_size {} must be >= 1",
+                self.epochs, self.batch_size
+            )));
+        }
+        if !(0.0..1.0).contains(&self.holdout_fraction) {
+            return Err(ModelError::Other(format!(
+                "fit holdout_fraction {} must lie in [0, 1)",
+                self.holdout_fraction
+            )));
+        }
+        self.early_stop.as_ref().map_or(Ok(()), EarlyStop::validate)
+    }
+}
+
 /// Early stopping of a fit, as mbrl-lib's `ModelTrainer` does it: an epoch improves when the
 /// held-out loss of some member (the only one, for a single network) falls below that member's
 /// best by more than `improvement_threshold` of its size; after `patience` epochs without one
@@ -172,6 +191,21 @@ impl Default for EarlyStop {
             patience: 5,
             improvement_threshold: 0.01,
         }
+    }
+}
+
+impl EarlyStop {
+    /// Checks that the patience is at least 1 and the threshold finite and at least 0.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        let threshold = self.improvement_threshold;
+        if self.patience == 0 || !(threshold >= 0.0 && threshold.is_finite()) {
+            return Err(ModelError::Other(format!(
+                "early stopping with patience {} and improvement threshold {threshold}: the \
+                 patience must be at least 1 and the threshold finite and at least 0",
+                self.patience
+            )));
+        }
+        Ok(())
     }
 }
 

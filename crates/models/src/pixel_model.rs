@@ -76,6 +76,7 @@ use serde::{Deserialize, Serialize};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::{Action, Space};
 use tandem_envs::{Env, EnvError, Step};
+use tandem_nn::budget::MemoryEstimate;
 use tandem_nn::candle_ext::{uniform_tensor, ParamSet};
 use tandem_nn::conv::{conv2d_layer, conv_transpose2d_layer};
 use tandem_nn::{Checkpoint, Checkpointable};
@@ -221,6 +222,51 @@ impl PixelModelConfig {
             }
         }
         Ok(())
+    }
+
+    /// The memory of the model trained on minibatches of `batch` stacks: the encoder's and the
+    /// decoder's convolutions and fully connected layers with their optimizer state, and the
+    /// feature maps of a training pass (estimated by sizes, to catch orders of magnitude).
+    pub fn memory(&self, batch: usize) -> MemoryEstimate {
+        let [h, w, c] = self.image;
+        let [c1, c2, c3] = self.channels;
+        let in_c = self.frames.saturating_mul(c);
+        let (mh, mw) = self.layers.map_size(h, w);
+        let map = mh.saturating_mul(mw).saturating_mul(c3);
+        let conv = [
+            in_c.saturating_mul(c1).saturating_mul(16),
+            c1.saturating_mul(c2).saturating_mul(16),
+            c2.saturating_mul(c3).saturating_mul(9),
+        ];
+        let fc = [
+            map.saturating_mul(self.features),
+            self.features.saturating_mul(self.factors),
+            self.n_actions.saturating_mul(self.factors),
+        ];
+        let copies = self.optimizer.copies() as usize;
+        let params = |v: [usize; 3]| {
+            v.iter()
+                .try_fold(0usize, |a, &x| a.checked_add(x))
+                .unwrap_or(usize::MAX)
+        };
+        let maps = h
+            .saturating_mul(w)
+            .saturating_mul(c1)
+            .saturating_add((h / 2).saturating_mul(w / 2).saturating_mul(c2))
+            .saturating_add(map);
+        MemoryEstimate::new()
+            .f32s(
+                format!("pixel model convolutions (channels {:?})", self.channels),
+                &[2, copies, params(conv)],
+            )
+            .f32s(
+                format!(
+                    "pixel model dense layers (features {}, factors {})",
+                    self.features, self.factors
+                ),
+                &[2, copies, params(fc)],
+            )
+            .f32s("pixel model feature maps (x batch)", &[6, batch, maps])
     }
 
     /// Values per frame (`height · width · channels`).

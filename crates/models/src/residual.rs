@@ -4,6 +4,7 @@
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
 use tandem_dynamics::Plant;
+use tandem_nn::budget::MemoryEstimate;
 use tandem_nn::{Activation, Checkpoint, Checkpointable, Mlp, MlpConfig, NnError};
 
 use crate::data::check_input;
@@ -32,6 +33,37 @@ pub struct ResidualModelConfig {
     pub optimizer: OptimizerConfig,
     /// Seed of the weight initialization.
     pub seed: u64,
+}
+
+impl ResidualModelConfig {
+    /// Checks positive hidden widths, dropout in `[0, 1)` and the optimizer's ranges.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        if self.hidden.contains(&0) || !(0.0..1.0).contains(&self.dropout) {
+            return Err(ModelError::Other(format!(
+                "residual model: hidden widths {:?} must be positive and dropout {} in [0, 1)",
+                self.hidden, self.dropout
+            )));
+        }
+        self.optimizer.validate()
+    }
+
+    /// The memory of the difference network (with its optimizer state) for
+    /// `state_dim`-dimensional states and `action_dim`-dimensional inputs, trained on
+    /// minibatches of `batch` rows.
+    pub fn memory(&self, state_dim: usize, action_dim: usize, batch: usize) -> MemoryEstimate {
+        let sizes = [
+            &[state_dim.saturating_add(action_dim)][..],
+            &self.hidden,
+            &[state_dim],
+        ]
+        .concat();
+        MemoryEstimate::new().mlp(
+            format!("difference network {:?}", self.hidden),
+            &sizes,
+            self.optimizer.copies(),
+            batch,
+        )
+    }
 }
 
 impl Default for ResidualModelConfig {

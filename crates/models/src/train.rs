@@ -48,6 +48,27 @@ impl OptimizerConfig {
         })
     }
 
+    /// Checks the optimizer's ranges (a positive learning rate, moments in `[0, 1)`, ...).
+    pub fn validate(&self) -> Result<(), ModelError> {
+        match self {
+            OptimizerConfig::Adam(c) => c.validate(),
+            OptimizerConfig::AdaGrad(c) => c.validate(),
+            OptimizerConfig::Sgd(c) => c.validate(),
+        }
+        .map_err(nn_other)
+    }
+
+    /// Parameter-sized buffers a network trained with this optimizer keeps: the parameters, their
+    /// gradient and the optimizer's state (Adam's two moments, AdaGrad's sum, SGD's momentum).
+    pub fn copies(&self) -> u64 {
+        match self {
+            OptimizerConfig::Adam(_) => 4,
+            OptimizerConfig::AdaGrad(_) => 3,
+            OptimizerConfig::Sgd(c) if c.momentum == 0.0 => 2,
+            OptimizerConfig::Sgd(_) => 3,
+        }
+    }
+
     pub(crate) fn build(&self, n_params: usize) -> Result<Opt, ModelError> {
         Ok(match *self {
             OptimizerConfig::Adam(c) => Opt::Adam(Adam::new(c, n_params).map_err(nn_other)?),
@@ -534,14 +555,7 @@ impl<T: Clone> Standardized<T> {
             }
         }
         if let Some(stop) = &cfg.early_stop {
-            let threshold = stop.improvement_threshold;
-            if stop.patience == 0 || !(threshold >= 0.0 && threshold.is_finite()) {
-                return Err(ModelError::Other(format!(
-                    "early stopping with patience {} and improvement threshold {threshold}: the \
-                     patience must be at least 1 and the threshold finite and at least 0",
-                    stop.patience
-                )));
-            }
+            stop.validate()?;
             if holdout.is_empty() {
                 return Err(ModelError::Other(
                     "early stopping needs held-out rows: raise holdout_fraction above 0".into(),

@@ -58,6 +58,35 @@ impl Default for GmmPriorConfig {
     }
 }
 
+impl GmmPriorConfig {
+    /// Checks the ranges the prior relies on: at least 2 clusters (the fit clamps the count to
+    /// `[2, max_clusters]`), at least one sample per cluster, kept trajectory and EM iteration, and
+    /// a finite positive strength.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        if self.max_clusters < 2
+            || self.min_samples_per_cluster == 0
+            || self.max_samples == 0
+            || self.max_iterations == 0
+        {
+            return Err(ModelError::Other(format!(
+                "dynamics prior: max_clusters {} must be >= 2, and min_samples_per_cluster {}, \
+                 max_samples {} and max_iterations {} >= 1",
+                self.max_clusters,
+                self.min_samples_per_cluster,
+                self.max_samples,
+                self.max_iterations
+            )));
+        }
+        if !(self.strength.is_finite() && self.strength > 0.0) {
+            return Err(ModelError::Other(format!(
+                "dynamics prior: strength {} must be finite and > 0",
+                self.strength
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// Settings of a [`TvlgFit`].
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -75,6 +104,19 @@ impl Default for TvlgConfig {
             regularization: 1e-6,
             prior: Some(GmmPriorConfig::default()),
         }
+    }
+}
+
+impl TvlgConfig {
+    /// Checks a finite, non-negative `regularization` and the prior's ranges.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        if !(self.regularization.is_finite() && self.regularization >= 0.0) {
+            return Err(ModelError::Other(format!(
+                "dynamics regularization {} must be finite and >= 0",
+                self.regularization
+            )));
+        }
+        self.prior.as_ref().map_or(Ok(()), GmmPriorConfig::validate)
     }
 }
 

@@ -75,6 +75,11 @@ pub enum MemoryError {
     },
 }
 
+/// `bytes` for people: `1.50 GiB`.
+pub fn show_bytes(bytes: u64) -> String {
+    show(Some(bytes))
+}
+
 /// `bytes` for people: `1.50 GiB`, `"more than 16 EiB"` for an overflow.
 fn show(bytes: Option<u64>) -> String {
     let Some(b) = bytes else {
@@ -196,6 +201,33 @@ impl MemoryEstimate {
             .and_then(|w| w.checked_mul(batch as u64))
             .and_then(|n| n.checked_mul(ACTIVATION_BUFFERS * F32));
         self.part(what, params.and_then(|p| p.checked_add(acts?)))
+    }
+
+    /// Adds every part of `other`, each name prefixed with `prefix` (e.g. `"p3.base.sac: "`), so
+    /// that a study's estimate names the setting each part comes from.
+    pub fn with(mut self, prefix: &str, other: MemoryEstimate) -> Self {
+        self.parts.extend(
+            other
+                .parts
+                .into_iter()
+                .map(|(what, b)| (format!("{prefix}{what}"), b)),
+        );
+        self
+    }
+
+    /// Every part `n` times over (`n` copies of the same allocation, e.g. one per condition),
+    /// named `"<n> x <part>"`.
+    pub fn times(self, n: u64) -> Self {
+        if n == 1 {
+            return self;
+        }
+        Self {
+            parts: self
+                .parts
+                .into_iter()
+                .map(|(what, b)| (format!("{n} x {what}"), b.and_then(|b| b.checked_mul(n))))
+                .collect(),
+        }
     }
 
     /// The total in bytes, `None` if it overflows `u64`.

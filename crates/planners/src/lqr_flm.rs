@@ -49,6 +49,26 @@ impl Default for LqrFlmConfig {
     }
 }
 
+impl LqrFlmConfig {
+    /// Checks positive, finite `kl_step`, `min_eta < max_eta`, `eta_init`, `tolerance`, and at
+    /// least one dual iteration.
+    pub fn validate(&self) -> Result<()> {
+        positive("kl_step", self.kl_step)?;
+        positive("min_eta", self.min_eta)?;
+        positive("max_eta", self.max_eta)?;
+        positive("eta_init", self.eta_init)?;
+        positive("tolerance", self.tolerance)?;
+        crate::mpc::nonzero("dual_iterations", self.dual_iterations)?;
+        if self.min_eta >= self.max_eta {
+            return Err(PlanError::Config(format!(
+                "min_eta {} must be below max_eta {}",
+                self.min_eta, self.max_eta
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// The result of one LQR-FLM update.
 #[derive(Debug, Clone)]
 pub struct LqrFlmStep {
@@ -71,15 +91,7 @@ pub struct LqrFlm {
 impl LqrFlm {
     /// An optimizer with these settings (checked here).
     pub fn new(cfg: LqrFlmConfig) -> Result<Self> {
-        positive("kl_step", cfg.kl_step)?;
-        positive("min_eta", cfg.min_eta)?;
-        positive("max_eta", cfg.max_eta)?;
-        positive("eta_init", cfg.eta_init)?;
-        positive("tolerance", cfg.tolerance)?;
-        crate::mpc::nonzero("dual_iterations", cfg.dual_iterations)?;
-        if cfg.min_eta >= cfg.max_eta {
-            return Err(PlanError::Config("min_eta must be below max_eta".into()));
-        }
+        cfg.validate()?;
         Ok(Self { cfg })
     }
 

@@ -47,6 +47,26 @@ impl Default for Pi2Config {
     }
 }
 
+impl Pi2Config {
+    /// Checks a positive `kl_step`, and finite, non-negative `ridge`, `min_variance` and
+    /// `covariance_damping`.
+    pub fn validate(&self) -> Result<()> {
+        positive("kl_step", self.kl_step)?;
+        for (what, v) in [
+            ("ridge", self.ridge),
+            ("min_variance", self.min_variance),
+            ("covariance_damping", self.covariance_damping),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(crate::PlanError::Config(format!(
+                    "{what} must be finite and non-negative, got {v}"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The result of one PI² update.
 #[derive(Debug, Clone)]
 pub struct Pi2Step {
@@ -134,13 +154,7 @@ pub fn pi2_update_with_temperatures(
     cfg: &Pi2Config,
     temperatures: Option<&[f64]>,
 ) -> Result<Pi2Step> {
-    positive("kl_step", cfg.kl_step)?;
-    if !(cfg.covariance_damping >= 0.0 && cfg.covariance_damping.is_finite()) {
-        return Err(crate::PlanError::Config(format!(
-            "covariance_damping must be finite and non-negative, got {}",
-            cfg.covariance_damping
-        )));
-    }
+    cfg.validate()?;
     let (n_s, t_len, m) = actions.dim();
     let n = prev.state_dim();
     check_len("controller horizon", prev.horizon(), t_len)?;

@@ -73,6 +73,32 @@ impl Default for PilqrConfig {
     }
 }
 
+impl PilqrConfig {
+    /// Checks both stages' settings, positive residual thresholds with `res_ratio_inc <=
+    /// res_ratio_dec`, and step multipliers around 1.
+    pub fn validate(&self) -> Result<()> {
+        self.lqr.validate()?;
+        self.pi2.validate()?;
+        crate::mpc::positive("min_step_mult", self.min_step_mult)?;
+        crate::mpc::positive("max_step_mult", self.max_step_mult)?;
+        crate::mpc::positive("res_ratio_dec", self.res_ratio_dec)?;
+        crate::mpc::positive("res_ratio_inc", self.res_ratio_inc)?;
+        if self.min_step_mult > 1.0 || self.max_step_mult < 1.0 {
+            return Err(PlanError::Config(format!(
+                "step multipliers [{}, {}] must contain 1",
+                self.min_step_mult, self.max_step_mult
+            )));
+        }
+        if self.res_ratio_inc > self.res_ratio_dec {
+            return Err(PlanError::Config(format!(
+                "res_ratio_inc {} must not exceed res_ratio_dec {}",
+                self.res_ratio_inc, self.res_ratio_dec
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// One PILQR update and its parts.
 #[derive(Debug, Clone)]
 pub struct PilqrStep {
@@ -113,22 +139,7 @@ impl Pilqr {
 
     /// An optimizer with these settings (checked here).
     pub fn new(cfg: PilqrConfig) -> Result<Self> {
-        crate::mpc::positive("min_step_mult", cfg.min_step_mult)?;
-        crate::mpc::positive("max_step_mult", cfg.max_step_mult)?;
-        crate::mpc::positive("res_ratio_dec", cfg.res_ratio_dec)?;
-        crate::mpc::positive("res_ratio_inc", cfg.res_ratio_inc)?;
-        if cfg.min_step_mult > 1.0 || cfg.max_step_mult < 1.0 {
-            return Err(PlanError::Config(format!(
-                "step multipliers [{}, {}] must contain 1",
-                cfg.min_step_mult, cfg.max_step_mult
-            )));
-        }
-        if cfg.res_ratio_inc > cfg.res_ratio_dec {
-            return Err(PlanError::Config(format!(
-                "res_ratio_inc {} must not exceed res_ratio_dec {}",
-                cfg.res_ratio_inc, cfg.res_ratio_dec
-            )));
-        }
+        cfg.validate()?;
         Ok(Self {
             lqr: LqrFlm::new(cfg.lqr.clone())?,
             cfg,

@@ -33,6 +33,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use tandem_algos::{AlgoError, Checkpoints, Result as AlgoResult};
 use tandem_core::CurvePoint;
+use tandem_nn::budget::{memory_limit, MemoryEstimate};
 use tandem_nn::Checkpoint;
 
 use crate::{Error, Result};
@@ -63,6 +64,10 @@ pub struct StudyArgs {
     /// No progress bars.
     #[arg(long)]
     pub quiet: bool,
+    /// Check the settings whole (every range, the seeds, the memory of `--jobs` parallel jobs),
+    /// print the estimate and exit, without running or writing anything.
+    #[arg(long)]
+    pub check: bool,
     /// Replace the study in an existing `--out` directory; without it, an existing study there
     /// is an error.
     #[arg(long, conflicts_with = "resume")]
@@ -93,6 +98,7 @@ impl Default for StudyArgs {
             jobs: DEFAULT_JOBS,
             config: None,
             quiet: false,
+            check: false,
             overwrite: false,
             resume: None,
             stop: Stop::never(),
@@ -156,6 +162,11 @@ pub trait Study: Sync {
     /// studies run the same on every seed; one may add runs on chosen seeds (p2-maze's F1
     /// experiment).
     fn jobs(&self, settings: &Self::Settings, seed: u64) -> Vec<Vec<String>>;
+
+    /// What one run of `run` allocates at most (networks with their optimizer state, buffers,
+    /// planner populations, condition sets), for the check before any work: a job's runs go one
+    /// after another, so a job needs its largest run's, and `--jobs` jobs run at once.
+    fn memory(&self, settings: &Self::Settings, run: &str) -> Result<MemoryEstimate>;
 
     /// The length of `run`'s progress bar (e.g. its real steps).
     fn length(&self, settings: &Self::Settings, run: &str) -> u64;
@@ -321,18 +332,102 @@ fn read_config<S: Study>(study: &S, dir: &Path, what: &str) -> Result<RunConfig<
 
 /// The settings of a new study from the command line.
 fn fresh<S: Study>(study: &S, args: &StudyArgs) -> Result<RunConfig<S::Settings>> {
+    let seeds = args.seeds.unwrap_or(study.default_seeds());
+    let first_seed = args.first_seed.unwrap_or(0);
+    seed_range(first_seed, seeds)?;
     let settings = study.settings(args.quick, args.config.as_deref())?;
     ensure_finite(&settings).map_err(|e| Error::input("settings", e.to_string()))?;
     Ok(RunConfig {
         study: study.name().to_string(),
         config: settings,
-        seeds: args.seeds.unwrap_or(study.default_seeds()),
-        first_seed: args.first_seed.unwrap_or(0),
+        seeds,
+        first_seed,
         quick: args.quick,
         jobs: args.jobs,
         status: "running".into(),
         wall_seconds: None,
     })
+}
+
+/// The most seeds one process runs: its jobs are listed before the first starts.
+pub const MAX_SEEDS: u64 = 100_000;
+
+/// The seeds `first, first + 1, ..., first + seeds - 1`, refused when empty, above [`MAX_SEEDS`]
+/// or past `u64::MAX`.
+pub fn seed_range(first: u64, seeds: u64) -> Result<std::ops::Range<u64>> {
+    let what = "--seeds/--first-seed";
+    if seeds == 0 || seeds > MAX_SEEDS {
+        return Err(Error::input(
+            what,
+            format!("{seeds} seeds: a process runs 1 to {MAX_SEEDS} (run more as separate processes and merge them)"),
+        ));
+    }
+    match first.checked_add(seeds) {
+        Some(end) => Ok(first..end),
+        None => Err(Error::input(
+            what,
+            format!(
+                "{seeds} seeds from {first} run past the largest seed {}",
+                u64::MAX
+            ),
+        )),
+    }
+}
+
+/// Checks that `jobs` parallel jobs of `settings` fit in memory before any work: each job needs
+/// its largest run's estimate ([`Study::memory`]), and the `jobs` largest jobs run at once.
+/// The error names the run, its largest part (the setting to change) and the limit.
+fn check_memory<S: Study>(
+    study: &S,
+    settings: &S::Settings,
+    seeds: std::ops::Range<u64>,
+    jobs: u64,
+    what: &str,
+) -> Result<u64> {
+    let limit = memory_limit().map_err(|e| Error::input("memory limit", e.to_string()))?;
+    // Runs are the same on most seeds: estimate each distinct job once.
+    let mut distinct: Vec<Vec<String>> = Vec::new();
+    let mut count: Vec<u64> = Vec::new();
+    for seed in seeds {
+        for job in study.jobs(settings, seed) {
+            match distinct.iter().position(|j| *j == job) {
+                Some(k) => count[k] += 1,
+                None => {
+                    distinct.push(job);
+                    count.push(1);
+                }
+            }
+        }
+    }
+    let mut per_job: Vec<(u64, String, MemoryEstimate)> = Vec::new();
+    for (job, n) in distinct.iter().zip(&count) {
+        let estimates = job
+            .iter()
+            .map(|run| Ok((run.clone(), study.memory(settings, run)?)))
+            .collect::<Result<Vec<_>>>()?;
+        let largest = estimates
+            .into_iter()
+            .max_by_key(|(_, e)| e.total().map_or(u128::MAX, u128::from));
+        let Some((run, est)) = largest else { continue };
+        // An estimate that alone is over the limit names its run.
+        est.check_against(&format!("{what}: the {run} run"), limit)
+            .map_err(|e| Error::input("memory", e.to_string()))?;
+        let bytes = est.total().unwrap_or(u64::MAX);
+        per_job.extend(std::iter::repeat_n(
+            (bytes, run, est),
+            (*n).min(jobs) as usize,
+        ));
+    }
+    per_job.sort_by_key(|j| std::cmp::Reverse(j.0));
+    let at_once = per_job
+        .into_iter()
+        .take(jobs as usize)
+        .fold(MemoryEstimate::new(), |acc, (_, run, est)| {
+            acc.with(&format!("{run}: "), est)
+        });
+    at_once
+        .check_against(&format!("{what}: {jobs} parallel jobs (--jobs)"), limit)
+        .map_err(|e| Error::input("memory", e.to_string()))
 }
 
 /// The settings recorded in `dir/config.json`, checked against the command line.
@@ -479,14 +574,37 @@ fn layout<S: Study>(study: &S, merged: bool) -> Layout {
     }
 }
 
-/// Runs (or resumes) `study` as the command line says.
-pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
-    tandem_nn::set_gemm_threads(1);
-    let stop = args.stop.clone();
-    let mut rc = match &args.resume {
+/// The settings the command line asks for (or `--resume` records), checked whole before any
+/// work: each setting's range, the seed range, and the memory of `--jobs` parallel jobs. Returns
+/// them with the estimated peak memory in bytes.
+pub fn check<S: Study>(study: &S, args: &StudyArgs) -> Result<(RunConfig<S::Settings>, u64)> {
+    let rc = match &args.resume {
         Some(dir) => recorded(study, args, dir)?,
         None => fresh(study, args)?,
     };
+    let seeds = seed_range(rc.first_seed, rc.seeds)?;
+    let bytes = check_memory(study, &rc.config, seeds, args.jobs, &harness_what(args))?;
+    Ok((rc, bytes))
+}
+
+/// Runs (or resumes) `study` as the command line says, after [`check`].
+pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
+    tandem_nn::set_gemm_threads(1);
+    let stop = args.stop.clone();
+    let (mut rc, bytes) = check(study, args)?;
+    if args.check {
+        println!(
+            "{}: settings valid; {} seeds from {}; estimated peak memory {} with {} parallel jobs \
+             (limit {})",
+            study.name(),
+            rc.seeds,
+            rc.first_seed,
+            tandem_nn::budget::show_bytes(bytes),
+            args.jobs,
+            tandem_nn::budget::show_bytes(memory_limit().unwrap_or(0)),
+        );
+        return Ok(());
+    }
     let (out, existing) = match (&args.resume, args.overwrite) {
         (Some(d), _) => (Some(d.as_path()), Existing::Resume),
         (None, true) => (args.out.as_deref(), Existing::Overwrite),
@@ -513,7 +631,7 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> ");
     let settings = &rc.config;
-    let jobs: Vec<(u64, Vec<String>)> = (rc.first_seed..rc.first_seed + rc.seeds)
+    let jobs: Vec<(u64, Vec<String>)> = seed_range(rc.first_seed, rc.seeds)?
         .flat_map(|seed| {
             study
                 .jobs(settings, seed)
@@ -573,8 +691,12 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
             code: stop.exit_code().unwrap_or(EXIT_SIGINT),
         });
     }
-    let seeds = rc.first_seed..rc.first_seed + rc.seeds;
-    let records = read_records(study, settings, dir.path(), seeds)?;
+    let records = read_records(
+        study,
+        settings,
+        dir.path(),
+        seed_range(rc.first_seed, rc.seeds)?,
+    )?;
     remove_dir(&dir.path().join("state"))?;
     let md = study.report(&dir, settings, &records, wall)?;
     rc.status = "complete".into();
@@ -583,6 +705,15 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
     println!("{md}");
     println!("wrote {}", dir.path().display());
     Ok(())
+}
+
+/// How errors name the settings of a run: its `--config` file, the resumed directory, or the
+/// study's own.
+fn harness_what(args: &StudyArgs) -> String {
+    match &args.resume {
+        Some(d) => format!("--resume {}", d.display()),
+        None => settings_name(args.config.as_deref()),
+    }
 }
 
 /// `state/seed<k>/<first run>/`: the checkpoints of one job (its runs may share some, e.g. a

@@ -120,6 +120,7 @@ pub struct StudyOptions {
 trait Registered {
     fn name(&self) -> &str;
     fn run(&self, args: &StudyArgs) -> Result<()>;
+    fn check(&self, args: &StudyArgs) -> Result<Checked>;
     fn merge(&self, dirs: &[PathBuf], out: Option<&Path>, overwrite: bool) -> Result<()>;
 }
 
@@ -129,6 +130,11 @@ impl<S: Study> Registered for S {
     }
     fn run(&self, args: &StudyArgs) -> Result<()> {
         harness::run(self, args)
+    }
+    fn check(&self, args: &StudyArgs) -> Result<Checked> {
+        let (rc, memory) = harness::check(self, args)?;
+        let settings = serde_json::to_value(&rc.config).map_err(Error::other)?;
+        Ok(Checked { settings, memory })
     }
     fn merge(&self, dirs: &[PathBuf], out: Option<&Path>, overwrite: bool) -> Result<()> {
         harness::merge(self, dirs, out, overwrite)
@@ -180,6 +186,21 @@ fn find(name: &str, options: &StudyOptions) -> Result<Box<dyn Registered>> {
                 ),
             )
         })
+}
+
+/// What [`check_study`] found: the settings a run would use and its estimated peak memory.
+#[derive(Debug, Clone)]
+pub struct Checked {
+    /// The settings, as `config.json` records them.
+    pub settings: serde_json::Value,
+    /// The estimated peak memory of `--jobs` parallel jobs, bytes.
+    pub memory: u64,
+}
+
+/// Checks the study `name`'s settings whole as a run would before any work ([`harness::check`]:
+/// ranges, products, seeds, memory), writing nothing; `tandem reproduce <study> --check`.
+pub fn check_study(name: &str, options: &StudyOptions, args: &StudyArgs) -> Result<Checked> {
+    find(name, options)?.check(args)
 }
 
 /// Runs (or with `--resume`, continues) the study `name` ([`harness::run`]).

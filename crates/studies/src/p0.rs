@@ -53,6 +53,7 @@ use tandem_robots::leo::{leo_plant, skeleton};
 
 use crate::harness::{self, JobError, Study};
 use crate::{Error, Result};
+use tandem_nn::budget::MemoryEstimate;
 
 /// The problem a p0 study runs on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -570,6 +571,16 @@ impl Study for P0Study {
             .map(|m| m.name().to_string())
             .collect();
         vec![pretrained, vec![Method::Cold.name().to_string()]]
+    }
+
+    fn memory(&self, cfg: &P0Config, _run: &str) -> Result<MemoryEstimate> {
+        let env = match self.0 {
+            P0Task::Pendulum => (pendulum_problem().real.env)(),
+            P0Task::Leo => (leo_problem().map_err(Error::other)?.real.env)(),
+        }?;
+        let sd = env.observation_space().flat_dim();
+        let ad = env.action_space().flat_dim();
+        Ok(cfg.memory(sd, ad))
     }
 
     fn length(&self, cfg: &P0Config, run: &str) -> u64 {

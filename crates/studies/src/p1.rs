@@ -28,6 +28,7 @@ use crate::p3::{
     runs_table, seconds_per_seed, step_progress, target_of, target_sentence,
 };
 use crate::{Error, Result};
+use tandem_nn::budget::MemoryEstimate;
 
 /// Everything that decides a p1 study's numbers.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -138,6 +139,15 @@ impl Study for P1Study {
             .iter()
             .map(|m| vec![m.name().to_string()])
             .collect()
+    }
+
+    fn memory(&self, s: &P1Settings, run: &str) -> Result<MemoryEstimate> {
+        let method = Method::ALL
+            .into_iter()
+            .find(|m| m.name() == run)
+            .ok_or_else(|| Error::Other(format!("unknown run {run}")))?;
+        let (od, ad) = crate::p3::mujoco_dims(&s.env)?;
+        Ok(MemoryEstimate::new().with("p1.", s.p1.memory(method, od, ad)))
     }
 
     fn length(&self, s: &P1Settings, _run: &str) -> u64 {

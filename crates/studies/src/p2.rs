@@ -40,6 +40,7 @@ use tandem_robots::PixelMazeEnv;
 
 use crate::harness::{self, JobError, Study};
 use crate::{Error, Result};
+use tandem_nn::budget::MemoryEstimate;
 
 /// Which of p2's experiments.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -739,6 +740,32 @@ impl Study for P2Study {
             .into_iter()
             .chain(Method::ALL.iter().map(|m| vec![m.name().to_string()]))
             .collect()
+    }
+
+    fn memory(&self, s: &Settings, run: &str) -> Result<MemoryEstimate> {
+        let env = match s {
+            Settings::CartPole(_) => tandem_envs::make("CartPole-v1")?,
+            Settings::Maze { runs, .. } => tandem_robots::make(&runs.env)?,
+        };
+        let steps = env.max_episode_steps().unwrap_or(1000);
+        Ok(match s {
+            Settings::CartPole(c) => {
+                let od = env.observation_space().flat_dim();
+                let n = match env.action_space() {
+                    tandem_core::Space::Discrete { n } => *n,
+                    space => space.flat_dim(),
+                };
+                c.memory(od, n, steps)
+            }
+            Settings::Maze { runs, quality } => {
+                let (episodes, prefix) = if run == F1_RUN {
+                    (quality.episodes(), "quality: ")
+                } else {
+                    (runs.max_real_episodes, "")
+                };
+                MemoryEstimate::new().with(prefix, runs.memory(episodes, steps))
+            }
+        })
     }
 
     fn length(&self, s: &Settings, run: &str) -> u64 {

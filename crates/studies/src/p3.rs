@@ -32,6 +32,7 @@ use tandem_robots::{Leg2RConfig, Leg2REnv, Leg2REnvExt, Leg2RModel};
 
 use crate::harness::{self, JobError, Study};
 use crate::{Error, Result};
+use tandem_nn::budget::MemoryEstimate;
 
 /// p3's elite fractions (Fig. 3).
 pub const ELITE_FRACTIONS: [f64; 6] = [0.01, 0.05, 0.10, 0.20, 0.50, 1.0];
@@ -92,6 +93,9 @@ pub(crate) fn quick_loop(b: &mut MbpoConfig) {
 /// The leg's id.
 const LEG: &str = "Leg2R-real-v0";
 
+/// The ids a leg study runs on: the true leg and the idealized one.
+const LEG_IDS: [&str; 2] = [LEG, "Leg2R-v0"];
+
 /// The return each MuJoCo task's study counts real steps to, where no run's return is the
 /// target: HalfCheetah p3 Fig. 3's 10 000, the others ours.
 const MUJOCO_TARGETS: [(&str, f64); 4] = [
@@ -106,6 +110,15 @@ const MUJOCO_TARGETS: [(&str, f64); 4] = [
 pub(crate) fn mujoco_loop(env: &str) -> Option<(MbpoConfig, f64)> {
     let (_, target) = MUJOCO_TARGETS.iter().find(|(id, _)| *id == env)?;
     Some((MbpoConfig::mujoco(env)?, *target))
+}
+
+/// The observation and action dimensions of the MuJoCo task `env`, from its spec (no model is
+/// loaded).
+pub(crate) fn mujoco_dims(env: &str) -> Result<(usize, usize)> {
+    let spec = TaskKind::from_id(env)
+        .ok_or_else(|| Error::input("env", format!("{env}: not a gymnasium MuJoCo task")))?
+        .spec();
+    Ok((spec.obs_dim, spec.nu))
 }
 
 /// The ids `p3-mujoco` runs, for messages.
@@ -169,6 +182,14 @@ impl P3Settings {
             .map_err(|e| Error::input(what, e.to_string()))?;
         match &self.leg {
             Some(leg) => {
+                if !LEG_IDS.contains(&self.env.as_str()) {
+                    return bad(format!(
+                        "env {}: a leg study runs {} (p3-mujoco runs {})",
+                        self.env,
+                        LEG_IDS.join(" or "),
+                        mujoco_ids()
+                    ));
+                }
                 if let Err(e) = leg2r_problem_with(&self.env, leg) {
                     return bad(format!("leg: {e}"));
                 }
@@ -203,6 +224,15 @@ impl P3Settings {
             .find(|f| !(**f > 0.0 && **f <= 1.0))
         {
             return bad(format!("ablate_elites: {f} must lie in (0, 1]"));
+        }
+        let runs = self.ablation();
+        for (k, (name, f)) in runs.iter().enumerate() {
+            if let Some((_, g)) = runs[..k].iter().find(|(n, _)| n == name) {
+                return bad(format!(
+                    "ablate_elites: {g} and {f} both name the run {name}; give fractions that \
+                     differ in their percent to two decimals"
+                ));
+            }
         }
         if !matches!(self.p3.mpc.utility, Utility::CemElite { .. })
             && !self.ablate_elites.is_empty()
@@ -329,6 +359,29 @@ impl Study for P3Study {
             }
         }
         runs.into_iter().map(|r| vec![r]).collect()
+    }
+
+    fn memory(&self, s: &P3Settings, run: &str) -> Result<MemoryEstimate> {
+        let (od, ad) = match &s.leg {
+            Some(leg) => {
+                let env = (leg2r_problem_with(&s.env, leg).map_err(Error::other)?.env)()?;
+                (
+                    env.observation_space().flat_dim(),
+                    env.action_space().flat_dim(),
+                )
+            }
+            None => mujoco_dims(&s.env)?,
+        };
+        let p3 = &s.p3;
+        let est = if run == Method::Sac.name() {
+            MemoryEstimate::new().with("base.sac.", p3.base.sac.memory(od, ad))
+        } else if run == Method::Mbpo.name() || run == ORACLE {
+            let rollouts = p3.base.max_rollout_capacity();
+            MemoryEstimate::new().with("base.", p3.base.memory(od, ad, rollouts))
+        } else {
+            p3.memory(od, ad)
+        };
+        Ok(MemoryEstimate::new().with("p3.", est))
     }
 
     fn length(&self, s: &P3Settings, _run: &str) -> u64 {

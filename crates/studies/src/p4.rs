@@ -36,6 +36,7 @@ use tandem_robots::p4::{
 
 use crate::harness::{self, JobError, Study};
 use crate::{Error, Result};
+use tandem_nn::budget::MemoryEstimate;
 
 /// What differs between p4's local-controller tasks.
 pub trait P4Task: Sync {
@@ -178,10 +179,27 @@ impl<C> P4Settings<C> {
         if !self.target.is_finite() {
             return Err(bad(format!("target {} must be finite", self.target)));
         }
+        if total_samples(&self.local, T::conditions().len()).is_none() {
+            return Err(bad(format!(
+                "local.iterations {} x local.samples {} x {} conditions overflows",
+                self.local.iterations,
+                self.local.samples,
+                T::conditions().len()
+            )));
+        }
         // Fails early without the `mujoco` feature (or without the scene), before any directory.
         T::problem(self.cost).map_err(|e| bad(e.to_string()))?;
         Ok(())
     }
+}
+
+/// Samples of one run over all `conditions`, `None` on overflow.
+fn total_samples(local: &LocalConfig, conditions: usize) -> Option<u64> {
+    let n = local
+        .iterations
+        .checked_mul(local.samples)?
+        .checked_mul(conditions)?;
+    u64::try_from(n).ok()
 }
 
 /// What a finished run leaves.
@@ -258,8 +276,16 @@ impl<T: P4Task> Study for P4Study<T> {
             .collect()
     }
 
+    fn memory(&self, s: &Self::Settings, _run: &str) -> Result<MemoryEstimate> {
+        let problem = T::problem(s.cost).map_err(Error::other)?;
+        let (sd, ad) = (problem.system.state_dim(), problem.system.action_dim());
+        let k = problem.conditions.len();
+        Ok(MemoryEstimate::new().with("local: ", s.local.memory(k, problem.horizon, sd, ad)))
+    }
+
     fn length(&self, s: &Self::Settings, _run: &str) -> u64 {
-        (s.local.iterations * s.local.samples * T::conditions().len()) as u64
+        // Checked by the settings' validation.
+        total_samples(&s.local, T::conditions().len()).unwrap_or(u64::MAX)
     }
 
     fn run(

@@ -36,6 +36,7 @@ use tandem_robots::p4::{ReacherCost, REACHER_HORIZON};
 use crate::harness::{self, JobError, Study};
 use crate::p4::{figure_row, SeedFigure};
 use crate::{Error, Result};
+use tandem_nn::budget::MemoryEstimate;
 
 /// The methods, in the table's order.
 pub const METHODS: [&str; 4] = ["mdgps_lqr_flm", "mdgps_pi2", "mdgps_pilqr", "ddpg"];
@@ -86,6 +87,16 @@ impl ReacherSettings {
         if self.conditions == 0 || self.test_conditions == 0 {
             return Err(bad("conditions and test_conditions must be positive".into()));
         }
+        if self.mdgps_samples().is_none() {
+            return Err(bad(format!(
+                "mdgps.local.iterations {} x mdgps.local.samples {} x conditions {} x {} steps \
+                 overflows",
+                self.mdgps.local.iterations,
+                self.mdgps.local.samples,
+                self.conditions,
+                REACHER_HORIZON
+            )));
+        }
         if !(self.target.is_finite() && self.target > 0.0) {
             return Err(bad(format!(
                 "target {} must be finite and > 0",
@@ -98,9 +109,14 @@ impl ReacherSettings {
     }
 
     /// Real samples (time steps) of one MDGPS run.
-    fn mdgps_samples(&self) -> u64 {
+    fn mdgps_samples(&self) -> Option<u64> {
         let l = &self.mdgps.local;
-        (l.iterations * l.samples * self.conditions * REACHER_HORIZON) as u64
+        let n = l
+            .iterations
+            .checked_mul(l.samples)?
+            .checked_mul(self.conditions)?
+            .checked_mul(REACHER_HORIZON)?;
+        u64::try_from(n).ok()
     }
 
     /// Real samples (time steps) of one run of `method`.
@@ -108,7 +124,8 @@ impl ReacherSettings {
         if method == "ddpg" {
             self.ddpg.steps
         } else {
-            self.mdgps_samples()
+            // Checked by `validate`.
+            self.mdgps_samples().unwrap_or(u64::MAX)
         }
     }
 }
@@ -179,6 +196,23 @@ impl Study for ReacherStudy {
         let what = harness::settings_name(config);
         s.validate(&what)?;
         Ok(s)
+    }
+
+    fn memory(&self, s: &ReacherSettings, run: &str) -> Result<MemoryEstimate> {
+        let problem = reacher_problem(s.cost, 1, 0).map_err(Error::other)?;
+        let (sd, ad) = (problem.system.state_dim(), problem.system.action_dim());
+        let test = MemoryEstimate::new().f32s(
+            "test_conditions (starts and final states)",
+            &[4, s.test_conditions, sd],
+        );
+        Ok(if run == "ddpg" {
+            test.with("ddpg.agent.", s.ddpg.agent.memory(sd, ad))
+        } else {
+            test.with(
+                "mdgps.",
+                s.mdgps.memory(s.conditions, problem.horizon, sd, ad, sd),
+            )
+        })
     }
 
     fn jobs(&self, _s: &ReacherSettings, _seed: u64) -> Vec<Vec<String>> {
@@ -426,7 +460,7 @@ impl ReacherTable {
             s.conditions,
             l.iterations,
             l.samples,
-            s.mdgps_samples(),
+            s.budget("mdgps"),
             s.ddpg.steps,
             self.target
         );
