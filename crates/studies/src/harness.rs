@@ -945,6 +945,15 @@ pub fn merge<S: Study>(
     let mut stored = Vec::new();
     for (d, dc) in &parts {
         let own = dc.seeds();
+        let mut unique = own.clone();
+        unique.sort_unstable();
+        unique.dedup();
+        if unique.len() != own.len() {
+            return Err(Error::input(
+                format!("{}/config.json", d.display()),
+                "lists a seed twice",
+            ));
+        }
         if let Some(s) = own.iter().find(|s| seeds.contains(s)) {
             return Err(Error::input(
                 d.display().to_string(),
