@@ -209,7 +209,8 @@ pub struct RunConfig<S> {
     pub quick: bool,
     /// Parallel jobs of the last process.
     pub jobs: u64,
-    /// `running`, `interrupted` or `complete`.
+    /// `running`, `interrupted`, `failed` (then `config.json` also holds the `error`) or
+    /// `complete`.
     pub status: String,
     /// Wall time of the last (or only) process, seconds; absent while running.
     pub wall_seconds: Option<f64>,
