@@ -32,7 +32,7 @@ use serde_json::{json, Value};
 use tandem_envs::{Action, Env, Space};
 
 use super::json::{self, kind};
-use super::{CliError, Result};
+use super::{CliError, IoOp, Result};
 
 /// `tandem env` subcommands.
 #[derive(Debug, Subcommand)]
@@ -78,16 +78,10 @@ fn read_file(path: &std::path::Path) -> Result<String> {
         let mut s = String::new();
         std::io::stdin()
             .read_to_string(&mut s)
-            .map_err(|source| CliError::Io {
-                path: path.to_path_buf(),
-                source,
-            })?;
+            .map_err(|source| CliError::io(IoOp::Read, path, source))?;
         return Ok(s);
     }
-    std::fs::read_to_string(path).map_err(|source| CliError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    std::fs::read_to_string(path).map_err(|source| CliError::io(IoOp::Read, path, source))
 }
 
 /// The `--state` argument as numbers.

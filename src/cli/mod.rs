@@ -11,7 +11,7 @@ pub mod urdf;
 
 /// Why a command failed: the studies' error type serves every command. `main` prints it and
 /// exits with status 1 (or the status of an interruption).
-pub use tandem_studies::{Error as CliError, Result};
+pub use tandem_studies::{Error as CliError, IoOp, Result};
 
 /// Writes `text` and a newline to stdout. A closed pipe (`tandem ... | head`) ends the program
 /// quietly with status 0, as a Unix tool stopped by SIGPIPE would, instead of panicking.

@@ -25,7 +25,7 @@ use tandem_agents::{Algo, AlgoConfig};
 use tandem_nn::Checkpoint;
 
 use super::presets::{self, Preset};
-use super::{CliError, Result};
+use super::{CliError, IoOp, Result};
 
 /// Arguments of `tandem train`.
 #[derive(Debug, Args)]
@@ -208,10 +208,8 @@ impl ConfigSource {
     pub fn read(&self, algo: Algo) -> Result<(AlgoConfig, TrainSettings)> {
         match self {
             ConfigSource::File(p) => {
-                let text = std::fs::read_to_string(p).map_err(|source| CliError::Io {
-                    path: p.clone(),
-                    source,
-                })?;
+                let text = std::fs::read_to_string(p)
+                    .map_err(|source| CliError::io(IoOp::Read, p, source))?;
                 parse_config(algo, &text, &format!("config file {}", p.display()))
             }
             ConfigSource::Preset(p) => parse_config(algo, p.text, &format!("preset {}", p.file)),
@@ -525,9 +523,10 @@ impl Checkpoints for RunFiles<'_> {
     }
 }
 
+/// A failed write into the run directory `path`.
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CliError {
     let path = path.to_path_buf();
-    move |source| CliError::Io { path, source }
+    move |source| CliError::io(IoOp::Write, path, source)
 }
 
 /// `metrics.csv` (one row per evaluation) and `episodes.csv` as `log` stands.

@@ -13,7 +13,7 @@ use tandem_dynamics::rigid::{
 };
 
 use super::json::{check_output, kind, numbers, parse};
-use super::{CliError, Result};
+use super::{CliError, IoOp, Result};
 
 /// `tandem urdf ...`
 #[derive(Debug, Subcommand)]
@@ -46,10 +46,8 @@ pub fn run(cmd: UrdfCommand) -> Result<()> {
         }
         UrdfCommand::Eval { file, states } => {
             let model = load(&file)?;
-            let text = std::fs::read_to_string(&states).map_err(|source| CliError::Io {
-                path: states.clone(),
-                source,
-            })?;
+            let text = std::fs::read_to_string(&states)
+                .map_err(|source| CliError::io(IoOp::Read, &states, source))?;
             let what = format!("states file {}", states.display());
             let out = eval(&model, &parse(&text, &what)?, &what)?;
             let text = serde_json::to_string_pretty(&out).map_err(CliError::other)?;

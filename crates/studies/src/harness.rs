@@ -7,17 +7,21 @@
 //! run goes and what report its records make. [`run`] then writes, in the output directory:
 //!
 //! - `config.json`: the study's name, its settings, the seeds, and how the run stands (`running`,
-//!   `interrupted`, `complete`) with its wall time;
-//! - `runs/<run>__seed<k>/record.json` (and the study's `curve.csv`) as soon as a run finishes;
+//!   `interrupted`, `failed` with its `error`, `complete`) with its wall time;
+//! - `runs/<run>__seed<k>/record.json`, its SHA-256 (`record.json.sha256`, in `sha256sum`'s
+//!   format) and the study's `curve.csv` as soon as a run finishes;
 //! - `state/seed<k>/<job>/`: each unfinished job's checkpoints, removed when the job is done;
 //! - the study's report files (tables, figures).
 //!
 //! A stop request ([`StudyArgs::stop`]; the `tandem` program sets it on SIGINT or SIGTERM)
 //! stops every job at once (each loses the steps since its last checkpoint), marks
 //! `config.json` `interrupted` and returns [`Error::Interrupted`] with the exit status 130 or
-//! 143. `--resume DIR` continues from the checkpoints, also after a kill, refusing settings
-//! other than the recorded ones. Seeds can run as separate processes (`--seeds 1 --first-seed
-//! k`), on one machine or many; [`merge`] joins their complete directories into one report.
+//! 143. A failed run or write (a full disk, a removed file) lets the other jobs finish, then
+//! marks `config.json` `failed` with the reason. `--resume DIR` continues from the checkpoints,
+//! after a kill or a failure too, refusing settings other than the recorded ones. Seeds can run
+//! as separate processes (`--seeds 1 --first-seed k`), on one machine or many; [`merge`] joins
+//! their complete directories into one report, checking each record against its folder and its
+//! checksum, and merges merged directories again (per node, then across nodes).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -36,7 +40,7 @@ use tandem_core::CurvePoint;
 use tandem_nn::budget::{memory_limit, MemoryEstimate};
 use tandem_nn::Checkpoint;
 
-use crate::{Error, Result};
+use crate::{Error, IoOp, Result};
 
 /// The command line every study shares (`#[command(flatten)]` it into the study's arguments).
 #[derive(Debug, Clone, Args)]
@@ -216,7 +220,8 @@ pub struct RunConfig<S> {
     pub quick: bool,
     /// Parallel jobs of the last process.
     pub jobs: u64,
-    /// `running`, `interrupted` or `complete`.
+    /// `running`, `interrupted`, `failed` (then `config.json` also holds the `error`) or
+    /// `complete`.
     pub status: String,
     /// Wall time of the last (or only) process, seconds; absent while running.
     pub wall_seconds: Option<f64>,
@@ -236,20 +241,20 @@ struct StudyName {
 /// The name of the study that wrote `dir` (its `config.json`'s `study`).
 pub fn study_of(dir: &Path) -> Result<String> {
     let path = dir.join("config.json");
-    let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
-        path: path.clone(),
-        source,
-    })?;
+    let text = std::fs::read_to_string(&path).map_err(failed(IoOp::Read, &path))?;
     let n: StudyName = serde_json::from_str(&text)
         .map_err(|e| Error::input(path.display().to_string(), e.to_string()))?;
     Ok(n.study)
 }
 
+/// The error of `op` on `path` failing.
+fn failed(op: IoOp, path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
+    move |source| Error::io(op, path, source)
+}
+
+/// The error of reading `path` failing.
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
-    move |source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    }
+    failed(IoOp::Read, path)
 }
 
 fn write_json(dir: &RunDir, name: &str, value: &impl Serialize) -> Result<()> {
@@ -261,7 +266,7 @@ fn write_json(dir: &RunDir, name: &str, value: &impl Serialize) -> Result<()> {
 pub fn write(dir: &RunDir, name: &str, text: &str) -> Result<()> {
     dir.write(name, text)
         .map(drop)
-        .map_err(io(&dir.path().join(name)))
+        .map_err(failed(IoOp::Write, &dir.path().join(name)))
 }
 
 /// Writes a study's `table.json` and its Markdown rendering `table.md`.
@@ -305,6 +310,85 @@ pub fn mean_curves<R>(
 
 /// `dir/config.json`, which must be `study`'s (`what` names the directory in errors).
 fn read_config<S: Study>(study: &S, dir: &Path, what: &str) -> Result<RunConfig<S::Settings>> {
+    let (path, text) = config_text(study, dir, what)?;
+    serde_json::from_str(&text).map_err(|e| {
+        let listed = serde_json::from_str::<serde_json::Value>(&text)
+            .is_ok_and(|v| v.get("seeds").is_some_and(|s| s.is_array()));
+        if listed {
+            Error::input(
+                what,
+                "a merge's directory: its seeds are finished and cannot be resumed; merge it \
+                 with others instead",
+            )
+        } else {
+            Error::input(path.display().to_string(), e.to_string())
+        }
+    })
+}
+
+/// `config.json` as merge reads it: a study's own (`seeds` counted from `first_seed`) or a
+/// merge's (`seeds` listed, `parts` the directories whose processes ran them).
+#[derive(Deserialize)]
+#[serde(bound(deserialize = "S: DeserializeOwned"))]
+struct DirConfig<S> {
+    config: S,
+    quick: bool,
+    seeds: SeedSet,
+    #[serde(default)]
+    first_seed: u64,
+    status: String,
+    /// Why a `failed` study failed.
+    #[serde(default)]
+    error: Option<String>,
+    wall_seconds: Option<f64>,
+    #[serde(default)]
+    parts: Vec<Part>,
+}
+
+/// A directory whose process ran seeds: its path (as the merge that read it was given it), first
+/// seed, seed count and wall time.
+type Part = (String, u64, u64, Option<f64>);
+
+/// `config.json`'s `seeds`: a count from `first_seed` (a study's) or a list (a merge's).
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum SeedSet {
+    Count(u64),
+    List(Vec<u64>),
+}
+
+impl<S> DirConfig<S> {
+    fn seeds(&self) -> Result<Vec<u64>> {
+        Ok(match &self.seeds {
+            SeedSet::Count(n) => seed_range(self.first_seed, *n)?.collect(),
+            SeedSet::List(l) => l.clone(),
+        })
+    }
+
+    /// The processes that ran this directory's seeds: a merge's parts, or the study itself
+    /// (`dir`), so that merging merges again sums the same wall times.
+    fn leaves(&self, dir: &Path) -> Result<Vec<Part>> {
+        let seeds = self.seeds()?;
+        Ok(match &self.seeds {
+            SeedSet::List(_) if !self.parts.is_empty() => self.parts.clone(),
+            _ => vec![(
+                dir.display().to_string(),
+                seeds.iter().copied().min().unwrap_or(self.first_seed),
+                seeds.len() as u64,
+                self.wall_seconds,
+            )],
+        })
+    }
+}
+
+/// `dir/config.json` of a study or a merge for [`merge`].
+fn read_dir_config<S: Study>(study: &S, dir: &Path, what: &str) -> Result<DirConfig<S::Settings>> {
+    let (path, text) = config_text(study, dir, what)?;
+    serde_json::from_str(&text).map_err(|e| Error::input(path.display().to_string(), e.to_string()))
+}
+
+/// `dir/config.json`'s path and text, which must name `study`.
+fn config_text<S: Study>(study: &S, dir: &Path, what: &str) -> Result<(PathBuf, String)> {
     let path = dir.join("config.json");
     let text = std::fs::read_to_string(&path).map_err(|e| {
         Error::input(
@@ -327,7 +411,7 @@ fn read_config<S: Study>(study: &S, dir: &Path, what: &str) -> Result<RunConfig<
             ),
         ));
     }
-    serde_json::from_str(&text).map_err(bad)
+    Ok((path, text))
 }
 
 /// The settings of a new study from the command line.
@@ -507,6 +591,22 @@ fn record_dir(dir: &Path, run: &str, seed: u64) -> PathBuf {
     dir.join("runs").join(format!("{run}__seed{seed}"))
 }
 
+/// The file beside each `record.json` holding its SHA-256 as `sha256sum` writes it, so that
+/// `sha256sum -c record.json.sha256` checks a record without tandem.
+const CHECKSUM: &str = "record.json.sha256";
+
+/// `bytes`' SHA-256 in lowercase hexadecimal.
+fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    use std::fmt::Write as _;
+    Sha256::digest(bytes)
+        .iter()
+        .fold(String::with_capacity(64), |mut s, b| {
+            let _ = write!(s, "{b:02x}");
+            s
+        })
+}
+
 /// Writes a finished run's `curve.csv` and `record.json` (the record last: its presence says
 /// the run is done).
 fn write_record<S: Study>(
@@ -516,27 +616,94 @@ fn write_record<S: Study>(
     seed: u64,
     r: &S::Record,
 ) -> Result<()> {
+    let path = record_dir(dir, run, seed).join("record.json");
+    let text = to_json_pretty(r).map_err(|e| Error::Other(format!("{}: {e}", path.display())))?;
+    write_record_text(study, dir, run, seed, r, &text)
+}
+
+/// [`write_record`] with the record's text given (a merge copies each record's bytes).
+fn write_record_text<S: Study>(
+    study: &S,
+    dir: &Path,
+    run: &str,
+    seed: u64,
+    r: &S::Record,
+    text: &str,
+) -> Result<()> {
     let sub = record_dir(dir, run, seed);
-    std::fs::create_dir_all(&sub).map_err(io(&sub))?;
+    std::fs::create_dir_all(&sub).map_err(failed(IoOp::Create, &sub))?;
     let (header, rows) = study.curve(r);
     let curve = crate::run::csv(&header, &rows);
     let path = sub.join("curve.csv");
-    tandem_nn::write_atomic(&path, curve.as_bytes()).map_err(io(&path))?;
+    tandem_nn::write_atomic(&path, curve.as_bytes()).map_err(failed(IoOp::Write, &path))?;
+    // The checksum before the record, whose presence alone says the run is done.
+    let path = sub.join(CHECKSUM);
+    let line = format!("{}  record.json\n", sha256_hex(text.as_bytes()));
+    tandem_nn::write_atomic(&path, line.as_bytes()).map_err(failed(IoOp::Write, &path))?;
     let path = sub.join("record.json");
-    let text = to_json_pretty(r).map_err(|e| Error::Other(format!("{}: {e}", path.display())))?;
-    tandem_nn::write_atomic(&path, text.as_bytes()).map_err(io(&path))
+    tandem_nn::write_atomic(&path, text.as_bytes()).map_err(failed(IoOp::Write, &path))
 }
 
-/// A finished run's record, if it is there.
-fn read_record<R: DeserializeOwned>(dir: &Path, run: &str, seed: u64) -> Result<Option<R>> {
-    let path = record_dir(dir, run, seed).join("record.json");
-    match std::fs::read_to_string(&path) {
-        Ok(text) => serde_json::from_str(&text)
-            .map(Some)
-            .map_err(|e| Error::input(path.display().to_string(), e.to_string())),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(source) => Err(Error::Io { path, source }),
+/// A finished run's record as its folder holds it.
+struct Stored<R> {
+    run: String,
+    seed: u64,
+    record: R,
+    /// The file's text, which a merge copies unchanged.
+    text: String,
+    /// Whether a checksum covered it (records written before records had one have none).
+    checksummed: bool,
+}
+
+/// A finished run's record, if it is there, checked against the run and seed of its folder and
+/// against its checksum where it has one.
+fn read_record<R: DeserializeOwned>(dir: &Path, run: &str, seed: u64) -> Result<Option<Stored<R>>> {
+    let sub = record_dir(dir, run, seed);
+    let path = sub.join("record.json");
+    let text = match std::fs::read_to_string(&path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(source) => return Err(Error::io(IoOp::Read, path, source)),
+    };
+    let bad = |message: String| Error::input(path.display().to_string(), message);
+    let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    // Every study's records name their seed, and all but p2-maze's F1 experiment their method
+    // (the run's name): a record moved or edited into another run's folder disagrees.
+    let folder = format!("runs/{run}__seed{seed}/");
+    if let Some(s) = value.get("seed").filter(|s| s.as_u64() != Some(seed)) {
+        return Err(bad(format!(
+            "records seed {s}, but its folder {folder} is seed {seed}'s"
+        )));
     }
+    if let Some(m) = value.get("method").filter(|m| m.as_str() != Some(run)) {
+        return Err(bad(format!(
+            "records method {m}, but its folder {folder} is the {run} run's"
+        )));
+    }
+    let sum_path = sub.join(CHECKSUM);
+    let checksummed = match std::fs::read_to_string(&sum_path) {
+        Ok(line) => {
+            let recorded = line.split_whitespace().next().unwrap_or_default();
+            let actual = sha256_hex(text.as_bytes());
+            if recorded != actual {
+                return Err(bad(format!(
+                    "its SHA-256 is {actual}, but {CHECKSUM} beside it says {recorded}: the \
+                     record changed after it was written"
+                )));
+            }
+            true
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => false,
+        Err(source) => return Err(Error::io(IoOp::Read, sum_path, source)),
+    };
+    let record = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    Ok(Some(Stored {
+        run: run.to_string(),
+        seed,
+        record,
+        text,
+        checksummed,
+    }))
 }
 
 /// Every run's record for `seeds` in the study directory `dir`, by seed, then run.
@@ -544,8 +711,8 @@ fn read_records<S: Study>(
     study: &S,
     settings: &S::Settings,
     dir: &Path,
-    seeds: std::ops::Range<u64>,
-) -> Result<Vec<S::Record>> {
+    seeds: impl IntoIterator<Item = u64>,
+) -> Result<Vec<Stored<S::Record>>> {
     let mut records = Vec::new();
     for seed in seeds {
         for run in study.jobs(settings, seed).iter().flatten() {
@@ -559,6 +726,33 @@ fn read_records<S: Study>(
         }
     }
     Ok(records)
+}
+
+/// Refuses a record in `dir/runs/` that is no run of `records` (the directory's seeds and
+/// settings): a merge would leave it out without a word.
+fn refuse_strays<R>(dir: &Path, records: &[Stored<R>]) -> Result<()> {
+    let runs = dir.join("runs");
+    let entries = match std::fs::read_dir(&runs) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(source) => return Err(Error::io(IoOp::Read, runs, source)),
+    };
+    for entry in entries {
+        let entry = entry.map_err(failed(IoOp::Read, &runs))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let record = entry.path().join("record.json");
+        let known = records
+            .iter()
+            .any(|r| name == format!("{}__seed{}", r.run, r.seed));
+        if !known && record.exists() {
+            return Err(Error::input(
+                record.display().to_string(),
+                "is no run of its directory's seeds and settings (config.json): move it out, \
+                 or merge the directory it belongs to",
+            ));
+        }
+    }
+    Ok(())
 }
 
 fn layout<S: Study>(study: &S, merged: bool) -> Layout {
@@ -674,7 +868,8 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
     let mut errors = errors.into_inner().expect("threads joined");
     errors.sort();
     if let Some((seed, e)) = errors.first() {
-        return Err(Error::Other(format!("seed {seed}: {e}")));
+        let e = Error::Other(format!("seed {seed}: {e}"));
+        return Err(mark_failed(study, &dir, &mut rc, wall, e));
     }
     if stop.requested() {
         rc.status = "interrupted".into();
@@ -691,17 +886,22 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
             code: stop.exit_code().unwrap_or(EXIT_SIGINT),
         });
     }
-    let records = read_records(
-        study,
-        settings,
-        dir.path(),
-        seed_range(rc.first_seed, rc.seeds)?,
-    )?;
-    remove_dir(&dir.path().join("state"))?;
-    let md = study.report(&dir, settings, &records, wall)?;
+    let seeds = seed_range(rc.first_seed, rc.seeds)?;
+    let report = || -> Result<String> {
+        let records = read_records(study, settings, dir.path(), seeds)?;
+        remove_dir(&dir.path().join("state"))?;
+        let records: Vec<S::Record> = records.into_iter().map(|r| r.record).collect();
+        study.report(&dir, settings, &records, wall)
+    };
+    let md = match report() {
+        Ok(md) => md,
+        Err(e) => return Err(mark_failed(study, &dir, &mut rc, wall, e)),
+    };
     rc.status = "complete".into();
     rc.wall_seconds = Some(wall);
-    write_json(&dir, "config.json", &rc)?;
+    if let Err(e) = write_json(&dir, "config.json", &rc) {
+        return Err(mark_failed(study, &dir, &mut rc, wall, e));
+    }
     println!("{md}");
     println!("wrote {}", dir.path().display());
     Ok(())
@@ -716,6 +916,44 @@ fn harness_what(args: &StudyArgs) -> String {
     }
 }
 
+/// `config.json` of a failed study: the run's, with why it failed.
+#[derive(Serialize)]
+struct FailedConfig<'a, S> {
+    #[serde(flatten)]
+    run: &'a RunConfig<S>,
+    error: &'a str,
+}
+
+/// Marks `dir`'s `config.json` `failed` with `e` as the reason, and returns the error to report:
+/// `e` and how to go on. Finished records and the checkpoints of unfinished jobs stay, so that
+/// `--resume` continues once the cause (a full disk, a removed file) is fixed.
+fn mark_failed<S: Study>(
+    study: &S,
+    dir: &RunDir,
+    rc: &mut RunConfig<S::Settings>,
+    wall: f64,
+    e: Error,
+) -> Error {
+    let reason = e.to_string();
+    rc.status = "failed".into();
+    rc.wall_seconds = Some(wall);
+    let failed = FailedConfig {
+        run: rc,
+        error: &reason,
+    };
+    let d = dir.path().display();
+    let marked = match write_json(dir, "config.json", &failed) {
+        Ok(()) => format!("{d}/config.json records the failure"),
+        // A full disk may refuse this too; then config.json still says `running`.
+        Err(w) => format!("{w}, so config.json does not record the failure"),
+    };
+    Error::Other(format!(
+        "{reason}\n{marked}; finished runs and the others' last checkpoints stay: once the cause \
+         is fixed, continue with `tandem reproduce {} --resume {d}`",
+        study.name()
+    ))
+}
+
 /// `state/seed<k>/<first run>/`: the checkpoints of one job (its runs may share some, e.g. a
 /// pre-trained agent), removed when the job is done.
 fn job_state(dir: &Path, seed: u64, runs: &[String]) -> PathBuf {
@@ -725,10 +963,7 @@ fn job_state(dir: &Path, seed: u64, runs: &[String]) -> PathBuf {
 
 fn remove_dir(path: &Path) -> Result<()> {
     match std::fs::remove_dir_all(path) {
-        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(Error::Io {
-            path: path.to_path_buf(),
-            source: e,
-        }),
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(Error::io(IoOp::Remove, path, e)),
         _ => Ok(()),
     }
 }
@@ -756,45 +991,68 @@ fn run_one<S: Study>(
     Ok(())
 }
 
-/// What a merge's `config.json` records.
+/// What a merge's `config.json` records; [`merge`] reads it back ([`DirConfig`]), so that a
+/// merged directory merges again.
 #[derive(Debug, Serialize)]
 struct MergeConfig<'a, S> {
     study: &'a str,
     config: &'a S,
     quick: bool,
+    /// The seeds, ascending (any set: merges of merges need not be contiguous).
     seeds: Vec<u64>,
-    /// The merged directories, with their first seed, seed count and wall time.
-    parts: Vec<(String, u64, u64, Option<f64>)>,
+    /// The directories whose processes ran the seeds (through merged directories too), by
+    /// first seed, with their first seed, seed count and wall time.
+    parts: Vec<Part>,
+    /// The directories this merge read.
+    merged: Vec<String>,
     /// Sum of the parts' wall times, seconds.
     wall_seconds: f64,
     status: &'static str,
 }
 
-/// Joins complete directories of `study` with disjoint seeds and equal settings into one report
-/// in `out` (default `runs/<study>-merged__<time>/`).
+/// Joins complete directories of `study` (studies' or merges') with disjoint seeds and equal
+/// settings into one report in `out` (default `runs/<study>-merged__<time>/`).
+///
+/// Each record must agree with its folder (its `seed` and `method`) and with its checksum
+/// (`record.json.sha256`); a record without one (written before records had checksums) is
+/// taken as it is, with a note. Records are copied byte for byte, so that merging in two
+/// levels (per node, then across nodes) writes the report of one merge of all parts.
 pub fn merge<S: Study>(
     study: &S,
     dirs: &[PathBuf],
     out: Option<&Path>,
     overwrite: bool,
 ) -> Result<()> {
-    let mut parts: Vec<(PathBuf, RunConfig<S::Settings>)> = Vec::new();
+    let mut parts: Vec<(PathBuf, DirConfig<S::Settings>)> = Vec::new();
     for d in dirs {
         let what = d.display().to_string();
-        let rc = read_config(study, d, &what)?;
-        if rc.status != "complete" {
-            return Err(Error::input(
-                what,
-                format!(
-                    "the study is {}; finish it first (`tandem reproduce {} --resume {}`)",
-                    rc.status,
-                    study.name(),
-                    d.display()
-                ),
-            ));
+        let dc = read_dir_config(study, d, &what)?;
+        let resume = format!(
+            "`tandem reproduce {} --resume {}`",
+            study.name(),
+            d.display()
+        );
+        match dc.status.as_str() {
+            "complete" => {}
+            "failed" => {
+                return Err(Error::input(
+                    what,
+                    format!(
+                        "the study failed ({}); fix the cause, continue it with {resume}, then \
+                         merge it",
+                        dc.error.as_deref().unwrap_or("no reason recorded")
+                    ),
+                ))
+            }
+            status => {
+                return Err(Error::input(
+                    what,
+                    format!("the study is {status}; finish it first ({resume})"),
+                ))
+            }
         }
         if let Some((first, f)) = parts.first() {
-            if (&f.config, f.quick) != (&rc.config, rc.quick) {
+            if (&f.config, f.quick) != (&dc.config, dc.quick) {
                 return Err(Error::input(
                     what,
                     format!(
@@ -804,29 +1062,53 @@ pub fn merge<S: Study>(
                 ));
             }
         }
-        parts.push((d.clone(), rc));
+        parts.push((d.clone(), dc));
     }
     let Some((_, first)) = parts.first() else {
         return Err(Error::input("merge", "no directories given"));
     };
     let settings = &first.config;
     let mut seeds: Vec<u64> = Vec::new();
-    let mut by_seed = Vec::new();
-    for (d, rc) in &parts {
-        let range = rc.first_seed..rc.first_seed + rc.seeds;
-        if let Some(s) = range.clone().find(|s| seeds.contains(s)) {
+    let mut leaves: Vec<Part> = Vec::new();
+    let mut stored = Vec::new();
+    for (d, dc) in &parts {
+        let own = dc.seeds()?;
+        let mut unique = own.clone();
+        unique.sort_unstable();
+        unique.dedup();
+        if unique.len() != own.len() {
+            return Err(Error::input(
+                format!("{}/config.json", d.display()),
+                "lists a seed twice",
+            ));
+        }
+        if let Some(s) = own.iter().find(|s| seeds.contains(s)) {
             return Err(Error::input(
                 d.display().to_string(),
                 format!("seed {s} is in two of the merged directories"),
             ));
         }
-        seeds.extend(range.clone());
-        for seed in range {
-            by_seed.push((seed, read_records(study, settings, d, seed..seed + 1)?));
+        let records = read_records(study, settings, d, own.iter().copied())?;
+        refuse_strays(d, &records)?;
+        let unchecked = records.iter().filter(|r| !r.checksummed).count();
+        if unchecked > 0 {
+            eprintln!(
+                "note: {}: {unchecked} of {} records have no checksum (written before records \
+                 had one); merged as they are",
+                d.display(),
+                records.len()
+            );
         }
+        seeds.extend(own);
+        leaves.extend(dc.leaves(d)?);
+        stored.extend(records);
     }
-    by_seed.sort_by_key(|(s, _)| *s);
+    // By seed (stable: a seed's runs stay in the order of the study's jobs).
+    stored.sort_by_key(|r| r.seed);
     seeds.sort_unstable();
+    leaves.sort_by_key(|p| p.1);
+    // Summed in the parts' seed order, so that a merge of merges gives the same number.
+    let wall: f64 = leaves.iter().filter_map(|p| p.3).sum();
     let existing = if overwrite {
         Existing::Overwrite
     } else {
@@ -834,31 +1116,18 @@ pub fn merge<S: Study>(
     };
     let name = format!("{}-merged", study.name());
     let dir = RunDir::create(out, &name, layout(study, true), existing).map_err(Error::other)?;
-    let mut records = Vec::new();
-    for (seed, rs) in by_seed {
-        for (run, r) in study.jobs(settings, seed).iter().flatten().zip(rs) {
-            write_record(study, dir.path(), run, seed, &r)?;
-            records.push(r);
-        }
+    for r in &stored {
+        write_record_text(study, dir.path(), &r.run, r.seed, &r.record, &r.text)?;
     }
-    let wall: f64 = parts.iter().filter_map(|(_, rc)| rc.wall_seconds).sum();
+    let records: Vec<S::Record> = stored.into_iter().map(|r| r.record).collect();
     let md = study.report(&dir, settings, &records, wall)?;
     let merged = MergeConfig {
         study: study.name(),
         config: settings,
         quick: first.quick,
         seeds,
-        parts: parts
-            .iter()
-            .map(|(d, rc)| {
-                (
-                    d.display().to_string(),
-                    rc.first_seed,
-                    rc.seeds,
-                    rc.wall_seconds,
-                )
-            })
-            .collect(),
+        parts: leaves,
+        merged: dirs.iter().map(|d| d.display().to_string()).collect(),
         wall_seconds: wall,
         status: "complete",
     };

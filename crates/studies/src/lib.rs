@@ -29,7 +29,9 @@
 //! Dependencies: the workspace crates the studies run (`tandem-robots` for the papers' robots and
 //! scenes); `serde`/`serde_json` and `toml` for the recorded settings and `--config` files,
 //! `clap` so that every study's command line flattens the one [`StudyArgs`], `indicatif` for the
-//! progress bars, `signal-hook` for [`interrupt`], and `thiserror` for [`Error`].
+//! progress bars, `signal-hook` for [`interrupt`], `thiserror` for [`Error`], and `sha2`
+//! (RustCrypto's, small and widely used) for the records' checksums: SHA-256 rather than the
+//! CRC-32 of the checkpoints, so that `sha256sum -c` checks a committed record without tandem.
 
 #![warn(missing_docs)]
 
@@ -55,9 +57,11 @@ pub enum Error {
     /// An environment refused something (unknown id, invalid action or state).
     #[error(transparent)]
     Env(#[from] EnvError),
-    /// A file could not be read or written.
-    #[error("cannot read {}: {source}", path.display())]
+    /// A file could not be read, written, created or removed.
+    #[error("cannot {op} {}: {source}", path.display())]
     Io {
+        /// What was being done.
+        op: IoOp,
         /// The file.
         path: PathBuf,
         /// The operating system's error.
@@ -94,9 +98,43 @@ impl Error {
         }
     }
 
+    /// An [`Error::Io`] error: `op` on `path` failed with `source`.
+    pub fn io(op: IoOp, path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            op,
+            path: path.into(),
+            source,
+        }
+    }
+
     /// An [`Error::Other`] error from anything printable (e.g. another crate's error).
     pub fn other(e: impl std::fmt::Display) -> Self {
         Error::Other(e.to_string())
+    }
+}
+
+/// What [`Error::Io`] was doing with its file, so that the message says so ("cannot write ...:
+/// No space left on device", not "cannot read").
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IoOp {
+    /// Reading a file.
+    Read,
+    /// Writing a file.
+    Write,
+    /// Creating a directory.
+    Create,
+    /// Removing a file or directory.
+    Remove,
+}
+
+impl std::fmt::Display for IoOp {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            IoOp::Read => "read",
+            IoOp::Write => "write",
+            IoOp::Create => "create",
+            IoOp::Remove => "remove",
+        })
     }
 }
 

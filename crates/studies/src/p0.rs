@@ -52,7 +52,7 @@ use tandem_dynamics::rigid_plant::{Overrides, RigidPlantConfig};
 use tandem_robots::leo::{leo_plant, skeleton};
 
 use crate::harness::{self, JobError, Study};
-use crate::{Error, Result};
+use crate::{Error, IoOp, Result};
 use tandem_nn::budget::MemoryEstimate;
 
 /// The problem a p0 study runs on.
@@ -556,10 +556,8 @@ impl Study for P0Study {
             (P0Task::Leo, true) => leo_quick_config(),
         };
         let Some(path) = config else { return Ok(base) };
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text =
+            std::fs::read_to_string(path).map_err(|source| Error::io(IoOp::Read, path, source))?;
         parse_config(base, &text, &format!("--config {}", path.display()))
     }
 

@@ -10,6 +10,8 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use crate::IoOp;
+
 /// `YYYYMMDD-HHMMSS` in UTC for seconds since the Unix epoch (Howard Hinnant's civil-from-days).
 pub fn utc_stamp(unix_seconds: u64) -> String {
     let days = (unix_seconds / 86_400) as i64;
@@ -102,8 +104,10 @@ pub enum RunDirError {
         resumable: bool,
     },
     /// A file-system operation failed.
-    #[error("{}: {source}", path.display())]
+    #[error("cannot {op} {}: {source}", path.display())]
     Io {
+        /// What was being done.
+        op: IoOp,
         /// The file or directory.
         path: PathBuf,
         /// The operating system's error.
@@ -161,13 +165,13 @@ impl RunDir {
         layout: Layout,
         existing: Existing,
     ) -> Result<Self, RunDirError> {
-        let io = |path: &Path| {
+        let io = |op: IoOp, path: &Path| {
             let path = path.to_path_buf();
-            move |source| RunDirError::Io { path, source }
+            move |source| RunDirError::Io { op, path, source }
         };
         let Some(out) = out else {
             let root = Path::new("runs");
-            std::fs::create_dir_all(root).map_err(io(root))?;
+            std::fs::create_dir_all(root).map_err(io(IoOp::Create, root))?;
             let now = std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map(|d| d.as_secs())
@@ -182,15 +186,15 @@ impl RunDir {
                 match std::fs::create_dir(&path) {
                     Ok(()) => return Self::lock(path, layout, Existing::Refuse),
                     Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
-                    Err(e) => return Err(io(&path)(e)),
+                    Err(e) => return Err(io(IoOp::Create, &path)(e)),
                 }
             }
             unreachable!("some suffix is free");
         };
-        std::fs::create_dir_all(out).map_err(io(out))?;
+        std::fs::create_dir_all(out).map_err(io(IoOp::Create, out))?;
         let dir = Self::lock(out.to_path_buf(), layout, existing)?;
         let mut entries: Vec<String> = std::fs::read_dir(out)
-            .map_err(io(out))?
+            .map_err(io(IoOp::Read, out))?
             .filter_map(|e| e.ok())
             .map(|e| e.file_name().to_string_lossy().into_owned())
             .filter(|n| n != LOCK_FILE)
@@ -225,7 +229,7 @@ impl RunDir {
             } else {
                 std::fs::remove_file(&p)
             };
-            r.map_err(io(&p))?;
+            r.map_err(io(IoOp::Remove, &p))?;
         }
         Ok(dir)
     }
@@ -249,6 +253,7 @@ impl RunDir {
                         stale_lock,
                     };
                     writeln!(f, "{}", std::process::id()).map_err(|source| RunDirError::Io {
+                        op: IoOp::Write,
                         path: dir.lock.clone(),
                         source,
                     })?;
@@ -270,12 +275,19 @@ impl RunDir {
                         });
                     }
                     std::fs::remove_file(&lock).map_err(|source| RunDirError::Io {
+                        op: IoOp::Remove,
                         path: lock.clone(),
                         source,
                     })?;
                     stale_lock = Some(pid);
                 }
-                Err(source) => return Err(RunDirError::Io { path: lock, source }),
+                Err(source) => {
+                    return Err(RunDirError::Io {
+                        op: IoOp::Create,
+                        path: lock,
+                        source,
+                    })
+                }
             }
         }
     }
