@@ -782,9 +782,11 @@ fn merge_toml(base: &mut toml::Value, over: toml::Value) {
 }
 
 /// The `--config` file at `path` as a TOML table, for a study that takes some keys out before
-/// applying the rest ([`override_with_table`]).
+/// applying the rest ([`override_with_table`]). At most [`tandem_core::MAX_CONFIG_BYTES`]
+/// (1 MiB) are read: more (or an endless stream) is an error naming the file and the limit.
 pub fn read_table(path: &Path) -> Result<toml::Table> {
-    let text = std::fs::read_to_string(path).map_err(io(path))?;
+    let text =
+        tandem_core::read_file_capped(path, tandem_core::MAX_CONFIG_BYTES).map_err(io(path))?;
     toml::from_str(&text).map_err(|e| Error::input(settings_name(Some(path)), e.to_string()))
 }
 
