@@ -381,7 +381,7 @@ fn reproduce_rejects_non_finite_config_values_before_any_work() {
         ),
         (
             "[fit]\nholdout_fraction = 1.5",
-            "fit.holdout_fraction is 1.5",
+            "fit.holdout_fraction is 1.5, must lie in [0, 1)",
         ),
     ] {
         let cfg = temp_file(&format!("p0-{}", key.len()), line);
@@ -431,4 +431,117 @@ fn replay_outputs_that_overflow_are_errors_not_null() {
     let o = replay("CartPole-v1", "[0,0,0,1e3]", "[0]", "large-ok");
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!stdout(&o).contains("null"), "{}", stdout(&o));
+}
+
+/// `tandem env replay` of CartPole with `state` and `actions` as given on the command line.
+fn replay_args(state: &str, actions: &str) -> Output {
+    tandem(&[
+        "env",
+        "replay",
+        "--env",
+        "CartPole-v1",
+        "--state",
+        state,
+        "--actions",
+        actions,
+    ])
+}
+
+#[test]
+fn an_endless_actions_file_is_refused_at_its_cap() {
+    assert_fails_with(
+        &replay_args("[0,0,0,0]", "/dev/zero"),
+        &["cannot read /dev/zero", "64 MiB"],
+    );
+}
+
+#[test]
+fn an_endless_state_file_is_refused_at_its_cap() {
+    let actions = temp_file("capped-state-actions", "[0]");
+    assert_fails_with(
+        &replay_args("/dev/zero", actions.to_str().unwrap()),
+        &["cannot read /dev/zero", "64 MiB"],
+    );
+}
+
+#[test]
+fn endless_actions_on_stdin_are_refused_at_the_cap() {
+    let o = Command::new(env!("CARGO_BIN_EXE_tandem"))
+        .args([
+            "env",
+            "replay",
+            "--env",
+            "CartPole-v1",
+            "--state",
+            "[0,0,0,0]",
+        ])
+        .args(["--actions", "-"])
+        .stdin(std::fs::File::open("/dev/zero").unwrap())
+        .output()
+        .unwrap();
+    assert_fails_with(&o, &["cannot read stdin", "64 MiB"]);
+}
+
+#[test]
+fn an_endless_study_config_is_refused_before_the_output_directory_exists() {
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("capped-config-out");
+    let _ = std::fs::remove_dir_all(&out);
+    let o = tandem(&[
+        "reproduce",
+        "p2-cartpole",
+        "--quick",
+        "--quiet",
+        "--config",
+        "/dev/zero",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails_with(&o, &["/dev/zero", "1 MiB"]);
+    assert!(!out.exists());
+}
+
+#[test]
+fn frame_skip_with_a_registered_environment_is_refused() {
+    let actions = temp_file("frame-skip-env", "[[0, 0, 0]]");
+    // Refused before the environment is made, so with or without the `mujoco` feature.
+    let o = tandem(&[
+        "env",
+        "replay",
+        "--env",
+        "Hopper-v5",
+        "--frame-skip",
+        "50",
+        "--state",
+        "[0]",
+        "--actions",
+        actions.to_str().unwrap(),
+    ]);
+    assert_fails_with(
+        &o,
+        &[
+            "--frame-skip 50",
+            "only to --mjcf",
+            "Hopper-v5 has its own frame skip (4)",
+        ],
+    );
+}
+
+#[test]
+fn frame_skip_beyond_its_cap_is_refused() {
+    let actions = temp_file("frame-skip-huge", "[[0]]");
+    for n in ["18446744073709551615", "1000001"] {
+        let o = tandem(&[
+            "env",
+            "replay",
+            "--mjcf",
+            "x.xml",
+            "--frame-skip",
+            n,
+            "--state",
+            "[0, 0]",
+            "--actions",
+            actions.to_str().unwrap(),
+        ]);
+        assert_fails_with(&o, &["--frame-skip", "1..=1000000"]);
+    }
 }

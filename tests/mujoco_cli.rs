@@ -364,3 +364,82 @@ fn p4_reacher_runs_with_the_feature_only() {
     }
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `tandem env replay` of `target` (`["--env", ID]` or `["--mjcf", FILE]`) from `state` under
+/// the JSON `actions`, run in a temp folder (MuJoCo appends its warnings to `MUJOCO_LOG.TXT` in
+/// the working directory).
+#[cfg(feature = "mujoco")]
+fn replay_in_tmp(target: [&str; 2], state: &str, actions: &str, name: &str) -> Output {
+    let path = write_temp(name, actions);
+    Command::new(env!("CARGO_BIN_EXE_tandem"))
+        .args(["env", "replay", target[0], target[1], "--state", state])
+        .args(["--actions", path.to_str().unwrap()])
+        .current_dir(env!("CARGO_TARGET_TMPDIR"))
+        .output()
+        .expect("the tandem binary runs")
+}
+
+/// A failed run (exit code 1, no panic, nothing on stdout) whose stderr has every needle.
+#[cfg(feature = "mujoco")]
+fn fails_naming(o: &Output, needles: &[&str]) {
+    let err = err_text(o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(o.stdout.is_empty() && !err.contains("panicked"), "{err}");
+    for n in needles {
+        assert!(err.contains(n), "stderr lacks {n:?}: {err}");
+    }
+}
+
+#[cfg(feature = "mujoco")]
+#[test]
+fn replay_of_a_torque_that_blows_up_the_pendulum_is_an_error_naming_qacc() {
+    let scene = mujoco_dir("scenes/pendulum.xml");
+    // A moderate torque first: the failure is reported at step 1, not 0.
+    let o = replay_in_tmp(
+        ["--mjcf", &scene],
+        "[0.1, 0]",
+        "[[1.0], [1e10], [1e10]]",
+        "pendulum-1e10",
+    );
+    fails_naming(&o, &["step 1", "qacc[0]", "NaN or beyond ±1e10"]);
+}
+
+#[cfg(feature = "mujoco")]
+#[test]
+fn replay_of_hopper_with_a_huge_velocity_is_an_error_naming_qvel() {
+    let mut state = vec![
+        "0", "1.25", "0", "0", "0", "0", "0", "0", "0", "0", "0", "0",
+    ];
+    state[9] = "1e12";
+    let o = replay_in_tmp(
+        ["--env", "Hopper-v5"],
+        &format!("[{}]", state.join(",")),
+        "[[0, 0, 0]]",
+        "hopper-1e12",
+    );
+    fails_naming(&o, &["Hopper-v5", "step 0", "qvel[3]", "substep 1 of 4"]);
+}
+
+#[cfg(feature = "mujoco")]
+#[test]
+fn replay_of_a_1e300_action_is_an_error_not_a_zero_action() {
+    // The pendulum's motor has no ctrlrange: 1e300 (infinite in float32) is a bad ctrl, which
+    // MuJoCo would replace by 0.
+    let scene = mujoco_dir("scenes/pendulum.xml");
+    let o = replay_in_tmp(
+        ["--mjcf", &scene],
+        "[0.1, 0]",
+        "[[0.5], [1e300]]",
+        "pendulum-1e300",
+    );
+    fails_naming(&o, &["step 1", "ctrl[0]", "zeroes ctrl"]);
+    // Hopper's motors are limited: MuJoCo clamps the control into [-1, 1], and gymnasium's
+    // float32 control cost of an infinite action is infinite, so the reward is the error.
+    let o = replay_in_tmp(
+        ["--env", "Hopper-v5"],
+        "[0, 1.25, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]",
+        "[[0, 0, 0], [0, 1e300, 0]]",
+        "hopper-1e300",
+    );
+    fails_naming(&o, &["step 1", "reward is not finite"]);
+}

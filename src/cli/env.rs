@@ -12,11 +12,18 @@
 //! - `--actions`: path of a file holding a JSON array of actions (`-` reads stdin): integers for
 //!   a discrete action space, arrays of numbers for a box space (`[[0.5], [-1.0]]`).
 //!
+//! Files (and stdin) are read up to [`tandem_core::MAX_INPUT_BYTES`] (64 MiB); more is an error
+//! naming the file and the limit.
+//!
 //! - MuJoCo (feature `mujoco`): for gymnasium's MuJoCo tasks (`HalfCheetah-v5`, ...) the state is
 //!   `qpos` followed by `qvel`, the output `states` are `qpos ++ qvel` after each step, and the
 //!   output has one more list, `info`: each step's reward terms as gymnasium's `info` dict.
 //!   `--mjcf FILE` (instead of `--env`) replays any MJCF scene: state `qpos ++ qvel`, actions are
-//!   `ctrl`, `--frame-skip N` MuJoCo steps per action (default 1), reward 0, no time limit.
+//!   `ctrl`, `--frame-skip N` MuJoCo steps per action (default 1, at most [`MAX_FRAME_SKIP`]),
+//!   reward 0, no time limit. `--frame-skip` with `--env` is an error: a registered task has its
+//!   own frame skip. A step MuJoCo flags as bad (a NaN or a value beyond ±1e10 in `qpos`, `qvel`,
+//!   `qacc` or `ctrl`, after which MuJoCo would reset the simulation; full contact or constraint
+//!   buffers) is an error naming the quantity and the step, not a reset state in the output.
 //!
 //! Every action is checked before the first step: wrong kinds, dimensions and non-finite values
 //! (`NaN`, `Infinity` as Python's `json` writes them) are errors naming the action's index.
@@ -24,15 +31,20 @@
 //! `[0, 0, 0, 1e200]` squares the angular velocity), and a state, observation or reward that is
 //! no longer finite is an error naming the step and the quantity, not a `null` in the JSON.
 
-use std::io::Read as _;
 use std::path::PathBuf;
 
 use clap::{Args, Subcommand};
 use serde_json::{json, Value};
+use tandem_core::{read_capped, read_file_capped, MAX_INPUT_BYTES};
 use tandem_envs::{Action, Env, Space};
 
 use super::json::{self, kind};
 use super::{CliError, IoOp, Result};
+
+/// The most MuJoCo steps per action `--frame-skip` accepts: a million steps of a typical 2 ms
+/// timestep are 2000 s of simulated time per action, far past any use, and a larger value would
+/// keep the program busy for hours on one action.
+pub const MAX_FRAME_SKIP: u64 = 1_000_000;
 
 /// `tandem env` subcommands.
 #[derive(Debug, Subcommand)]
@@ -51,14 +63,16 @@ pub struct ReplayArgs {
     /// state `qpos ++ qvel`, actions are the actuators' `ctrl`, reward 0.
     #[arg(long)]
     pub mjcf: Option<PathBuf>,
-    /// MuJoCo steps per action of an `--mjcf` scene.
-    #[arg(long, default_value_t = 1, requires = "mjcf", value_parser = clap::value_parser!(u64).range(1..))]
-    pub frame_skip: u64,
-    /// Start state: a JSON array (e.g. '[0.01, 0, -0.02, 0]') or the path of a file holding one.
+    /// MuJoCo steps per action of an `--mjcf` scene (default 1, at most 1000000). Refused with
+    /// `--env`: a registered task has its own frame skip.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=MAX_FRAME_SKIP))]
+    pub frame_skip: Option<u64>,
+    /// Start state: a JSON array (e.g. '[0.01, 0, -0.02, 0]') or the path of a file holding one
+    /// (at most 64 MiB).
     #[arg(long)]
     pub state: String,
     /// File with a JSON array of actions (numbers for discrete, arrays for continuous); `-` for
-    /// stdin.
+    /// stdin. At most 64 MiB.
     #[arg(long)]
     pub actions: PathBuf,
 }
@@ -73,15 +87,19 @@ pub fn run(cmd: EnvCommand) -> Result<()> {
     }
 }
 
+/// The file at `path` (`-`: stdin), at most [`MAX_INPUT_BYTES`].
 fn read_file(path: &std::path::Path) -> Result<String> {
-    if path.as_os_str() == "-" {
-        let mut s = String::new();
-        std::io::stdin()
-            .read_to_string(&mut s)
-            .map_err(|source| CliError::io(IoOp::Read, path, source))?;
-        return Ok(s);
-    }
-    std::fs::read_to_string(path).map_err(|source| CliError::io(IoOp::Read, path, source))
+    let text = if path.as_os_str() == "-" {
+        read_capped(std::io::stdin().lock(), MAX_INPUT_BYTES)
+    } else {
+        read_file_capped(path, MAX_INPUT_BYTES)
+    };
+    let shown = if path.as_os_str() == "-" {
+        std::path::Path::new("stdin")
+    } else {
+        path
+    };
+    text.map_err(|source| CliError::io(IoOp::Read, shown, source))
 }
 
 /// The `--state` argument as numbers.
@@ -145,13 +163,25 @@ pub fn parse_actions(value: &Value, space: &Space, env: &str, what: &str) -> Res
 
 /// Replays `args` and returns the trajectory object.
 pub fn replay(args: &ReplayArgs) -> Result<Value> {
+    let id = args.env.as_deref().unwrap_or_default();
+    if let (Some(n), None) = (args.frame_skip, &args.mjcf) {
+        // Applying it would change the task's dt and so its rewards: no longer gymnasium's task.
+        return Err(CliError::input(
+            format!("--frame-skip {n}"),
+            format!(
+                "applies only to --mjcf scenes; {id} has its own frame skip{}",
+                tandem::mujoco::TaskKind::from_id(id)
+                    .map(|k| format!(" ({})", k.spec().frame_skip))
+                    .unwrap_or_default()
+            ),
+        ));
+    }
     let state = parse_state(&args.state)?;
     let what = format!("actions file {}", args.actions.display());
     let text = read_file(&args.actions)?;
     if let Some(path) = &args.mjcf {
-        return replay_mjcf(path, args.frame_skip, &state, &text, &what);
+        return replay_mjcf(path, args.frame_skip.unwrap_or(1), &state, &text, &what);
     }
-    let id = args.env.as_deref().unwrap_or_default();
     if let Some(kind) = tandem::mujoco::TaskKind::from_id(id) {
         return replay_mujoco_task(kind, &state, &text, &what);
     }

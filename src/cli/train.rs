@@ -44,7 +44,7 @@ pub struct TrainArgs {
     pub seed: Option<u64>,
     /// TOML file with `[agent]` and `[train]` overrides of the defaults. Without it, the tuned
     /// preset for the (algorithm, environment) pair is used when there is one (the files in
-    /// `crates/agents/presets/`, built into the program).
+    /// `crates/agents/presets/`, built into the program). At most 1 MiB.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Without `--config`, use the algorithm's defaults even where a preset exists.
@@ -208,7 +208,7 @@ impl ConfigSource {
     pub fn read(&self, algo: Algo) -> Result<(AlgoConfig, TrainSettings)> {
         match self {
             ConfigSource::File(p) => {
-                let text = std::fs::read_to_string(p)
+                let text = tandem_core::read_file_capped(p, tandem_core::MAX_CONFIG_BYTES)
                     .map_err(|source| CliError::io(IoOp::Read, p, source))?;
                 parse_config(algo, &text, &format!("config file {}", p.display()))
             }
@@ -272,15 +272,16 @@ fn fresh(args: &TrainArgs) -> Result<ResolvedConfig> {
 fn recorded(args: &TrainArgs, dir: &Path) -> Result<ResolvedConfig> {
     let what = format!("--resume {}", dir.display());
     let path = dir.join("config.toml");
-    let text = std::fs::read_to_string(&path).map_err(|e| {
-        CliError::input(
-            &what,
-            format!(
-                "{} cannot be read ({e}): not a `tandem train` run directory",
-                path.display()
-            ),
-        )
-    })?;
+    let text =
+        tandem_core::read_file_capped(&path, tandem_core::MAX_CONFIG_BYTES).map_err(|e| {
+            CliError::input(
+                &what,
+                format!(
+                    "{} cannot be read ({e}): not a `tandem train` run directory",
+                    path.display()
+                ),
+            )
+        })?;
     let rc: ResolvedConfig = toml::from_str(&text)
         .map_err(|e| CliError::input(format!("{}", path.display()), e.to_string().trim()))?;
     let mut conflicts = Vec::new();

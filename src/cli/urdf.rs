@@ -31,7 +31,7 @@ pub enum UrdfCommand {
     Eval {
         /// The URDF file.
         file: PathBuf,
-        /// JSON file with the list of states.
+        /// JSON file with the list of states (at most 64 MiB).
         #[arg(long)]
         states: PathBuf,
     },
@@ -46,7 +46,7 @@ pub fn run(cmd: UrdfCommand) -> Result<()> {
         }
         UrdfCommand::Eval { file, states } => {
             let model = load(&file)?;
-            let text = std::fs::read_to_string(&states)
+            let text = tandem_core::read_file_capped(&states, tandem_core::MAX_INPUT_BYTES)
                 .map_err(|source| CliError::io(IoOp::Read, &states, source))?;
             let what = format!("states file {}", states.display());
             let out = eval(&model, &parse(&text, &what)?, &what)?;

@@ -30,6 +30,15 @@ pub enum EnvError {
         /// What is wrong with it.
         reason: String,
     },
+    /// The simulation behind the environment failed during a step (e.g. MuJoCo found a NaN or a
+    /// huge acceleration and would reset itself); the environment needs a reset.
+    #[error("{env}: {reason}")]
+    Simulation {
+        /// The environment's id.
+        env: String,
+        /// What failed, naming the quantity and when.
+        reason: String,
+    },
     /// No environment of that name.
     #[error("unknown environment `{0}`")]
     Unknown(String),

@@ -157,13 +157,13 @@ impl FitConfig {
     pub fn validate(&self) -> Result<(), ModelError> {
         if self.epochs == 0 || self.batch_size == 0 {
             return Err(ModelError::Other(format!(
-                "fit epochs {} and batch_size {} must be >= 1",
+                "fit.epochs {} and fit.batch_size {} must be >= 1",
                 self.epochs, self.batch_size
             )));
         }
         if !(0.0..1.0).contains(&self.holdout_fraction) {
             return Err(ModelError::Other(format!(
-                "fit holdout_fraction {} must lie in [0, 1)",
+                "fit.holdout_fraction is {}, must lie in [0, 1)",
                 self.holdout_fraction
             )));
         }

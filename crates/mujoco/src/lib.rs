@@ -16,6 +16,12 @@
 //! | [`make`], [`registered`], [`AVAILABLE`] | always | the registry: with the feature, `make("HalfCheetah-v5")` is the task with its time limit; without it, an error saying how to enable it |
 //! | `Scene`, `MujocoEnv`, `MujocoPlant` | `mujoco` | a loaded MJCF model; an environment (gymnasium's task, or any scene); a plant (state `qpos ++ qvel`, batch step, finite-difference linearization) |
 //!
+//! A step after which MuJoCo flags a bad state (NaN or beyond ±1e10 in `qpos`, `qvel`, `qacc` or
+//! `ctrl`, which MuJoCo answers by resetting the simulation or zeroing `ctrl`; full contact or
+//! constraint buffers) is an error naming the quantity ([`MujocoError::Step`], in environments
+//! `tandem_envs::EnvError::Simulation`), never the reset state. MJCF files are read up to
+//! `tandem_core::MAX_INPUT_BYTES` (64 MiB).
+//!
 //! With the feature, replaying gymnasium 1.4.0's recorded episodes gives bit-identical `qpos`,
 //! `qvel` and observations, bit-identical rewards for five tasks and rewards within 2.3e-16 for
 //! Reacher and Pusher, whose norms gymnasium takes through BLAS (this crate's
@@ -47,7 +53,7 @@ pub use registry::{assets_dir, make, registered, AVAILABLE};
 pub use sim::{MujocoEnv, MujocoPlant, Scene};
 pub use task::{Outcome, Readout, TaskKind, TaskSpec, MAX_TERMS};
 
-/// Errors of loading MuJoCo models.
+/// Errors of loading MuJoCo models and of stepping them.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MujocoError {
     /// The linked MuJoCo library is not the version the bindings expect.
@@ -76,5 +82,20 @@ pub enum MujocoError {
         path: PathBuf,
         /// What is wrong.
         message: String,
+    },
+    /// MuJoCo raised a warning during a step after which the result is not the model's physics
+    /// (it reset the simulation, zeroed `ctrl`, or dropped contacts or constraints).
+    #[error("MuJoCo step failed at substep {substep} of {substeps} (t = {time} s): {problem}")]
+    Step {
+        /// What went bad: `qpos`, `qvel`, `qacc`, `ctrl`, `contacts` or `constraints`.
+        quantity: &'static str,
+        /// The explanation, naming the quantity's index where MuJoCo gives one.
+        problem: String,
+        /// The failed `mj_step` call, counted from 1, of the step's frame skip.
+        substep: usize,
+        /// The frame skip.
+        substeps: usize,
+        /// Simulation time before the failed substep, in seconds.
+        time: f64,
     },
 }

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use mujoco_rs::mujoco_c::{mjVERSION_HEADER, mj_version};
-use mujoco_rs::prelude::{MjData, MjModel, MjtObjBase};
+use mujoco_rs::prelude::{MjData, MjModel, MjtObjBase, MjtWarning};
 use nalgebra::DVector;
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::{Action, Rng, Space};
@@ -39,8 +39,10 @@ impl fmt::Debug for Scene {
 impl Scene {
     /// Loads the MJCF file at `path` (relative includes and meshes resolve from its folder).
     ///
-    /// Errors: the linked library is not MuJoCo 3.17.0, the file is missing or malformed, or the
-    /// model has actuator activations (`na > 0`; tandem's state is `qpos ++ qvel`).
+    /// Errors: the linked library is not MuJoCo 3.17.0, the file is missing, larger than
+    /// [`tandem_core::MAX_INPUT_BYTES`] (64 MiB, as URDF files; checked by reading at most one
+    /// byte more, so `/dev/zero` is refused quickly) or malformed, or the model has actuator
+    /// activations (`na > 0`; tandem's state is `qpos ++ qvel`).
     pub fn from_xml(path: impl AsRef<Path>) -> Result<Self, MujocoError> {
         let path = path.as_ref();
         check_library()?;
@@ -51,10 +53,18 @@ impl Scene {
                 message: "the path contains a NUL character".into(),
             });
         }
+        // MuJoCo reads the file itself (includes resolve from its folder); this bounded read
+        // only refuses what is too large, before MuJoCo would read all of it.
+        tandem_core::read_file_capped(path, tandem_core::MAX_INPUT_BYTES).map_err(|e| {
+            MujocoError::Load {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            }
+        })?;
         if !path.is_file() {
             return Err(MujocoError::Load {
                 path: path.to_path_buf(),
-                message: "no such file".into(),
+                message: "not a regular file".into(),
             });
         }
         let model = MjModel::from_xml(path).map_err(|e| MujocoError::Load {
@@ -213,12 +223,82 @@ fn load_state(data: &mut Data, qpos: &[f64], qvel: &[f64]) {
     data.forward();
 }
 
+/// The warnings after which a step's result is not the model's physics, with the quantity
+/// each concerns. MuJoCo counts them in `mjData.warning`, prints a line and carries on:
+/// - `BADQPOS`, `BADQVEL`, `BADQACC`: a NaN or a value beyond ±1e10 (`mjMAXVAL`); MuJoCo then
+///   resets the simulation (`mj_resetData`), so the step returns the model's default state.
+/// - `BADCTRL`: a NaN or a value beyond ±1e10 in the `ctrl` of an actuator without ctrlrange
+///   (an `f32` action of 1e300 is infinite; a limited actuator's is clamped first, correctly);
+///   MuJoCo zeroes `ctrl`, so the step would run with no control at all.
+/// - `CONTACTFULL`, `CNSTRFULL`: the arena is full, so contacts or constraints were dropped and
+///   bodies may pass through each other.
+///
+/// `INERTIA` (a (near) singular mass matrix) is not among them: MuJoCo regularizes the pivot and
+/// the step goes on finite; it marks a degenerate model (a massless chain), not a bad state.
+const FATAL_WARNINGS: [(MjtWarning, &str); 6] = [
+    (MjtWarning::mjWARN_BADQPOS, "qpos"),
+    (MjtWarning::mjWARN_BADQVEL, "qvel"),
+    (MjtWarning::mjWARN_BADQACC, "qacc"),
+    (MjtWarning::mjWARN_BADCTRL, "ctrl"),
+    (MjtWarning::mjWARN_CONTACTFULL, "contacts"),
+    (MjtWarning::mjWARN_CNSTRFULL, "constraints"),
+];
+
+/// Runs `mj_step` `substeps` times, failing at the first substep after which MuJoCo raised one
+/// of the [`FATAL_WARNINGS`].
+///
+/// The counters are zeroed before each substep rather than compared: the reset that follows a
+/// bad state zeroes them itself before counting the warning, so a count could stay the same.
+fn step_checked(data: &mut Data, substeps: usize) -> Result<(), MujocoError> {
+    for substep in 0..substeps {
+        let time = data.time();
+        {
+            let warnings = data.warning_mut();
+            for (w, _) in FATAL_WARNINGS {
+                warnings[w as usize].number = 0;
+            }
+        }
+        data.step();
+        let warnings = data.warning();
+        if let Some((w, quantity)) = FATAL_WARNINGS
+            .into_iter()
+            .find(|(w, _)| warnings[*w as usize].number > 0)
+        {
+            let index = warnings[w as usize].lastinfo;
+            let problem = match w {
+                MjtWarning::mjWARN_CONTACTFULL | MjtWarning::mjWARN_CNSTRFULL => format!(
+                    "too many {quantity} for MuJoCo's arena (some were dropped; raise the MJCF's \
+                     <size memory>)"
+                ),
+                _ => format!(
+                    "a bad {quantity}: {quantity}[{index}] is NaN or beyond ±1e10 (MuJoCo {})",
+                    if w == MjtWarning::mjWARN_BADCTRL {
+                        "zeroes ctrl"
+                    } else {
+                        "resets the simulation"
+                    }
+                ),
+            };
+            return Err(MujocoError::Step {
+                quantity,
+                problem,
+                substep: substep + 1,
+                substeps,
+                time,
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Where an environment is in its episode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
     NotReset,
     Running,
     Ended,
+    /// A step failed (MuJoCo flagged its result, see [`step_checked`]).
+    Failed,
 }
 
 /// A MuJoCo scene as an environment with gymnasium's semantics: one of gymnasium's v5 tasks
@@ -229,7 +309,11 @@ enum Phase {
 /// `ctrl` to the action rounded to `float32` (gymnasium's action dtype), runs `mj_step`
 /// `frame_skip` times, then `mj_rnePostConstraint` (contact forces), as gymnasium's `MujocoEnv`.
 /// Actions are not clipped: MuJoCo clamps `ctrl` into ctrlrange, and the control cost uses the
-/// action as given. A base environment does not truncate; [`crate::make`] adds the task's
+/// action as given. A step after which MuJoCo raised a warning that makes its result wrong (a
+/// bad `qpos`, `qvel`, `qacc` or `ctrl`, which MuJoCo answers by resetting the simulation or
+/// zeroing `ctrl`; full contact or constraint buffers) is an [`EnvError::Simulation`] naming the
+/// quantity and the substep, and the environment then needs a reset.
+/// A base environment does not truncate; [`crate::make`] adds the task's
 /// [`tandem_envs::TimeLimit`]. The reward terms of the last step (gymnasium's `info`) are in
 /// [`MujocoEnv::last_outcome`].
 pub struct MujocoEnv {
@@ -445,13 +529,13 @@ impl Env for MujocoEnv {
     fn step(&mut self, action: &Action) -> Result<Step, EnvError> {
         match self.phase {
             Phase::Running => {}
-            Phase::NotReset | Phase::Ended => {
+            Phase::NotReset | Phase::Ended | Phase::Failed => {
                 return Err(EnvError::NeedsReset {
                     env: self.id.clone(),
-                    when: if self.phase == Phase::NotReset {
-                        "before reset"
-                    } else {
-                        "after the episode ended"
+                    when: match self.phase {
+                        Phase::NotReset => "before reset",
+                        Phase::Ended => "after the episode ended",
+                        _ => "after a failed step",
                     },
                 })
             }
@@ -472,8 +556,12 @@ impl Env for MujocoEnv {
         self.before_qpos.copy_from_slice(self.data.qpos());
         Self::read_bodies(&self.data, &self.body_ids, &mut self.before_bodies);
         self.data.ctrl_mut().copy_from_slice(&self.ctrl);
-        for _ in 0..self.frame_skip {
-            self.data.step();
+        if let Err(e) = step_checked(&mut self.data, self.frame_skip) {
+            self.phase = Phase::Failed;
+            return Err(EnvError::Simulation {
+                env: self.id.clone(),
+                reason: e.to_string(),
+            });
         }
         self.data.rne_post_constraint();
         let observation = self.observe();
@@ -526,7 +614,11 @@ impl Env for MujocoEnv {
 /// `tandem_models::PlantModel`) run on MuJoCo scenes.
 ///
 /// [`Plant::step`] is a pure function of `(x, u)`: each call starts from `mj_resetData` (no
-/// solver warm start, time 0), sets the state and steps. An environment keeps its warm start from
+/// solver warm start, time 0), sets the state and steps. A step MuJoCo flags (see
+/// [`MujocoEnv`]: a bad `qpos`, `qvel`, `qacc` or `ctrl`, full buffers) gives an all-NaN next
+/// state through the [`Plant`] trait, which has no error channel (`tandem_models::PlantModel`
+/// refuses it as non-finite); [`MujocoPlant::try_step_into`] and [`MujocoPlant::step_batch`]
+/// return the error itself. An environment keeps its warm start from
 /// step to step, so where contacts are active a plant step can differ from an environment step
 /// in the solver's last digits. Scratch `mjData` are pooled, so one plant serves many threads.
 /// [`Plant::linearize`] is the trait's central differences.
@@ -597,10 +689,18 @@ impl MujocoPlant {
     /// Steps a batch: row `i` of `states` (`b × state_dim`, row-major) under row `i` of `actions`
     /// (`b × action_dim`) into row `i` of `next`, reusing one scratch `mjData`.
     ///
+    /// Errors: the first row whose step MuJoCo flags ([`MujocoError::Step`], see
+    /// [`MujocoPlant::try_step_into`]); the rows after it are not stepped.
+    ///
     /// # Panics
     /// If the slice lengths are not multiples of the dimensions with equal row counts (callers
     /// check at their boundary, see [`tandem_dynamics::check_dims`]).
-    pub fn step_batch(&self, states: &[f64], actions: &[f64], next: &mut [f64]) {
+    pub fn step_batch(
+        &self,
+        states: &[f64],
+        actions: &[f64],
+        next: &mut [f64],
+    ) -> Result<(), MujocoError> {
         let (n, m) = (self.state_dim(), self.action_dim());
         let rows = states.len() / n.max(1);
         assert!(
@@ -611,15 +711,29 @@ impl MujocoPlant {
             next.len()
         );
         let mut data = self.take();
-        for i in 0..rows {
+        let result = (0..rows).try_for_each(|i| {
             self.step_with(
                 &mut data,
                 &states[i * n..(i + 1) * n],
                 &actions[i * m..(i + 1) * m],
                 &mut next[i * n..(i + 1) * n],
-            );
-        }
+            )
+        });
         self.give(data);
+        result
+    }
+
+    /// [`Plant::step_into`] with MuJoCo's verdict: an error ([`MujocoError::Step`]) where MuJoCo
+    /// flagged a substep (a bad `qpos`, `qvel`, `qacc` or `ctrl`, full contact or constraint
+    /// buffers), instead of the state MuJoCo reset to. `next` is then unspecified.
+    ///
+    /// # Panics
+    /// If `x`, `u` or `next` do not have the plant's dimensions.
+    pub fn try_step_into(&self, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), MujocoError> {
+        let mut data = self.take();
+        let result = self.step_with(&mut data, x, u, next);
+        self.give(data);
+        result
     }
 
     fn take(&self) -> Data {
@@ -633,17 +747,22 @@ impl MujocoPlant {
         }
     }
 
-    fn step_with(&self, data: &mut Data, x: &[f64], u: &[f64], next: &mut [f64]) {
+    fn step_with(
+        &self,
+        data: &mut Data,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+    ) -> Result<(), MujocoError> {
         let nq = self.scene.nq();
         data.reset();
         data.qpos_mut().copy_from_slice(&x[..nq]);
         data.qvel_mut().copy_from_slice(&x[nq..]);
         data.ctrl_mut().copy_from_slice(u);
-        for _ in 0..self.frame_skip {
-            data.step();
-        }
+        step_checked(data, self.frame_skip)?;
         next[..nq].copy_from_slice(data.qpos());
         next[nq..].copy_from_slice(data.qvel());
+        Ok(())
     }
 }
 
@@ -667,8 +786,81 @@ impl Plant for MujocoPlant {
     }
 
     fn step_into(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
-        let mut data = self.take();
-        self.step_with(&mut data, x, u, next);
-        self.give(data);
+        if self.try_step_into(x, u, next).is_err() {
+            // The trait has no error channel; NaN is refused by every finiteness check
+            // downstream, where MuJoCo's reset state would pass as a real one.
+            next.fill(f64::NAN);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scene(name: &str) -> Scene {
+        let path = format!("{}/tests/scenes/{name}", env!("CARGO_MANIFEST_DIR"));
+        Scene::from_xml(path).unwrap()
+    }
+
+    /// The quantity of a failed plant step from `x` under `u`, or `None` when it succeeds.
+    fn failure(plant: &MujocoPlant, x: &[f64], u: &[f64]) -> Option<&'static str> {
+        let mut next = vec![0.0; plant.state_dim()];
+        match plant.try_step_into(x, u, &mut next) {
+            Ok(()) => None,
+            Err(MujocoError::Step { quantity, .. }) => Some(quantity),
+            Err(e) => panic!("unexpected error {e}"),
+        }
+    }
+
+    #[test]
+    fn a_normal_step_succeeds_and_a_blown_up_one_is_an_error_naming_the_quantity() {
+        let plant = MujocoPlant::new(scene("pendulum.xml"), 2).unwrap();
+        assert_eq!(failure(&plant, &[0.1, 0.0], &[1.0]), None);
+        // A torque of 1e10 accelerates the bob beyond 1e10 rad/s²: MuJoCo would reset.
+        assert_eq!(failure(&plant, &[0.1, 0.0], &[1e10]), Some("qacc"));
+        assert_eq!(failure(&plant, &[0.1, 1e12], &[0.0]), Some("qvel"));
+        assert_eq!(failure(&plant, &[1e12, 0.0], &[0.0]), Some("qpos"));
+        // 1e300 is infinite in f32: MuJoCo would zero the unlimited motor's ctrl...
+        assert_eq!(failure(&plant, &[0.1, 0.0], &[1e300]), Some("ctrl"));
+        // ...and clamps a limited one into ctrlrange first (the slider's ±4 N on 2 kg), which is
+        // the right answer, not an error.
+        let slider = MujocoPlant::new(scene("slider.xml"), 1).unwrap();
+        let mut next = [0.0; 2];
+        slider
+            .try_step_into(&[0.0, 0.0], &[1e300], &mut next)
+            .unwrap();
+        assert!((next[0] - 0.01 * 0.02).abs() < 1e-15 && (next[1] - 0.02).abs() < 1e-15);
+        // Through the trait, which has no error channel: NaN, never MuJoCo's reset state.
+        let next = plant.step(
+            &DVector::from_vec(vec![0.1, 0.0]),
+            &DVector::from_vec(vec![1e10]),
+        );
+        assert!(next.iter().all(|v| v.is_nan()), "{next}");
+        let mut batch = vec![0.0; 4];
+        let err = plant
+            .step_batch(&[0.1, 0.0, 0.1, 0.0], &[1.0, 1e10], &mut batch)
+            .unwrap_err();
+        assert!(err.to_string().contains("qacc[0]"), "{err}");
+    }
+
+    #[test]
+    fn an_environment_step_that_blows_up_is_an_error_and_needs_a_reset() {
+        let mut env = MujocoEnv::scene(scene("pendulum.xml"), 3).unwrap();
+        env.set_state(&[0.1, 0.0]).unwrap();
+        env.step(&Action::Continuous(vec![1.0])).unwrap();
+        let err = env.step(&Action::Continuous(vec![1e10])).unwrap_err();
+        assert!(matches!(err, EnvError::Simulation { .. }), "{err:?}");
+        let text = err.to_string();
+        assert!(
+            text.contains("qacc[0]")
+                && text.contains("substep 1 of 3")
+                && text.contains("t = 0.03"),
+            "{text}"
+        );
+        let again = env.step(&Action::Continuous(vec![0.0])).unwrap_err();
+        assert!(again.to_string().contains("after a failed step"), "{again}");
+        env.reset(None);
+        env.step(&Action::Continuous(vec![0.0])).unwrap();
     }
 }

@@ -70,7 +70,7 @@ fn plant_steps_are_pure_and_batch_steps_agree() {
         actions.extend(&ep.steps[0].action);
     }
     let mut next = vec![0.0; states.len()];
-    plant.step_batch(&states, &actions, &mut next);
+    plant.step_batch(&states, &actions, &mut next).unwrap();
     for (i, ep) in fx.episodes.iter().enumerate() {
         let x = DVector::from_column_slice(&states[i * 18..(i + 1) * 18]);
         let u = DVector::from_column_slice(&actions[i * 6..(i + 1) * 6]);

@@ -238,10 +238,16 @@ struct StudyName {
     study: String,
 }
 
+/// A file of a study's directory (`config.json`, a record, its checksum), read up to
+/// [`tandem_core::MAX_INPUT_BYTES`].
+fn read_study_file(path: &Path) -> std::io::Result<String> {
+    tandem_core::read_file_capped(path, tandem_core::MAX_INPUT_BYTES)
+}
+
 /// The name of the study that wrote `dir` (its `config.json`'s `study`).
 pub fn study_of(dir: &Path) -> Result<String> {
     let path = dir.join("config.json");
-    let text = std::fs::read_to_string(&path).map_err(failed(IoOp::Read, &path))?;
+    let text = read_study_file(&path).map_err(failed(IoOp::Read, &path))?;
     let n: StudyName = serde_json::from_str(&text)
         .map_err(|e| Error::input(path.display().to_string(), e.to_string()))?;
     Ok(n.study)
@@ -390,7 +396,7 @@ fn read_dir_config<S: Study>(study: &S, dir: &Path, what: &str) -> Result<DirCon
 /// `dir/config.json`'s path and text, which must name `study`.
 fn config_text<S: Study>(study: &S, dir: &Path, what: &str) -> Result<(PathBuf, String)> {
     let path = dir.join("config.json");
-    let text = std::fs::read_to_string(&path).map_err(|e| {
+    let text = read_study_file(&path).map_err(|e| {
         Error::input(
             what,
             format!(
@@ -451,8 +457,8 @@ pub fn seed_range(first: u64, seeds: u64) -> Result<std::ops::Range<u64>> {
         None => Err(Error::input(
             what,
             format!(
-                "{seeds} seeds from {first} run past the largest seed {}",
-                u64::MAX
+                "{seeds} seeds from {first} run past the last seed a process can run, {}",
+                u64::MAX - 1
             ),
         )),
     }
@@ -660,7 +666,7 @@ struct Stored<R> {
 fn read_record<R: DeserializeOwned>(dir: &Path, run: &str, seed: u64) -> Result<Option<Stored<R>>> {
     let sub = record_dir(dir, run, seed);
     let path = sub.join("record.json");
-    let text = match std::fs::read_to_string(&path) {
+    let text = match read_study_file(&path) {
         Ok(text) => text,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(source) => return Err(Error::io(IoOp::Read, path, source)),
@@ -681,7 +687,7 @@ fn read_record<R: DeserializeOwned>(dir: &Path, run: &str, seed: u64) -> Result<
         )));
     }
     let sum_path = sub.join(CHECKSUM);
-    let checksummed = match std::fs::read_to_string(&sum_path) {
+    let checksummed = match read_study_file(&sum_path) {
         Ok(line) => {
             let recorded = line.split_whitespace().next().unwrap_or_default();
             let actual = sha256_hex(text.as_bytes());
@@ -1182,9 +1188,11 @@ fn merge_toml(base: &mut toml::Value, over: toml::Value) {
 }
 
 /// The `--config` file at `path` as a TOML table, for a study that takes some keys out before
-/// applying the rest ([`override_with_table`]).
+/// applying the rest ([`override_with_table`]). At most [`tandem_core::MAX_CONFIG_BYTES`]
+/// (1 MiB) are read: more (or an endless stream) is an error naming the file and the limit.
 pub fn read_table(path: &Path) -> Result<toml::Table> {
-    let text = std::fs::read_to_string(path).map_err(io(path))?;
+    let text =
+        tandem_core::read_file_capped(path, tandem_core::MAX_CONFIG_BYTES).map_err(io(path))?;
     toml::from_str(&text).map_err(|e| Error::input(settings_name(Some(path)), e.to_string()))
 }
 

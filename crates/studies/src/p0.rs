@@ -112,13 +112,6 @@ pub fn parse_config(base: P0Config, text: &str, what: &str) -> Result<P0Config> 
 fn checked(cfg: P0Config, what: &str) -> Result<P0Config> {
     cfg.validate()
         .map_err(|e| Error::input(what, e.to_string()))?;
-    let h = cfg.fit.holdout_fraction;
-    if !(0.0..1.0).contains(&h) {
-        return Err(Error::input(
-            what,
-            format!("fit.holdout_fraction is {h}, must be in [0, 1)"),
-        ));
-    }
     Ok(cfg)
 }
 
@@ -556,8 +549,8 @@ impl Study for P0Study {
             (P0Task::Leo, true) => leo_quick_config(),
         };
         let Some(path) = config else { return Ok(base) };
-        let text =
-            std::fs::read_to_string(path).map_err(|source| Error::io(IoOp::Read, path, source))?;
+        let text = tandem_core::read_file_capped(path, tandem_core::MAX_CONFIG_BYTES)
+            .map_err(|source| Error::io(IoOp::Read, path, source))?;
         parse_config(base, &text, &format!("--config {}", path.display()))
     }
 
