@@ -2,7 +2,7 @@
 //! every struct reads from TOML/JSON and rejects unknown keys.
 
 use serde::{Deserialize, Serialize};
-use tandem_nn::budget::MemoryEstimate;
+use tandem_nn::budget::{widths, MemoryEstimate};
 
 #[cfg(feature = "pixels")]
 use crate::conv_qnet::ConvQNetConfig;
@@ -16,15 +16,6 @@ fn check_hidden(field: &'static str, h: &[usize]) -> Result<()> {
         format!("{h:?}"),
         "needs at least one hidden layer, each of 1..=16384 units",
     )
-}
-
-/// Layer widths `[input, hidden..., output]`.
-fn widths(input: usize, hidden: &[usize], output: usize) -> Vec<usize> {
-    let mut w = Vec::with_capacity(hidden.len() + 2);
-    w.push(input);
-    w.extend(hidden);
-    w.push(output);
-    w
 }
 
 /// Parameter-sized buffers of a network trained with Adam and tracked by a target network:

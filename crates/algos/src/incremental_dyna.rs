@@ -96,10 +96,7 @@ impl P1Config {
                 b.memory(obs_dim, act_dim, b.max_rollout_capacity()),
             ),
             Method::IncrementalDyna => {
-                let rollouts = b
-                    .rollouts_per_step
-                    .checked_mul(usize::try_from(b.epoch_length).unwrap_or(usize::MAX))
-                    .and_then(|n| n.checked_mul(b.retain_epochs));
+                let rollouts = b.rollout_capacity(1);
                 MemoryEstimate::new()
                     .with("base.sac.", b.sac.memory(obs_dim, act_dim))
                     .with(

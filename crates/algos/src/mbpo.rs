@@ -295,12 +295,17 @@ impl MbpoConfig {
         Ok(())
     }
 
-    /// The largest the rollout buffer gets: `rollouts_per_step × epoch_length × k × retain_epochs`
-    /// at the longest `k`; `None` on overflow.
+    /// The largest the rollout buffer gets: [`Self::rollout_capacity`] at the longest `k`.
     pub fn max_rollout_capacity(&self) -> Option<usize> {
+        self.rollout_capacity(self.rollout_length.max())
+    }
+
+    /// The rollout buffer for rollouts of length `k`: `rollouts_per_step × epoch_length × k ×
+    /// retain_epochs`; `None` on overflow.
+    pub fn rollout_capacity(&self, k: usize) -> Option<usize> {
         self.rollouts_per_step
             .checked_mul(usize::try_from(self.epoch_length).ok()?)?
-            .checked_mul(self.rollout_length.max())?
+            .checked_mul(k)?
             .checked_mul(self.retain_epochs)
     }
 

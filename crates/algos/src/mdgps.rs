@@ -38,7 +38,7 @@ pub use tandem_agents::{PolicyConfig, Weighting};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
 use tandem_models::{DynamicsModel, ModelInput};
-use tandem_nn::budget::MemoryEstimate;
+use tandem_nn::budget::{widths, MemoryEstimate};
 use tandem_nn::{Adam, AdamConfig, Checkpoint, Checkpointable};
 use tandem_planners::{adjust_step_mult, laplace_cost, LqrFlm, TrajectorySamples, TvlgController};
 
@@ -141,7 +141,7 @@ impl MdgpsConfig {
         policy_dim: usize,
     ) -> MemoryEstimate {
         let p = &self.policy;
-        let sizes = [&[policy_dim][..], &p.hidden, &[act_dim]].concat();
+        let sizes = widths(policy_dim, &p.hidden, act_dim);
         let row = policy_dim
             .saturating_add(act_dim)
             .saturating_add(act_dim.saturating_mul(act_dim));

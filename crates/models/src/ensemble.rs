@@ -9,7 +9,7 @@ use rand_distr::{Distribution, StandardNormal};
 use std::sync::Mutex;
 use tandem_core::seeding::SeedStream;
 use tandem_core::Rng;
-use tandem_nn::budget::MemoryEstimate;
+use tandem_nn::budget::{widths, MemoryEstimate};
 use tandem_nn::{
     gaussian_nll, map_side_by_side, Activation, Checkpoint, Checkpointable, GaussianHead,
     GaussianOutput, Mlp, MlpConfig, MlpWorkspace, NnError, RowBlock, RowDealer,
@@ -136,21 +136,19 @@ impl EnsembleConfig {
     /// `action_dim`-dimensional actions: `[s, a]` in, mean and log-variance of `[Δs, r]` out.
     pub fn sizes(&self, state_dim: usize, action_dim: usize) -> Vec<usize> {
         let dim = state_dim.saturating_add(usize::from(self.learn_reward));
-        let mut sizes = vec![state_dim.saturating_add(action_dim)];
-        sizes.extend(&self.hidden);
-        sizes.push(dim.saturating_mul(2));
-        sizes
+        widths(
+            state_dim.saturating_add(action_dim),
+            &self.hidden,
+            dim.saturating_mul(2),
+        )
     }
 
     /// The memory of the ensemble trained on minibatches of `batch` rows: every member's
     /// parameters with their gradients and optimizer state, and one training pass's activations.
     pub fn memory(&self, state_dim: usize, action_dim: usize, batch: usize) -> MemoryEstimate {
-        let one = MemoryEstimate::new().mlp(
-            "member",
-            &self.sizes(state_dim, action_dim),
-            self.optimizer.copies(),
-            batch,
-        );
+        let one =
+            self.optimizer
+                .network_memory("member", &self.sizes(state_dim, action_dim), batch);
         MemoryEstimate::new().part(
             format!("ensemble ({} members of {:?})", self.members, self.hidden),
             one.total().and_then(|b| b.checked_mul(self.members as u64)),

@@ -5,7 +5,7 @@ use nalgebra::DMatrix;
 use ndarray::{s, Array2, ArrayView2};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
-use tandem_nn::budget::MemoryEstimate;
+use tandem_nn::budget::{widths, MemoryEstimate};
 use tandem_nn::{Activation, Checkpoint, Checkpointable, Mlp, MlpConfig, NnError};
 
 use crate::data::{check_array, check_input};
@@ -78,16 +78,10 @@ impl IncrementalModelConfig {
             GainStructure::Full => state_dim.saturating_mul(action_dim),
             GainStructure::Diagonal => state_dim,
         };
-        let sizes = [
-            &[state_dim.saturating_add(action_dim)][..],
-            &self.hidden,
-            &[out],
-        ]
-        .concat();
-        MemoryEstimate::new().mlp(
+        let sizes = widths(state_dim.saturating_add(action_dim), &self.hidden, out);
+        self.optimizer.network_memory(
             format!("incremental model {:?}", self.hidden),
             &sizes,
-            self.optimizer.copies(),
             batch,
         )
     }

@@ -4,7 +4,7 @@
 use ndarray::{Array1, Array2};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
-use tandem_nn::budget::MemoryEstimate;
+use tandem_nn::budget::{widths, MemoryEstimate};
 use tandem_nn::{
     bce_with_logits, sigmoid, Activation, Checkpoint, Checkpointable, Mlp, MlpConfig, NnError,
 };
@@ -77,18 +77,9 @@ impl MlpModelConfig {
     /// and `action_dim`-dimensional actions, trained on minibatches of `batch` rows.
     pub fn memory(&self, state_dim: usize, action_dim: usize, batch: usize) -> MemoryEstimate {
         let out = state_dim + usize::from(self.learn_reward) + usize::from(self.learn_termination);
-        let sizes = [
-            &[state_dim.saturating_add(action_dim)][..],
-            &self.hidden,
-            &[out],
-        ]
-        .concat();
-        MemoryEstimate::new().mlp(
-            format!("model {:?}", self.hidden),
-            &sizes,
-            self.optimizer.copies(),
-            batch,
-        )
+        let sizes = widths(state_dim.saturating_add(action_dim), &self.hidden, out);
+        self.optimizer
+            .network_memory(format!("model {:?}", self.hidden), &sizes, batch)
     }
 }
 

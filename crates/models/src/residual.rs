@@ -4,7 +4,7 @@
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
 use tandem_dynamics::Plant;
-use tandem_nn::budget::MemoryEstimate;
+use tandem_nn::budget::{widths, MemoryEstimate};
 use tandem_nn::{Activation, Checkpoint, Checkpointable, Mlp, MlpConfig, NnError};
 
 use crate::data::check_input;
@@ -51,16 +51,14 @@ impl ResidualModelConfig {
     /// `state_dim`-dimensional states and `action_dim`-dimensional inputs, trained on
     /// minibatches of `batch` rows.
     pub fn memory(&self, state_dim: usize, action_dim: usize, batch: usize) -> MemoryEstimate {
-        let sizes = [
-            &[state_dim.saturating_add(action_dim)][..],
+        let sizes = widths(
+            state_dim.saturating_add(action_dim),
             &self.hidden,
-            &[state_dim],
-        ]
-        .concat();
-        MemoryEstimate::new().mlp(
+            state_dim,
+        );
+        self.optimizer.network_memory(
             format!("difference network {:?}", self.hidden),
             &sizes,
-            self.optimizer.copies(),
             batch,
         )
     }

@@ -4,6 +4,7 @@
 use ndarray::{Array2, ArrayView2};
 use rand::seq::SliceRandom;
 use tandem_core::Rng;
+use tandem_nn::budget::MemoryEstimate;
 use tandem_nn::{
     AdaGrad, AdaGradConfig, Adam, AdamConfig, Mlp, MlpWorkspace, NnError, Optimizer, Sgd, SgdConfig,
 };
@@ -67,6 +68,17 @@ impl OptimizerConfig {
             OptimizerConfig::Sgd(c) if c.momentum == 0.0 => 2,
             OptimizerConfig::Sgd(_) => 3,
         }
+    }
+
+    /// The memory of an MLP with layer widths `sizes` trained with this optimizer on minibatches
+    /// of `batch` rows: parameters, gradients, the optimizer's state and one pass's activations.
+    pub fn network_memory(
+        &self,
+        what: impl Into<String>,
+        sizes: &[usize],
+        batch: usize,
+    ) -> MemoryEstimate {
+        MemoryEstimate::new().mlp(what, sizes, self.copies(), batch)
     }
 
     pub(crate) fn build(&self, n_params: usize) -> Result<Opt, ModelError> {

@@ -158,6 +158,15 @@ pub fn mlp_params(sizes: &[usize]) -> Option<u64> {
     })
 }
 
+/// The layer widths of an MLP from `input` through `hidden` to `output`.
+pub fn widths(input: usize, hidden: &[usize], output: usize) -> Vec<usize> {
+    let mut w = Vec::with_capacity(hidden.len() + 2);
+    w.push(input);
+    w.extend(hidden);
+    w.push(output);
+    w
+}
+
 /// Bytes of `f32` buffers holding the product of `dims` numbers, `None` on overflow.
 pub fn f32_bytes(dims: &[usize]) -> Option<u64> {
     dims.iter()

@@ -258,11 +258,6 @@ fn failed(op: IoOp, path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
     move |source| Error::io(op, path, source)
 }
 
-/// The error of reading `path` failing.
-fn io(path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
-    failed(IoOp::Read, path)
-}
-
 fn write_json(dir: &RunDir, name: &str, value: &impl Serialize) -> Result<()> {
     let text = to_json_pretty(value).map_err(|e| Error::Other(format!("{name}: {e}")))?;
     write(dir, name, &text)
@@ -422,16 +417,13 @@ fn config_text<S: Study>(study: &S, dir: &Path, what: &str) -> Result<(PathBuf, 
 
 /// The settings of a new study from the command line.
 fn fresh<S: Study>(study: &S, args: &StudyArgs) -> Result<RunConfig<S::Settings>> {
-    let seeds = args.seeds.unwrap_or(study.default_seeds());
-    let first_seed = args.first_seed.unwrap_or(0);
-    seed_range(first_seed, seeds)?;
     let settings = study.settings(args.quick, args.config.as_deref())?;
     ensure_finite(&settings).map_err(|e| Error::input("settings", e.to_string()))?;
     Ok(RunConfig {
         study: study.name().to_string(),
         config: settings,
-        seeds,
-        first_seed,
+        seeds: args.seeds.unwrap_or(study.default_seeds()),
+        first_seed: args.first_seed.unwrap_or(0),
         quick: args.quick,
         jobs: args.jobs,
         status: "running".into(),
@@ -1191,8 +1183,8 @@ fn merge_toml(base: &mut toml::Value, over: toml::Value) {
 /// applying the rest ([`override_with_table`]). At most [`tandem_core::MAX_CONFIG_BYTES`]
 /// (1 MiB) are read: more (or an endless stream) is an error naming the file and the limit.
 pub fn read_table(path: &Path) -> Result<toml::Table> {
-    let text =
-        tandem_core::read_file_capped(path, tandem_core::MAX_CONFIG_BYTES).map_err(io(path))?;
+    let text = tandem_core::read_file_capped(path, tandem_core::MAX_CONFIG_BYTES)
+        .map_err(failed(IoOp::Read, path))?;
     toml::from_str(&text).map_err(|e| Error::input(settings_name(Some(path)), e.to_string()))
 }
 
