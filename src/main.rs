@@ -41,6 +41,10 @@ enum Command {
     /// merge studies of disjoint seeds.
     #[command(subcommand)]
     Reproduce(cli::reproduce::ReproduceCommand),
+    /// A study submitted with `tandem reproduce <study> --slurm`: its cells' state, resubmitting
+    /// what did not finish, and the commands its job scripts run.
+    #[command(subcommand)]
+    Sweep(cli::sweep::SweepCommand),
     /// Rigid-body dynamics of a URDF robot (inspect its joints; evaluate RNEA/CRBA/ABA/...).
     #[command(subcommand)]
     Urdf(cli::urdf::UrdfCommand),
@@ -54,6 +58,7 @@ fn run(command: Command) -> cli::Result<()> {
         Command::Env(cmd) => cli::env::run(cmd),
         Command::Train(args) => cli::train::run(&args),
         Command::Reproduce(cmd) => cli::reproduce::run(cmd),
+        Command::Sweep(cmd) => cli::sweep::run(cmd),
         Command::Urdf(cmd) => cli::urdf::run(cmd),
     }
 }

@@ -1,6 +1,7 @@
 //! `tandem reproduce merge` checks what it reads (each record against its folder and its
 //! checksum), merges merged directories again (per node, then across nodes) to the table of
-//! one merge, and refuses a failed study, which `--resume` continues once the cause is gone.
+//! one merge, merges disjoint (seed, method) cells of `--methods` runs to the table of one run,
+//! and refuses a failed study, which `--resume` continues once the cause is gone.
 //! On `p2-cartpole --quick`, the cheapest study.
 
 use std::path::{Path, PathBuf};
@@ -195,7 +196,10 @@ fn merges_of_merges_equal_one_merge_of_all_seeds() {
         );
     }
     // A merged directory again with one of its seeds; resuming one is refused clearly.
-    fails(&merge(&[&p("m1"), b], &p("x")), &["seed 1 is in two"]);
+    fails(
+        &merge(&[&p("m1"), b], &p("x")),
+        &["seed 1's model_free run is in two"],
+    );
     let o = tandem(&["reproduce", "p2-cartpole", "--resume", s(&p("m1"))]);
     fails(&o, &["a merge's directory", "cannot be resumed"]);
     let _ = std::fs::remove_dir_all(&root);
@@ -255,5 +259,99 @@ fn a_failed_study_is_marked_refused_by_merge_and_resumes_once_fixed() {
         assert!(a == std::fs::read(cut.join(f)).unwrap(), "{f}");
     }
     ok(&merge(&[&cut], &root.join("merged")));
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// `p2-cartpole --quick` of one seed and the methods `methods` into `out`.
+fn cell(out: &Path, seed: u64, methods: &str) -> Output {
+    let k = seed.to_string();
+    tandem(&[
+        "reproduce",
+        "p2-cartpole",
+        "--quick",
+        "--quiet",
+        "--seeds",
+        "1",
+        "--first-seed",
+        &k,
+        "--methods",
+        methods,
+        "--out",
+        s(out),
+    ])
+}
+
+#[test]
+fn disjoint_method_cells_merge_to_the_table_of_one_run() {
+    let root = root("cells");
+    let whole = root.join("whole");
+    cartpole(&whole, 2, 0);
+    let p = |n: &str| root.join(n);
+    let mut cells = Vec::new();
+    // Given in reverse order: a cell's methods are recorded in the study's order.
+    for seed in [1, 0] {
+        for method in ["with_model", "model_free"] {
+            let d = p(&format!("s{seed}-{method}"));
+            ok(&cell(&d, seed, method));
+            cells.push(d);
+        }
+    }
+    let config = json(&cells[0].join("config.json"));
+    assert_eq!(config["methods"], serde_json::json!(["with_model"]));
+    // Every run of its own and no other.
+    assert!(cells[0].join("runs/with_model__seed1/record.json").exists());
+    assert!(!cells[0].join("runs/model_free__seed1").exists());
+
+    let dirs: Vec<&Path> = cells.iter().map(PathBuf::as_path).collect();
+    ok(&merge(&dirs, &p("merged")));
+    // Per method, then across methods.
+    ok(&merge(&[dirs[1], dirs[3]], &p("free")));
+    ok(&merge(&[dirs[0], dirs[2]], &p("model")));
+    assert_eq!(
+        json(&p("free/config.json"))["methods"],
+        serde_json::json!(["model_free"])
+    );
+    ok(&merge(&[&p("model"), &p("free")], &p("two-level")));
+    for m in ["merged", "two-level"] {
+        let merged = json(&p(m).join("config.json"));
+        assert!(merged.get("methods").is_none(), "{m}: all methods");
+        assert_eq!(merged["seeds"], serde_json::json!([0, 1]));
+        let one = std::fs::read(whole.join("table.json")).unwrap();
+        assert!(
+            one == std::fs::read(p(m).join("table.json")).unwrap(),
+            "{m}"
+        );
+    }
+    // A table needs every merged method on every merged seed.
+    fails(
+        &merge(&[dirs[0], dirs[1], dirs[2]], &p("x")),
+        &["seed 0's model_free run is in none", "--methods model_free"],
+    );
+    // The same cell twice, directly or inside a merge.
+    fails(
+        &merge(&[dirs[1], &p("free")], &p("x")),
+        &["seed 1's model_free run is in two"],
+    );
+    assert!(!p("x").exists());
+
+    // Unknown or repeated methods, and a resume that names other ones, are refused.
+    fails(
+        &cell(&p("y"), 0, "sac"),
+        &["no run \"sac\"", "its runs are model_free, with_model"],
+    );
+    fails(
+        &cell(&p("y"), 0, "model_free,model_free"),
+        &["model_free is named twice"],
+    );
+    let o = tandem(&[
+        "reproduce",
+        "p2-cartpole",
+        "--resume",
+        s(dirs[0]),
+        "--methods",
+        "model_free",
+    ]);
+    fails(&o, &["--methods model_free (the run has with_model)"]);
+    assert!(!p("y").exists());
     let _ = std::fs::remove_dir_all(&root);
 }

@@ -6,6 +6,7 @@ pub mod json;
 pub mod presets;
 pub mod reproduce;
 pub mod rollout;
+pub mod sweep;
 pub mod train;
 pub mod urdf;
 

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Subcommand};
 use tandem_studies::interrupt::Stop;
+use tandem_studies::sweep::Resources;
 use tandem_studies::{StudyArgs, StudyOptions};
 
 use super::{CliError, Result};
@@ -55,6 +56,9 @@ pub struct P0Args {
     /// Seeds, output, jobs, resume: as every study.
     #[command(flatten)]
     pub study: StudyArgs,
+    /// `--slurm`: submit the study to a SLURM cluster instead.
+    #[command(flatten)]
+    pub slurm: SlurmArgs,
 }
 
 /// Arguments of `tandem reproduce p1`.
@@ -63,6 +67,9 @@ pub struct P1Args {
     /// Seeds, output, jobs, resume: as every study.
     #[command(flatten)]
     pub study: StudyArgs,
+    /// `--slurm`: submit the study to a SLURM cluster instead.
+    #[command(flatten)]
+    pub slurm: SlurmArgs,
     /// The task: HalfCheetah-v5, Hopper-v5, Walker2d-v5 or InvertedPendulum-v5 [default:
     /// HalfCheetah-v5; on `--resume`, the recorded one].
     #[arg(long)]
@@ -75,6 +82,9 @@ pub struct P2Args {
     /// Seeds (default 10, as p2 averages over 10 runs), output, jobs, resume: as every study.
     #[command(flatten)]
     pub study: StudyArgs,
+    /// `--slurm`: submit the study to a SLURM cluster instead.
+    #[command(flatten)]
+    pub slurm: SlurmArgs,
     /// p2-maze only: the maze, `PixelMaze-v0` (ours, from the paper alone) or `PixelMaze-v1`
     /// (the authors' released layout), with its default settings [default: a `--config`
     /// file's `env`, else PixelMaze-v0; on `--resume`, the recorded one].
@@ -88,6 +98,9 @@ pub struct P3Args {
     /// Seeds, output, jobs, resume: as every study.
     #[command(flatten)]
     pub study: StudyArgs,
+    /// `--slurm`: submit the study to a SLURM cluster instead.
+    #[command(flatten)]
+    pub slurm: SlurmArgs,
     /// Also run M-DeMoRL with elite fractions 1, 5, 10, 20, 50 and 100 % (p3 Fig. 3).
     #[arg(long)]
     pub ablate_elites: bool,
@@ -115,6 +128,9 @@ pub struct P4Args {
     /// Seeds, output, jobs, resume: as every study.
     #[command(flatten)]
     pub study: StudyArgs,
+    /// `--slurm`: submit the study to a SLURM cluster instead.
+    #[command(flatten)]
+    pub slurm: SlurmArgs,
 }
 
 /// Arguments of `tandem reproduce p4-reacher`.
@@ -123,6 +139,44 @@ pub struct ReacherArgs {
     /// Seeds, output, jobs, resume: as every study.
     #[command(flatten)]
     pub study: StudyArgs,
+    /// `--slurm`: submit the study to a SLURM cluster instead.
+    #[command(flatten)]
+    pub slurm: SlurmArgs,
+}
+
+/// `tandem reproduce <study> --slurm`: the study as a SLURM job array of (seed, method) cells
+/// and a merge job after them ([`tandem_studies::sweep`]); `--out` is the sweep's directory.
+#[derive(Debug, Clone, Args)]
+pub struct SlurmArgs {
+    /// Submit the study to SLURM instead of running it here: one array task per cell (a seed
+    /// and a method), resumed after preemption, and a job that merges them into `--out`/merged/.
+    #[arg(long)]
+    pub slurm: bool,
+    /// What each task asks for.
+    #[command(flatten)]
+    pub resources: Resources,
+    /// With `--slurm`: print the job scripts and the `sbatch` commands, write and submit
+    /// nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// With `--slurm`: the `tandem` program the tasks run [default: this one].
+    #[arg(long, value_name = "PATH")]
+    pub tandem: Option<PathBuf>,
+}
+
+impl SlurmArgs {
+    /// Refuses SLURM's options without `--slurm`.
+    fn refuse_without_slurm(&self) -> Result<()> {
+        let given = self.dry_run || self.tandem.is_some() || self.resources != Resources::default();
+        if !self.slurm && given {
+            return Err(CliError::input(
+                "--slurm",
+                "--partition, --time, --mem, --cpus-per-task, --account, --grace, --dry-run and \
+                 --tandem are options of a SLURM sweep: add --slurm",
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// Arguments of `tandem reproduce merge`.
@@ -156,27 +210,31 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
         env,
         ..StudyOptions::default()
     };
-    let (name, args, options) = match cmd {
-        ReproduceCommand::P0Pendulum(a) => ("p0-pendulum", a.study, on(None)),
-        ReproduceCommand::P0Leo(a) => ("p0-leo", a.study, on(None)),
-        ReproduceCommand::P1(a) => ("p1", a.study, on(a.env)),
-        ReproduceCommand::P2Cartpole(a) => ("p2-cartpole", a.study, on(a.env)),
-        ReproduceCommand::P2Maze(a) => ("p2-maze", a.study, on(a.env)),
+    let (name, args, slurm, options) = match cmd {
+        ReproduceCommand::P0Pendulum(a) => ("p0-pendulum", a.study, a.slurm, on(None)),
+        ReproduceCommand::P0Leo(a) => ("p0-leo", a.study, a.slurm, on(None)),
+        ReproduceCommand::P1(a) => ("p1", a.study, a.slurm, on(a.env)),
+        ReproduceCommand::P2Cartpole(a) => ("p2-cartpole", a.study, a.slurm, on(a.env)),
+        ReproduceCommand::P2Maze(a) => ("p2-maze", a.study, a.slurm, on(a.env)),
         ReproduceCommand::P3Leg(a) => {
             let options = a.options(None);
-            ("p3-leg", a.study, options)
+            ("p3-leg", a.study, a.slurm, options)
         }
         ReproduceCommand::P3Mujoco(a) => {
             let options = a.p3.options(a.env);
-            ("p3-mujoco", a.p3.study, options)
+            ("p3-mujoco", a.p3.study, a.p3.slurm, options)
         }
-        ReproduceCommand::P4Pusher(a) => ("p4-pusher", a.study, on(None)),
-        ReproduceCommand::P4Door(a) => ("p4-door", a.study, on(None)),
-        ReproduceCommand::P4Reacher(a) => ("p4-reacher", a.study, on(None)),
+        ReproduceCommand::P4Pusher(a) => ("p4-pusher", a.study, a.slurm, on(None)),
+        ReproduceCommand::P4Door(a) => ("p4-door", a.study, a.slurm, on(None)),
+        ReproduceCommand::P4Reacher(a) => ("p4-reacher", a.study, a.slurm, on(None)),
         ReproduceCommand::Merge(a) => {
             return tandem_studies::merge(&a.dirs, a.out.as_deref(), a.overwrite)
         }
     };
+    slurm.refuse_without_slurm()?;
+    if slurm.slurm {
+        return super::sweep::create(name, &options, &args, slurm);
+    }
     let stop = Stop::on_signals().map_err(|e| CliError::Other(format!("signal handlers: {e}")))?;
     tandem_studies::run_study(name, &options, &StudyArgs { stop, ..args })
 }

@@ -23,6 +23,7 @@
 //! their complete directories into one report, checking each record against its folder and its
 //! checksum, and merges merged directories again (per node, then across nodes).
 
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
@@ -53,6 +54,11 @@ pub struct StudyArgs {
     /// `tandem reproduce merge` combines into one report.
     #[arg(long)]
     pub first_seed: Option<u64>,
+    /// Run only these methods (the runs' names, comma-separated, e.g. `sac,mbpo`) [default:
+    /// all]: one (seed, method) cell per process on a cluster; `tandem reproduce merge`
+    /// combines disjoint cells of equal settings.
+    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    pub methods: Option<Vec<String>>,
     /// Small smoke configuration (small networks, short budgets; numbers are meaningless).
     #[arg(long)]
     pub quick: bool,
@@ -97,6 +103,7 @@ impl Default for StudyArgs {
         Self {
             seeds: None,
             first_seed: None,
+            methods: None,
             quick: false,
             out: None,
             jobs: DEFAULT_JOBS,
@@ -216,6 +223,9 @@ pub struct RunConfig<S> {
     pub seeds: u64,
     /// The first seed.
     pub first_seed: u64,
+    /// The methods run (`--methods`) when not all are; absent for all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub methods: Option<Vec<String>>,
     /// Whether `--quick` chose the base settings.
     pub quick: bool,
     /// Parallel jobs of the last process.
@@ -337,6 +347,8 @@ struct DirConfig<S> {
     seeds: SeedSet,
     #[serde(default)]
     first_seed: u64,
+    #[serde(default)]
+    methods: Option<Vec<String>>,
     status: String,
     /// Why a `failed` study failed.
     #[serde(default)]
@@ -424,6 +436,7 @@ fn fresh<S: Study>(study: &S, args: &StudyArgs) -> Result<RunConfig<S::Settings>
         config: settings,
         seeds: args.seeds.unwrap_or(study.default_seeds()),
         first_seed: args.first_seed.unwrap_or(0),
+        methods: args.methods.clone(),
         quick: args.quick,
         jobs: args.jobs,
         status: "running".into(),
@@ -456,6 +469,80 @@ pub fn seed_range(first: u64, seeds: u64) -> Result<std::ops::Range<u64>> {
     }
 }
 
+/// The runs of `seed` that `methods` selects (all for `None`), grouped into jobs as
+/// [`Study::jobs`] groups them; a job left without runs is dropped.
+pub fn selected_jobs<S: Study>(
+    study: &S,
+    settings: &S::Settings,
+    seed: u64,
+    methods: Option<&[String]>,
+) -> Vec<Vec<String>> {
+    let mut jobs = study.jobs(settings, seed);
+    if let Some(methods) = methods {
+        for job in &mut jobs {
+            job.retain(|run| methods.contains(run));
+        }
+        jobs.retain(|job| !job.is_empty());
+    }
+    jobs
+}
+
+/// Every run of `seeds` that `methods` selects, once each, in the order the study lists them.
+fn runs_of<S: Study>(
+    study: &S,
+    settings: &S::Settings,
+    seeds: impl IntoIterator<Item = u64>,
+    methods: Option<&[String]>,
+) -> Vec<String> {
+    let mut runs: Vec<String> = Vec::new();
+    for seed in seeds {
+        for run in selected_jobs(study, settings, seed, methods)
+            .into_iter()
+            .flatten()
+        {
+            if !runs.contains(&run) {
+                runs.push(run);
+            }
+        }
+    }
+    runs
+}
+
+/// `--methods` checked against the runs of `seeds`: each one of the study's, none twice, at
+/// least one run selected. Returns them in the study's order, or `None` when they are all.
+pub fn select_methods<S: Study>(
+    study: &S,
+    settings: &S::Settings,
+    seeds: impl IntoIterator<Item = u64> + Clone,
+    methods: Option<&[String]>,
+) -> Result<Option<Vec<String>>> {
+    let Some(methods) = methods else {
+        return Ok(None);
+    };
+    let all = runs_of(study, settings, seeds, None);
+    for (k, m) in methods.iter().enumerate() {
+        if !all.contains(m) {
+            return Err(Error::input(
+                "--methods",
+                format!(
+                    "{} has no run {m:?} on these seeds; its runs are {}",
+                    study.name(),
+                    all.join(", ")
+                ),
+            ));
+        }
+        if methods[..k].contains(m) {
+            return Err(Error::input("--methods", format!("{m} is named twice")));
+        }
+    }
+    let chosen: Vec<String> = all
+        .iter()
+        .filter(|r| methods.contains(r))
+        .cloned()
+        .collect();
+    Ok((chosen.len() < all.len()).then_some(chosen))
+}
+
 /// Checks that `jobs` parallel jobs of `settings` fit in memory before any work: each job needs
 /// its largest run's estimate ([`Study::memory`]), and the `jobs` largest jobs run at once.
 /// The error names the run, its largest part (the setting to change) and the limit.
@@ -463,6 +550,7 @@ fn check_memory<S: Study>(
     study: &S,
     settings: &S::Settings,
     seeds: std::ops::Range<u64>,
+    methods: Option<&[String]>,
     jobs: u64,
     what: &str,
 ) -> Result<u64> {
@@ -471,7 +559,7 @@ fn check_memory<S: Study>(
     let mut distinct: Vec<Vec<String>> = Vec::new();
     let mut count: Vec<u64> = Vec::new();
     for seed in seeds {
-        for job in study.jobs(settings, seed) {
+        for job in selected_jobs(study, settings, seed, methods) {
             match distinct.iter().position(|j| *j == job) {
                 Some(k) => count[k] += 1,
                 None => {
@@ -704,16 +792,21 @@ fn read_record<R: DeserializeOwned>(dir: &Path, run: &str, seed: u64) -> Result<
     }))
 }
 
-/// Every run's record for `seeds` in the study directory `dir`, by seed, then run.
+/// The record of every run of `seeds` that `methods` selects in the study directory `dir`, by
+/// seed, then run.
 fn read_records<S: Study>(
     study: &S,
     settings: &S::Settings,
     dir: &Path,
     seeds: impl IntoIterator<Item = u64>,
+    methods: Option<&[String]>,
 ) -> Result<Vec<Stored<S::Record>>> {
     let mut records = Vec::new();
     for seed in seeds {
-        for run in study.jobs(settings, seed).iter().flatten() {
+        for run in selected_jobs(study, settings, seed, methods)
+            .iter()
+            .flatten()
+        {
             let r = read_record(dir, run, seed)?.ok_or_else(|| {
                 Error::Other(format!(
                     "{}: seed {seed}: the {run} run left no record",
@@ -770,12 +863,38 @@ fn layout<S: Study>(study: &S, merged: bool) -> Layout {
 /// work: each setting's range, the seed range, and the memory of `--jobs` parallel jobs. Returns
 /// them with the estimated peak memory in bytes.
 pub fn check<S: Study>(study: &S, args: &StudyArgs) -> Result<(RunConfig<S::Settings>, u64)> {
-    let rc = match &args.resume {
+    let mut rc = match &args.resume {
         Some(dir) => recorded(study, args, dir)?,
         None => fresh(study, args)?,
     };
     let seeds = seed_range(rc.first_seed, rc.seeds)?;
-    let bytes = check_memory(study, &rc.config, seeds, args.jobs, &harness_what(args))?;
+    let asked = args.methods.as_deref().or(rc.methods.as_deref());
+    let methods = select_methods(study, &rc.config, seeds.clone(), asked)?;
+    if let (Some(dir), Some(given)) = (&args.resume, &args.methods) {
+        if methods != rc.methods {
+            return Err(Error::input(
+                format!("--resume {}", dir.display()),
+                format!(
+                    "conflicts with the run being resumed: --methods {} (the run has {}); a \
+                     resumed run keeps its settings",
+                    given.join(","),
+                    rc.methods
+                        .as_ref()
+                        .map_or("all".to_string(), |m| m.join(","))
+                ),
+            ));
+        }
+    }
+    rc.methods = methods;
+    let what = harness_what(args);
+    let bytes = check_memory(
+        study,
+        &rc.config,
+        seeds,
+        rc.methods.as_deref(),
+        args.jobs,
+        &what,
+    )?;
     Ok((rc, bytes))
 }
 
@@ -823,10 +942,10 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> ");
     let settings = &rc.config;
+    let methods = rc.methods.as_deref();
     let jobs: Vec<(u64, Vec<String>)> = seed_range(rc.first_seed, rc.seeds)?
         .flat_map(|seed| {
-            study
-                .jobs(settings, seed)
+            selected_jobs(study, settings, seed, methods)
                 .into_iter()
                 .map(move |j| (seed, j))
         })
@@ -886,7 +1005,7 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
     }
     let seeds = seed_range(rc.first_seed, rc.seeds)?;
     let report = || -> Result<String> {
-        let records = read_records(study, settings, dir.path(), seeds)?;
+        let records = read_records(study, settings, dir.path(), seeds, methods)?;
         remove_dir(&dir.path().join("state"))?;
         let records: Vec<S::Record> = records.into_iter().map(|r| r.record).collect();
         study.report(&dir, settings, &records, wall)
@@ -998,6 +1117,9 @@ struct MergeConfig<'a, S> {
     quick: bool,
     /// The seeds, ascending (any set: merges of merges need not be contiguous).
     seeds: Vec<u64>,
+    /// The methods, when not all of the study's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    methods: Option<Vec<String>>,
     /// The directories whose processes ran the seeds (through merged directories too), by
     /// first seed, with their first seed, seed count and wall time.
     parts: Vec<Part>,
@@ -1068,7 +1190,8 @@ pub fn merge<S: Study>(
     let settings = &first.config;
     let mut seeds: Vec<u64> = Vec::new();
     let mut leaves: Vec<Part> = Vec::new();
-    let mut stored = Vec::new();
+    let mut stored: Vec<Stored<S::Record>> = Vec::new();
+    let mut cells: HashSet<(u64, String)> = HashSet::new();
     for (d, dc) in &parts {
         let own = dc.seeds()?;
         let mut unique = own.clone();
@@ -1080,14 +1203,21 @@ pub fn merge<S: Study>(
                 "lists a seed twice",
             ));
         }
-        if let Some(s) = own.iter().find(|s| seeds.contains(s)) {
+        let methods = dc.methods.as_deref();
+        let records = read_records(study, settings, d, own.iter().copied(), methods)?;
+        refuse_strays(d, &records)?;
+        if let Some(r) = records
+            .iter()
+            .find(|r| !cells.insert((r.seed, r.run.clone())))
+        {
             return Err(Error::input(
                 d.display().to_string(),
-                format!("seed {s} is in two of the merged directories"),
+                format!(
+                    "seed {}'s {} run is in two of the merged directories",
+                    r.seed, r.run
+                ),
             ));
         }
-        let records = read_records(study, settings, d, own.iter().copied())?;
-        refuse_strays(d, &records)?;
         let unchecked = records.iter().filter(|r| !r.checksummed).count();
         if unchecked > 0 {
             eprintln!(
@@ -1101,10 +1231,41 @@ pub fn merge<S: Study>(
         leaves.extend(dc.leaves(d)?);
         stored.extend(records);
     }
-    // By seed (stable: a seed's runs stay in the order of the study's jobs).
-    stored.sort_by_key(|r| r.seed);
     seeds.sort_unstable();
-    leaves.sort_by_key(|p| p.1);
+    seeds.dedup();
+    // The cells must make a table: every selected method on every seed.
+    let mut ran: Vec<String> = Vec::new();
+    for r in &stored {
+        if !ran.contains(&r.run) {
+            ran.push(r.run.clone());
+        }
+    }
+    let methods = select_methods(study, settings, seeds.iter().copied(), Some(&ran))?;
+    let order: Vec<(u64, String)> = seeds
+        .iter()
+        .flat_map(|&seed| {
+            selected_jobs(study, settings, seed, methods.as_deref())
+                .into_iter()
+                .flatten()
+                .map(move |run| (seed, run))
+        })
+        .collect();
+    if let Some((seed, run)) = order.iter().find(|cell| !cells.contains(*cell)) {
+        return Err(Error::input(
+            "merge",
+            format!(
+                "seed {seed}'s {run} run is in none of the directories: a table needs every \
+                 merged method on every merged seed; run it (`tandem reproduce {} --seeds 1 \
+                 --first-seed {seed} --methods {run}`) and merge its directory too",
+                study.name()
+            ),
+        ));
+    }
+    // By seed, then run as the study lists them.
+    let rank: HashMap<(u64, String), usize> =
+        order.into_iter().enumerate().map(|(k, c)| (c, k)).collect();
+    stored.sort_by_key(|r| rank.get(&(r.seed, r.run.clone())).copied());
+    leaves.sort_by(|a, b| (a.1, &a.0).cmp(&(b.1, &b.0)));
     // Summed in the parts' seed order, so that a merge of merges gives the same number.
     let wall: f64 = leaves.iter().filter_map(|p| p.3).sum();
     let existing = if overwrite {
@@ -1124,6 +1285,7 @@ pub fn merge<S: Study>(
         config: settings,
         quick: first.quick,
         seeds,
+        methods,
         parts: leaves,
         merged: dirs.iter().map(|d| d.display().to_string()).collect(),
         wall_seconds: wall,

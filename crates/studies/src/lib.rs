@@ -12,6 +12,7 @@
 //! | [`report`] | tables, comparisons and figures of the reports |
 //! | [`run`] | run directories (no run overwritten by accident), CSV and SVG |
 //! | [`interrupt`] | SIGINT/SIGTERM as a stop request that long runs poll |
+//! | [`sweep`] | a study as a SLURM job array of (seed, method) cells and a merge job |
 //!
 //! [`run_study`] and [`merge`] reach every study by its name through one registry, as the
 //! `tandem reproduce` program does:
@@ -45,6 +46,7 @@ pub mod p4;
 pub mod p4_reacher;
 pub mod report;
 pub mod run;
+pub mod sweep;
 
 use std::path::{Path, PathBuf};
 
@@ -144,7 +146,7 @@ pub type Result<T> = std::result::Result<T, Error>;
 /// What a study's command line may choose besides [`StudyArgs`]: the task of the studies that
 /// run on several, and p3's extra runs. A study reads what applies to it; [`merge`] passes none,
 /// as each directory's settings record them.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StudyOptions {
     /// The task (`p1`, `p2-maze`, `p3-mujoco`) [default: a `--config` file's or the study's].
     pub env: Option<String>,
@@ -172,7 +174,18 @@ impl<S: Study> Registered for S {
     fn check(&self, args: &StudyArgs) -> Result<Checked> {
         let (rc, memory) = harness::check(self, args)?;
         let settings = serde_json::to_value(&rc.config).map_err(Error::other)?;
-        Ok(Checked { settings, memory })
+        let cells = harness::seed_range(rc.first_seed, rc.seeds)?
+            .flat_map(|seed| {
+                harness::selected_jobs(self, &rc.config, seed, rc.methods.as_deref())
+                    .into_iter()
+                    .map(move |job| (seed, job))
+            })
+            .collect();
+        Ok(Checked {
+            settings,
+            memory,
+            cells,
+        })
     }
     fn merge(&self, dirs: &[PathBuf], out: Option<&Path>, overwrite: bool) -> Result<()> {
         harness::merge(self, dirs, out, overwrite)
@@ -233,6 +246,9 @@ pub struct Checked {
     pub settings: serde_json::Value,
     /// The estimated peak memory of `--jobs` parallel jobs, bytes.
     pub memory: u64,
+    /// The jobs, each a seed and its runs (those `--methods` selects), in the order a run
+    /// starts them: the cells of a sweep ([`sweep`]).
+    pub cells: Vec<(u64, Vec<String>)>,
 }
 
 /// Checks the study `name`'s settings whole as a run would before any work ([`harness::check`]:
