@@ -10,8 +10,9 @@
 # Then `export SLURM_CONF=$PWD/.slurm/etc/slurm.conf` (or `. .slurm/env`) points sbatch, squeue
 # and scontrol at it. It runs as root (apt-get, and daemons that start jobs as their users).
 #
-# Exit status: 0 when the cluster is up (or stopped), 3 when the packages cannot be installed
-# (said loudly on stderr; `.ci/run` then skips the cluster tests), 1 on any other failure.
+# Exit status: 0 when the cluster is up (or stopped), 3 when the packages cannot be installed or
+# it does not run as root (said loudly on stderr; `.ci/run` then skips the cluster tests), 1 on
+# any other failure.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DIR="$PWD/.slurm"
@@ -44,8 +45,8 @@ elif [ -n "${1:-}" ]; then
 fi
 
 if [ "$(id -u)" -ne 0 ]; then
-    echo "setup-slurm: run as root (it installs packages and starts SLURM's daemons)" >&2
-    exit 1
+    echo "setup-slurm: NOT SET UP: it runs as root (it installs packages and starts SLURM's daemons)" >&2
+    exit 3
 fi
 
 if ! command -v slurmctld >/dev/null || ! command -v slurmd >/dev/null \

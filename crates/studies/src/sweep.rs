@@ -834,3 +834,114 @@ pub fn resubmit(dir: &Path) -> Result<Option<Submission>> {
     }
     submit(dir, Some(tasks)).map(Some)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("tandem-sweep-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    #[test]
+    fn array_specs_join_consecutive_tasks() {
+        assert_eq!(array_spec(&[0, 1, 2, 3]), "0-3");
+        assert_eq!(array_spec(&[0, 1, 2, 5, 7, 8]), "0-2,5,7-8");
+        assert_eq!(array_spec(&[4]), "4");
+    }
+
+    #[test]
+    fn values_that_would_break_a_script_are_refused() {
+        for bad in ["", "a b", "x\ny", "$HOME", "it's", "a#b"] {
+            let r = Resources {
+                partition: Some(bad.into()),
+                ..Resources::default()
+            };
+            assert!(r.validate().is_err(), "{bad:?}");
+        }
+        let r = Resources {
+            partition: Some("gpu-a100".into()),
+            time: Some("1-12:00:00".into()),
+            mem: Some("4G".into()),
+            account: Some("proj_42".into()),
+            ..Resources::default()
+        };
+        r.validate().unwrap();
+        // Twice 100 MiB, plus 512 MiB.
+        assert_eq!(default_memory(100 << 20), "712M");
+    }
+
+    /// Without SLURM: the tasks run by hand, each idempotent, merge to one local run's table.
+    #[test]
+    fn tasks_run_by_hand_merge_to_the_table_of_one_run() {
+        let (root, local) = (temp("tasks"), temp("local"));
+        let args = StudyArgs {
+            seeds: Some(2),
+            quick: true,
+            quiet: true,
+            out: Some(root.clone()),
+            ..StudyArgs::default()
+        };
+        let options = StudyOptions::default();
+        let tandem = PathBuf::from("/opt/tandem");
+        let planned = create(
+            "p2-cartpole",
+            &options,
+            &args,
+            Resources::default(),
+            tandem,
+            false,
+        )
+        .unwrap();
+        let cells: Vec<(u64, &str, &str)> = planned
+            .sweep
+            .cells
+            .iter()
+            .map(|c| (c.seed, c.methods[0].as_str(), c.dir.as_str()))
+            .collect();
+        assert_eq!(
+            cells,
+            [
+                (0, "model_free", "cells/seed0-model_free"),
+                (0, "with_model", "cells/seed0-with_model"),
+                (1, "model_free", "cells/seed1-model_free"),
+                (1, "with_model", "cells/seed1-with_model"),
+            ]
+        );
+        let script = std::fs::read_to_string(root.join("slurm/cells.sbatch")).unwrap();
+        assert!(script.contains("#SBATCH --requeue\n#SBATCH --signal=B:TERM@300\n"));
+        assert!(script.contains("exec '/opt/tandem' sweep task '"));
+
+        let st = status(&root).unwrap();
+        assert!(st.cells.iter().all(|c| c.state == CellState::Pending));
+        assert_eq!(st.unfinished(), [0, 1, 2, 3]);
+        let e = run_task(&root, 4, Stop::never()).unwrap_err().to_string();
+        assert!(e.contains("the sweep has 4 cells"), "{e}");
+        for k in [3, 0, 2, 1, 0] {
+            run_task(&root, k, Stop::never()).unwrap();
+        }
+        let modes: Vec<String> = read_starts(&root, 0)
+            .unwrap()
+            .into_iter()
+            .map(|s| s.mode)
+            .collect();
+        assert_eq!(modes, ["started", "finished already"]);
+        let st = status(&root).unwrap();
+        assert!(st.cells.iter().all(|c| c.state == CellState::Done));
+        assert!(st.unfinished().is_empty() && !st.merged);
+        merge_cells(&root).unwrap();
+        assert!(status(&root).unwrap().merged);
+
+        let one = StudyArgs {
+            out: Some(local.clone()),
+            ..args
+        };
+        crate::run_study("p2-cartpole", &options, &one).unwrap();
+        let table = |d: &Path| std::fs::read(d.join("table.json")).unwrap();
+        assert!(table(&local) == table(&root.join(MERGED)));
+        let _ = std::fs::remove_dir_all(&root);
+        let _ = std::fs::remove_dir_all(&local);
+    }
+}
