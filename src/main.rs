@@ -38,7 +38,7 @@ enum Command {
     Train(cli::train::TrainArgs),
     /// Reproduce a paper end to end: its study over seeds, with tables and figures (p0-pendulum,
     /// p0-leo, p1, p2-cartpole, p2-maze, p3-leg, p3-mujoco, p4-pusher, p4-door, p4-reacher), or
-    /// merge studies of disjoint seeds.
+    /// merge studies of disjoint (seed, method) cells.
     #[command(subcommand)]
     Reproduce(cli::reproduce::ReproduceCommand),
     /// A study submitted with `tandem reproduce <study> --slurm`: its cells' state, resubmitting

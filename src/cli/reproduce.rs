@@ -1,5 +1,6 @@
 //! `tandem reproduce`: the papers' studies ([`tandem_studies`]) by name, each with its own
-//! arguments, and `tandem reproduce merge`, which combines studies of disjoint seeds.
+//! arguments, and `tandem reproduce merge`, which combines studies of disjoint (seed, method)
+//! cells.
 
 use std::path::PathBuf;
 
@@ -44,8 +45,10 @@ pub enum ReproduceCommand {
     /// p4 (PILQR) Fig. 4 on gymnasium's reacher (MuJoCo, needs `--features mujoco`): neural
     /// policies by MDGPS with LQR-FLM, PI² or PILQR and by DDPG, final distance on 300 test targets.
     P4Reacher(ReacherArgs),
-    /// Combine p0-pendulum, p0-leo, p1, p2-cartpole, p2-maze, p3-leg, p3-mujoco, p4-pusher, p4-door or p4-reacher reproductions of disjoint seeds (e.g. one
-    /// process per seed, `--first-seed`) into one table and figure; their settings must be equal.
+    /// Combine p0-pendulum, p0-leo, p1, p2-cartpole, p2-maze, p3-leg, p3-mujoco, p4-pusher,
+    /// p4-door or p4-reacher reproductions of disjoint (seed, method) cells (e.g. one process
+    /// per seed and method, `--first-seed`, `--methods`) into one table and figure; their
+    /// settings must be equal, and every merged method must be there on every merged seed.
     Merge(MergeArgs),
 }
 

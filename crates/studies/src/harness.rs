@@ -1130,8 +1130,9 @@ struct MergeConfig<'a, S> {
     status: &'static str,
 }
 
-/// Joins complete directories of `study` (studies' or merges') with disjoint seeds and equal
-/// settings into one report in `out` (default `runs/<study>-merged__<time>/`).
+/// Joins complete directories of `study` (studies' or merges') with disjoint (seed, method)
+/// cells and equal settings into one report in `out` (default `runs/<study>-merged__<time>/`).
+/// The cells must make a table: every merged method on every merged seed.
 ///
 /// Each record must agree with its folder (its `seed` and `method`) and with its checksum
 /// (`record.json.sha256`); a record without one (written before records had checksums) is

@@ -262,7 +262,7 @@ pub fn run_study(name: &str, options: &StudyOptions, args: &StudyArgs) -> Result
     find(name, options)?.run(args)
 }
 
-/// Combines complete directories of one study with disjoint seeds into one report in `out`
+/// Combines complete directories of one study with disjoint (seed, method) cells into one report in `out`
 /// (default `runs/<study>-merged__<time>/`); the study is the one their `config.json` names
 /// ([`harness::merge`]).
 pub fn merge(dirs: &[PathBuf], out: Option<&Path>, overwrite: bool) -> Result<()> {

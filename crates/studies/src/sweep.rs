@@ -337,7 +337,7 @@ pub fn create(
         let dir = args
             .out
             .clone()
-            .unwrap_or_else(|| PathBuf::from(format!("runs/{name}-sweep")));
+            .unwrap_or_else(|| PathBuf::from(format!("runs/{name}-sweep__<time>")));
         (
             std::path::absolute(&dir).map_err(io(IoOp::Read, &dir))?,
             None,
