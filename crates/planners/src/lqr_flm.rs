@@ -103,9 +103,10 @@ pub struct LqrFlmStep {
     /// `max_t KL_t / ε_t`: at most `1 + tolerance`.
     pub max_kl_ratio: f64,
     /// No pass of the search met every bound, and `controller` is the conservative fallback (the
-    /// least violating pass's `η_t` scaled up by powers of 10 until every bound holds).
+    /// least violating pass's `η_t` scaled up by powers of 10 until every bound holds, the scale
+    /// then refined by bisection).
     pub fallback: bool,
-    /// Backward and forward passes the search ran.
+    /// Passes (backward pass, forward moments and KL) the search evaluated.
     pub passes: usize,
 }
 
@@ -421,10 +422,13 @@ impl Pass {
             .iter()
             .zip(eps)
             .map(|(k, e)| k / e)
-            .fold(
-                f64::NEG_INFINITY,
-                |a, r| if r.is_nan() { r } else { a.max(r) },
-            )
+            .fold(f64::NEG_INFINITY, |a, r| {
+                if a.is_nan() || r.is_nan() {
+                    f64::NAN
+                } else {
+                    a.max(r)
+                }
+            })
     }
 
     fn into_step(self, eps: &[f64], fallback: bool, passes: usize) -> LqrFlmStep {
