@@ -634,10 +634,11 @@ mod tests {
             starts: held_out.iter().map(|x| x.to_vec()).collect(),
             measure: Box::new(|x| x[0].abs()),
         };
-        // Measured: uniform 0.4, 6.4, 0.9 % above the optimum; precision-weighted 1.2, 5.6,
-        // 4.2 %; uniform with the step rule 17, 32, 21 %.
+        // Measured: uniform 1.1, 11.2, 0.3 % above the optimum; precision-weighted 1.9, 5.2,
+        // 2.1 %; uniform with the step rule 5.2, 27, 1.8 %. (Before LQR-FLM's search kept every
+        // step within its KL bound, the local steps were larger: uniform 0.4, 6.4, 0.9 %.)
         for (weighting, adjust, bound) in [
-            (Weighting::Uniform, false, 1.1),
+            (Weighting::Uniform, false, 1.15),
             (Weighting::Precision, false, 1.1),
             (Weighting::Uniform, true, 1.5),
         ] {
@@ -679,7 +680,7 @@ mod tests {
             }
             assert!(run.curve.last().unwrap().test_measure < 0.5 * run.curve[0].test_measure);
             // The rule starts at the third iteration (it needs two anchored updates); measured
-            // 1, 1, 5, 10, 4.4, 1.5, 6.2, 10.
+            // 1, 1, 5, 10, 2.8, 4.4, 10, 10.
             let mults: Vec<f64> = run.curve.iter().map(|p| p.step_mult).collect();
             if adjust {
                 assert_eq!(mults[..2], [1.0, 1.0], "{case}");

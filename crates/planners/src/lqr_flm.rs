@@ -4,11 +4,20 @@
 //! solve `min E_p[Q]` subject to `E[KL(p ‖ p̄)] ≤ ε` **at every time step** (p4 eq. 1: one
 //! constraint per step, not one on the whole trajectory). With a dual variable `η_t` per step the
 //! Lagrangian is an LQR problem with the cost `c/η_t − log p̄(u|x)`; its maximum-entropy solution
-//! is a TVLG controller with `Σ_t = Q_uu⁻¹` ([`LqrFlm::backward`]). Each `η_t` is found by
-//! bracketing in log space on the constraint `KL_t − ε` (the KL evaluated under the new
-//! controller's state distribution, p4 footnote 1). Where `Q_uu` is not positive definite the
-//! step's `η_t` is raised (×10) and the pass repeated: the known failure of earlier
+//! is a TVLG controller with `Σ_t = Q_uu⁻¹` ([`LqrFlm::backward`]). Where `Q_uu` is not positive
+//! definite the step's `η_t` is raised (×10) and the pass repeated: the known failure of earlier
 //! implementations becomes a smaller step instead of an error.
+//!
+//! The dual search follows GPS's `traj_opt_lqr_python`: bracket each `η_t` in log space on the
+//! sign of `KL_t − ε_t` (the KL under the new controller's state distribution, p4 footnote 1),
+//! then, if that has not converged, Adam steps on all `η_t` at once. The steps are coupled (the
+//! state distribution at `t` depends on every earlier step), so each step's bracket goes stale;
+//! returning the last pass, as we did, left steps at 3–50 ε. The search now returns the pass with
+//! the lowest predicted cost among those that meet every bound within the tolerance
+//! (`KL_t ≤ (1 + tolerance) ε_t`): that is the constrained problem's own objective. If no pass
+//! does, it scales the least violating pass's `η_t` up by powers of 10 until every bound holds
+//! (the safe, conservative step: at `η = max_eta` the controller is `p̄` itself) and says so in
+//! [`LqrFlmStep::fallback`]; GPS instead returns its last pass with a warning.
 
 use nalgebra::{DMatrix, DVector};
 use tandem_models::TvlgDynamics;
@@ -17,8 +26,10 @@ use crate::error::{check_len, PlanError, Result};
 use crate::mpc::positive;
 use crate::tvlg::{expected_cost, forward_moments, policy_kl, QuadraticCost, TvlgController};
 
-/// Settings of [`LqrFlm`]. Defaults follow GPS's `traj_opt_lqr_python` (η bounds `[1e-8, 1e16]`,
-/// 50 dual iterations, constraint met within 10% of ε); `kl_step = 1.0` per step is ours.
+/// Settings of [`LqrFlm`]. Defaults follow GPS's `traj_opt_lqr_python` with per-step constraints
+/// (η bounds `[1e-8, 1e16]`, 20 bracketing passes then up to 200 Adam steps, constraint met within
+/// 10% of ε); the learning rate is ours (GPS's 0.005 is on η itself, ours on `log η`), and so is
+/// `kl_step = 1.0` per step.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LqrFlmConfig {
@@ -28,9 +39,15 @@ pub struct LqrFlmConfig {
     pub min_eta: f64,
     /// Largest dual variable.
     pub max_eta: f64,
-    /// Dual iterations (backward + forward passes).
-    pub dual_iterations: usize,
-    /// Relative tolerance on `|KL_t − ε| / ε`.
+    /// Passes (backward + forward) of the first phase, which brackets each `η_t` in log space
+    /// (at least 1).
+    pub bracket_iterations: usize,
+    /// Adam steps on `log η` of the second phase, run when bracketing has not converged (0: none).
+    pub adam_iterations: usize,
+    /// Adam's learning rate on `log η_t` (the largest change of `log η_t` per step, about).
+    pub adam_learning_rate: f64,
+    /// Relative tolerance: a pass meets step `t`'s bound when `KL_t ≤ (1 + tolerance) ε_t`, and
+    /// the search stops once every `|KL_t − ε_t| ≤ tolerance · ε_t`.
     pub tolerance: f64,
     /// Initial dual variable.
     pub eta_init: f64,
@@ -42,7 +59,9 @@ impl Default for LqrFlmConfig {
             kl_step: 1.0,
             min_eta: 1e-8,
             max_eta: 1e16,
-            dual_iterations: 50,
+            bracket_iterations: 20,
+            adam_iterations: 200,
+            adam_learning_rate: 0.05,
             tolerance: 0.1,
             eta_init: 1.0,
         }
@@ -50,15 +69,16 @@ impl Default for LqrFlmConfig {
 }
 
 impl LqrFlmConfig {
-    /// Checks positive, finite `kl_step`, `min_eta < max_eta`, `eta_init`, `tolerance`, and at
-    /// least one dual iteration.
+    /// Checks positive, finite `kl_step`, `min_eta < max_eta`, `eta_init`, `tolerance` and
+    /// `adam_learning_rate`, and at least one bracketing pass.
     pub fn validate(&self) -> Result<()> {
         positive("kl_step", self.kl_step)?;
         positive("min_eta", self.min_eta)?;
         positive("max_eta", self.max_eta)?;
         positive("eta_init", self.eta_init)?;
         positive("tolerance", self.tolerance)?;
-        crate::mpc::nonzero("dual_iterations", self.dual_iterations)?;
+        positive("adam_learning_rate", self.adam_learning_rate)?;
+        crate::mpc::nonzero("bracket_iterations", self.bracket_iterations)?;
         if self.min_eta >= self.max_eta {
             return Err(PlanError::Config(format!(
                 "min_eta {} must be below max_eta {}",
@@ -80,6 +100,14 @@ pub struct LqrFlmStep {
     pub kl: Vec<f64>,
     /// Expected quadratic cost of the new controller under the fitted dynamics.
     pub predicted_cost: f64,
+    /// `max_t KL_t / ε_t`: at most `1 + tolerance`.
+    pub max_kl_ratio: f64,
+    /// No pass of the search met every bound, and `controller` is the conservative fallback (the
+    /// least violating pass's `η_t` scaled up by powers of 10 until every bound holds, the scale
+    /// then refined by bisection).
+    pub fallback: bool,
+    /// Passes (backward pass, forward moments and KL) the search evaluated.
+    pub passes: usize,
 }
 
 /// The LQR-FLM update; see the module docs.
@@ -118,6 +146,11 @@ impl LqrFlm {
     }
 
     /// One update with its own KL bound `ε_t` at every step (PILQR's per-step step adjustment).
+    ///
+    /// Returns the feasible pass (every `KL_t ≤ (1 + tolerance) ε_t`) with the lowest predicted
+    /// cost over both phases of the dual search; when no pass was feasible, the conservative
+    /// fallback of the module docs (`fallback` set). An error when even `η_t = max_eta` at every
+    /// step breaks a bound (numerically degenerate: that controller is `p̄` itself).
     pub fn update_per_step(
         &self,
         prev: &TvlgController,
@@ -133,30 +166,24 @@ impl LqrFlm {
             positive("kl_step", e)?;
         }
         let cfg = &self.cfg;
+        let mut search = DualSearch::new(kl_steps, cfg.tolerance);
         let mut etas = vec![cfg.eta_init; t_len];
         let mut lo = vec![cfg.min_eta; t_len];
         let mut hi = vec![cfg.max_eta; t_len];
-        let mut best: Option<(TvlgController, Vec<f64>, Vec<f64>)> = None;
-        for _ in 0..cfg.dual_iterations {
-            let ctrl = self.backward(prev, dynamics, cost, &mut etas, &mut lo)?;
-            let mom = forward_moments(&ctrl, dynamics)?;
-            let n = prev.state_dim();
-            let kl: Vec<f64> = (0..t_len)
-                .map(|t| {
-                    let mx = mom.mu[t].rows(0, n).into_owned();
-                    let sx = mom.sigma[t].view((0, 0), (n, n)).into_owned();
-                    policy_kl(&ctrl, prev, t, &mx, &sx)
-                })
-                .collect();
-            let mut done = true;
+        let at_floor = |eta: f64| eta <= cfg.min_eta * 1.000001;
+        let mut converged = false;
+        // Phase 1: bracket each η_t in log space on the sign of KL_t − ε_t.
+        for _ in 0..cfg.bracket_iterations {
+            let pass = self.pass(prev, dynamics, cost, &mut etas, &mut lo)?;
+            converged = search.converged(&pass, at_floor);
             for t in 0..t_len {
-                let eps = kl_steps[t];
-                let con = kl[t] - eps;
-                let at_floor = etas[t] <= cfg.min_eta * 1.000001;
-                if con.abs() <= cfg.tolerance * eps || (con < 0.0 && at_floor) {
+                let con = pass.kl[t] - kl_steps[t];
+                if con.abs() <= cfg.tolerance * kl_steps[t] {
                     continue;
                 }
-                done = false;
+                if con < 0.0 && at_floor(etas[t]) {
+                    continue;
+                }
                 if con > 0.0 {
                     // Step too large: η too small.
                     lo[t] = etas[t];
@@ -175,16 +202,118 @@ impl LqrFlm {
                 }
                 etas[t] = etas[t].clamp(cfg.min_eta, cfg.max_eta);
             }
-            best = Some((ctrl, etas.clone(), kl));
-            if done {
+            search.offer(pass);
+            if converged {
                 break;
             }
         }
-        let (controller, etas, kl) = best.expect("at least one dual iteration");
-        let predicted_cost = expected_cost(&forward_moments(&controller, dynamics)?, cost);
-        Ok(LqrFlmStep {
+        // Phase 2: the brackets go stale (a step's KL moves with the earlier steps' η), so ascend
+        // the dual in all η_t at once with Adam, as GPS does. GPS steps η itself on the dual's
+        // gradient KL_t − ε_t; we step log η_t (η spans [min_eta, max_eta] and its scale is the
+        // cost's) on ln(KL_t / ε_t), clamped to ±5: the same sign, but violations span orders of
+        // magnitude, and with the raw difference Adam's second moment, remembering an early
+        // 50 ε, shrinks the steps near the bound to a crawl.
+        if !converged && cfg.adam_iterations > 0 {
+            let (b1, b2, tiny) = (0.9, 0.999, 1e-8);
+            let (lmin, lmax) = (cfg.min_eta.ln(), cfg.max_eta.ln());
+            let mut mom1 = vec![0.0; t_len];
+            let mut mom2 = vec![0.0; t_len];
+            let mut ignored = vec![cfg.min_eta; t_len];
+            for i in 0..cfg.adam_iterations {
+                let pass = self.pass(prev, dynamics, cost, &mut etas, &mut ignored)?;
+                let done = search.converged(&pass, at_floor);
+                let k = (i + 1) as i32;
+                for t in 0..t_len {
+                    let g = (pass.kl[t] / kl_steps[t]).ln().clamp(-5.0, 5.0);
+                    mom1[t] = b1 * mom1[t] + (1.0 - b1) * g;
+                    mom2[t] = b2 * mom2[t] + (1.0 - b2) * g * g;
+                    let step = (mom1[t] / (1.0 - b1.powi(k)))
+                        / ((mom2[t] / (1.0 - b2.powi(k))).sqrt() + tiny);
+                    etas[t] = (etas[t].ln() + cfg.adam_learning_rate * step)
+                        .clamp(lmin, lmax)
+                        .exp();
+                }
+                search.offer(pass);
+                if done {
+                    break;
+                }
+            }
+        }
+        if let Some(best) = search.best.take() {
+            return Ok(best.into_step(kl_steps, false, search.passes));
+        }
+        // Phase 3, no pass met every bound: scale all of the least violating pass's η_t by 10^s,
+        // s = 1, 2, …, until one does, then bisect s between the last two. Every step moves
+        // toward p̄ and so does the state distribution; at η_t = max_eta everywhere the
+        // controller is p̄ itself (KL 0). Only passes that meet every bound are kept.
+        let base = search
+            .least_violating
+            .take()
+            .expect("at least one pass")
+            .etas;
+        let scaled = |s: f64| -> Vec<f64> {
+            base.iter()
+                .map(|e| (e * 10f64.powf(s)).min(cfg.max_eta))
+                .collect()
+        };
+        let mut s = 0.0;
+        loop {
+            s += 1.0;
+            let mut etas = scaled(s);
+            let saturated = etas.iter().all(|&e| e >= cfg.max_eta);
+            let pass = self.pass(prev, dynamics, cost, &mut etas, &mut lo)?;
+            let ratio = pass.max_ratio(kl_steps);
+            search.offer(pass);
+            if search.best.is_some() {
+                break;
+            }
+            if saturated {
+                return Err(PlanError::Numerical(format!(
+                    "LQR-FLM: no controller meets the KL bounds, not even at eta = {:e} \
+                     (largest KL_t / eps_t {ratio:.3})",
+                    cfg.max_eta
+                )));
+            }
+        }
+        let (mut bad, mut good) = (s - 1.0, s);
+        for _ in 0..FALLBACK_BISECTIONS {
+            let mid = 0.5 * (bad + good);
+            let pass = self.pass(prev, dynamics, cost, &mut scaled(mid), &mut lo)?;
+            if search.feasible(&pass) {
+                good = mid;
+            } else {
+                bad = mid;
+            }
+            search.offer(pass);
+        }
+        let best = search.best.take().expect("a feasible pass");
+        Ok(best.into_step(kl_steps, true, search.passes))
+    }
+
+    /// One backward pass for `etas` (raised where `Q_uu` is not positive definite) and the KL
+    /// and predicted cost of its controller.
+    fn pass(
+        &self,
+        prev: &TvlgController,
+        dynamics: &TvlgDynamics,
+        cost: &[QuadraticCost],
+        etas: &mut [f64],
+        lower: &mut [f64],
+    ) -> Result<Pass> {
+        let controller = self.backward(prev, dynamics, cost, etas, lower)?;
+        let mom = forward_moments(&controller, dynamics)?;
+        let n = prev.state_dim();
+        let kl = (0..prev.horizon())
+            .map(|t| {
+                let mx = mom.mu[t].rows(0, n).into_owned();
+                let sx = mom.sigma[t].view((0, 0), (n, n)).into_owned();
+                policy_kl(&controller, prev, t, &mx, &sx)
+            })
+            .collect();
+        let predicted_cost = expected_cost(&mom, cost);
+        Ok(Pass {
             controller,
-            etas,
+            etas: etas.to_vec(),
             kl,
             predicted_cost,
         })
@@ -270,6 +399,112 @@ impl LqrFlm {
                 }
             }
             return TvlgController::new(gains, offsets, covs);
+        }
+    }
+}
+
+/// Bisections of the fallback's scale between the last power of 10 that broke a bound and the
+/// first that met them all (to a factor `10^(1/16)` ≈ 1.15 in `η`).
+const FALLBACK_BISECTIONS: usize = 4;
+
+/// One pass of the dual search: the controller for `etas`, its KL per step and predicted cost.
+struct Pass {
+    controller: TvlgController,
+    etas: Vec<f64>,
+    kl: Vec<f64>,
+    predicted_cost: f64,
+}
+
+impl Pass {
+    /// `max_t KL_t / ε_t` (NaN if a KL is).
+    fn max_ratio(&self, eps: &[f64]) -> f64 {
+        self.kl
+            .iter()
+            .zip(eps)
+            .map(|(k, e)| k / e)
+            .fold(f64::NEG_INFINITY, |a, r| {
+                if a.is_nan() || r.is_nan() {
+                    f64::NAN
+                } else {
+                    a.max(r)
+                }
+            })
+    }
+
+    fn into_step(self, eps: &[f64], fallback: bool, passes: usize) -> LqrFlmStep {
+        LqrFlmStep {
+            passes,
+            max_kl_ratio: self.max_ratio(eps),
+            controller: self.controller,
+            etas: self.etas,
+            kl: self.kl,
+            predicted_cost: self.predicted_cost,
+            fallback,
+        }
+    }
+}
+
+/// The passes seen so far: the feasible one with the lowest predicted cost, and the one whose
+/// largest `KL_t / ε_t` is smallest (the fallback's start while none is feasible).
+struct DualSearch<'a> {
+    eps: &'a [f64],
+    tolerance: f64,
+    best: Option<Pass>,
+    least_violating: Option<Pass>,
+    passes: usize,
+}
+
+impl<'a> DualSearch<'a> {
+    fn new(eps: &'a [f64], tolerance: f64) -> Self {
+        Self {
+            eps,
+            tolerance,
+            best: None,
+            least_violating: None,
+            passes: 0,
+        }
+    }
+
+    /// Every `KL_t ≤ (1 + tolerance) ε_t`, and a finite predicted cost.
+    fn feasible(&self, p: &Pass) -> bool {
+        p.predicted_cost.is_finite()
+            && p.kl
+                .iter()
+                .zip(self.eps)
+                .all(|(&k, &e)| k <= (1.0 + self.tolerance) * e)
+    }
+
+    /// Every `|KL_t − ε_t| ≤ tolerance · ε_t`, or `KL_t < ε_t` with `η_t` at its floor: nothing
+    /// left to search for.
+    fn converged(&self, p: &Pass, at_floor: impl Fn(f64) -> bool) -> bool {
+        self.feasible(p)
+            && (0..p.kl.len()).all(|t| {
+                let con = p.kl[t] - self.eps[t];
+                con.abs() <= self.tolerance * self.eps[t] || (con < 0.0 && at_floor(p.etas[t]))
+            })
+    }
+
+    /// Keeps `p` if it is the cheapest feasible pass, or (while none is feasible) the least
+    /// violating one.
+    fn offer(&mut self, p: Pass) {
+        self.passes += 1;
+        if self.feasible(&p) {
+            if self
+                .best
+                .as_ref()
+                .is_none_or(|b| p.predicted_cost < b.predicted_cost)
+            {
+                self.best = Some(p);
+            }
+        } else if self.best.is_none() {
+            let r = p.max_ratio(self.eps);
+            let better = self.least_violating.as_ref().is_none_or(|b| {
+                let rb = b.max_ratio(self.eps);
+                r < rb || rb.is_nan()
+            });
+            if better {
+                self.least_violating = Some(p);
+            }
         }
     }
 }
