@@ -223,11 +223,6 @@ fn trajectory_optimizer_settings_are_checked_before_any_run() {
             "[local.trajopt.lqr]\nadam_learning_rate = 0.0\n",
             "adam_learning_rate",
         ),
-        // The key the dual search had before its two phases: refused, not ignored.
-        (
-            "[local.trajopt.lqr]\ndual_iterations = 50\n",
-            "dual_iterations",
-        ),
         ("[local.trajopt.lqr]\neta_init = -1.0\n", "eta_init"),
         ("[local.trajopt.pi2]\nkl_step = 0.0\n", "kl_step"),
         ("[local.trajopt.pi2]\nridge = -1.0\n", "ridge"),

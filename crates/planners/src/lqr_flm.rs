@@ -40,7 +40,10 @@ pub struct LqrFlmConfig {
     /// Largest dual variable.
     pub max_eta: f64,
     /// Passes (backward + forward) of the first phase, which brackets each `η_t` in log space
-    /// (at least 1).
+    /// (at least 1). Settings recorded before the search had two phases name it
+    /// `dual_iterations` (then its only phase, returning the last pass), so that their
+    /// directories still read and merge.
+    #[serde(alias = "dual_iterations")]
     pub bracket_iterations: usize,
     /// Adam steps on `log η` of the second phase, run when bracketing has not converged (0: none).
     pub adam_iterations: usize,

@@ -454,7 +454,8 @@ fn one_step_matches_the_closed_form_dual() {
 }
 
 /// The search's settings: at least one bracketing pass, a positive finite learning rate; no
-/// gradient phase is allowed; the old `dual_iterations` key is refused, not ignored.
+/// gradient phase is allowed; the old `dual_iterations` key reads as `bracket_iterations`, and
+/// unknown keys are refused.
 #[test]
 fn dual_search_settings_are_checked() {
     let bad = [
@@ -484,8 +485,11 @@ fn dual_search_settings_are_checked() {
         ..Default::default()
     })
     .is_ok());
-    let e = serde_json::from_str::<LqrFlmConfig>(r#"{"dual_iterations": 50}"#).unwrap_err();
-    assert!(e.to_string().contains("dual_iterations"), "{e}");
+    // The key of settings recorded before the two phases reads as the first phase's passes.
+    let c: LqrFlmConfig = serde_json::from_str(r#"{"dual_iterations": 50}"#).unwrap();
+    assert_eq!((c.bracket_iterations, c.adam_iterations), (50, 200));
+    let e = serde_json::from_str::<LqrFlmConfig>(r#"{"dual_iteration": 50}"#).unwrap_err();
+    assert!(e.to_string().contains("dual_iteration"), "{e}");
     let c: LqrFlmConfig = serde_json::from_str(r#"{"adam_iterations": 7}"#).unwrap();
     assert_eq!(c.adam_iterations, 7);
     assert_eq!(c.bracket_iterations, 20);
