@@ -391,7 +391,7 @@ fn seeds_run_apart_and_merged_equal_one_run_of_all_seeds() {
             "--out",
             &p("m2"),
         ],
-        "seed 1 is in two",
+        "seed 1's warm run is in two",
     );
     // Another configuration does not merge.
     let cfg = root.join("other.toml");

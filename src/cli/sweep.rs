@@ -90,7 +90,13 @@ pub fn create(
         ))?;
         return Ok(());
     }
-    let submission = sweep::submit(&planned.dir, Some(tasks))?;
+    let submission = sweep::submit(&planned.dir, Some(tasks)).map_err(|e| {
+        let d = planned.dir.display();
+        CliError::Other(format!(
+            "{e}\nthe sweep is written in {d}: once sbatch works, submit it with `tandem sweep \
+             resubmit {d}`"
+        ))
+    })?;
     report_submission(&planned.dir, &submission)
 }
 
