@@ -143,7 +143,9 @@ pub fn reacher_policy_input() -> tandem_agents::PolicyInput {
 /// KL bound `ε = 0.1` per step (at 0.5 or 1 the local controllers, bounded against a global
 /// policy that still fits them loosely, lost more than they gained; GPS's step rule,
 /// [`super::mdgps::MdgpsStep`], helped a little on two seeds and hurt badly on the third), a
-/// policy of two hidden layers of 64 fitted uniformly.
+/// policy of two hidden layers of 64 fitted uniformly, linearized for the bound by GPS's
+/// regression with its GMM prior ([`super::mdgps::Linearization`]; `results/p4-reacher/` ran the
+/// point Jacobian).
 pub fn reacher_config() -> super::mdgps::MdgpsConfig {
     let mut local = super::gps::LocalConfig {
         iterations: 15,
@@ -156,6 +158,7 @@ pub fn reacher_config() -> super::mdgps::MdgpsConfig {
         local,
         policy: Default::default(),
         step: Default::default(),
+        linearization: Default::default(),
     }
 }
 

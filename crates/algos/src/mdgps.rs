@@ -7,8 +7,14 @@
 //!
 //! 1. draw `samples` trajectories of every `p_c` on the system (the counted samples);
 //! 2. for each condition: fit TVLG dynamics to its samples and linearize `π_θ` around them
-//!    (`K̄_t = ∂μ_θ/∂x` at the samples' mean state, `k̄_t = μ_θ(x̄_t) − K̄_t x̄_t`, `Σ̄_t = diag(σ²)`:
-//!    [`linearize`]);
+//!    ([`Linearization`]). By default as GPS does ([`linearize_by_regression`]): at every step the
+//!    regression of `μ_θ(x_t)` on the sampled `x_t` under a GMM prior over the condition's recent
+//!    states ([`TvlgPolicyFit`]), its residual covariance plus `diag(σ²)` as `Σ̄_t`. Or the
+//!    network's Jacobian at the samples' mean state (`K̄_t = ∂μ_θ/∂x(x̄_t)`,
+//!    `k̄_t = μ_θ(x̄_t) − K̄_t x̄_t`, `Σ̄_t = diag(σ²)`: [`linearize`]), which nearly deterministic
+//!    samples do not constrain: on a stand-in reacher its gains grew from 0.8 to 4 over 12
+//!    iterations and the local controllers, bounded against it, copied them. The regression's
+//!    gain is bounded by the spread of the policy's actions over the samples and the prior's;
 //! 3. update `p_c` with the local method: LQR-FLM minimizes the expected cost subject to
 //!    `E[KL(p_c ‖ π̄_c)] ≤ ε m` (p4's constraint against the old global policy; `m = 1`, or from
 //!    GPS's MDGPS step rule, [`MdgpsStep`]); PILQR does the same in its LQR-FLM stage (with its own
@@ -27,7 +33,7 @@
 //!
 //! A run is one [`Mdgps`] on the [`drive`]r: it saves itself under `mdgps_<method>` after every
 //! iteration (the local controllers and their optimizers' state, the global policy and its Adam
-//! state, the step rule's, the generator, the curve) and resumes from there with exactly the
+//! state, the step rule's, the policy prior's kept states and mixture, the generator, the curve) and resumes from there with exactly the
 //! numbers of an uninterrupted run.
 
 use nalgebra::{DMatrix, DVector};
@@ -37,7 +43,8 @@ use tandem_agents::GlobalPolicy;
 pub use tandem_agents::{PolicyConfig, Weighting};
 use tandem_core::seeding::rng_from_seed;
 use tandem_core::Rng;
-use tandem_models::{DynamicsModel, ModelInput};
+pub use tandem_models::PolicyFitConfig;
+use tandem_models::{DynamicsModel, ModelInput, TvlgPolicyFit};
 use tandem_nn::budget::{widths, MemoryEstimate};
 use tandem_nn::{Adam, AdamConfig, Checkpoint, Checkpointable};
 use tandem_planners::{adjust_step_mult, laplace_cost, LqrFlm, TrajectorySamples, TvlgController};
@@ -85,6 +92,35 @@ impl Default for MdgpsStep {
     }
 }
 
+/// How the global policy is linearized around a condition's samples for the local update's KL
+/// bound (step 2 of the module docs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Linearization {
+    /// GPS's (`PolicyPriorGMM`): the regression of the policy's mean actions on the sampled
+    /// states at every step under a GMM prior over the condition's last `max_samples`
+    /// trajectories, the residual covariance plus `diag(σ²)` ([`linearize_by_regression`]).
+    Regression(PolicyFitConfig),
+    /// The network's Jacobian at the samples' mean state with `diag(σ²)` ([`linearize`]). Settings
+    /// recorded before the regression existed have no `linearization` and read as this, which is
+    /// what they ran.
+    PointJacobian,
+}
+
+impl Default for Linearization {
+    /// GPS's regression with its prior's defaults.
+    fn default() -> Self {
+        Linearization::Regression(PolicyFitConfig::default())
+    }
+}
+
+impl Linearization {
+    /// What settings without a `linearization` ran: the point Jacobian.
+    pub fn recorded_default() -> Self {
+        Linearization::PointJacobian
+    }
+}
+
 /// Settings of [`train_mdgps`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -97,6 +133,11 @@ pub struct MdgpsConfig {
     /// The step rule of LQR-FLM's KL bound.
     #[serde(default)]
     pub step: MdgpsStep,
+    /// How the global policy is linearized for the bound. New settings choose GPS's regression
+    /// ([`Linearization::default`]); settings without the key read as the point Jacobian
+    /// ([`Linearization::recorded_default`]), which they ran.
+    #[serde(default = "Linearization::recorded_default")]
+    pub linearization: Linearization,
 }
 
 impl MdgpsConfig {
@@ -124,6 +165,10 @@ impl MdgpsConfig {
                 st.min_mult, st.max_mult
             )));
         }
+        if let Linearization::Regression(fit) = &self.linearization {
+            fit.validate()
+                .map_err(|e| AlgoError::Config(format!("linearization: {e}")))?;
+        }
         Ok(())
     }
 }
@@ -131,7 +176,8 @@ impl MdgpsConfig {
 impl MdgpsConfig {
     /// The memory of a run ([`LocalConfig::memory`]) with the global policy on
     /// `policy_dim`-dimensional inputs: its network trained with Adam and its regression data
-    /// (every condition's samples of the iteration, with their precisions).
+    /// (every condition's samples of the iteration, with their precisions), and with the
+    /// regression's prior its kept states and the policy's actions there, per condition.
     pub fn memory(
         &self,
         conditions: usize,
@@ -145,12 +191,26 @@ impl MdgpsConfig {
         let row = policy_dim
             .saturating_add(act_dim)
             .saturating_add(act_dim.saturating_mul(act_dim));
+        let kept = match &self.linearization {
+            Linearization::Regression(fit) => fit.prior.as_ref().map_or(0, |p| p.max_samples),
+            Linearization::PointJacobian => 0,
+        };
         self.local
             .memory(conditions, horizon, state_dim, act_dim)
             .mlp("policy network", &sizes, 4, p.batch_size)
             .f32s(
                 "policy regression data (conditions x samples x horizon)",
                 &[conditions, self.local.samples, horizon, row],
+            )
+            .f32s(
+                "policy prior's states and actions (conditions x max_samples)",
+                &[
+                    2,
+                    conditions,
+                    kept,
+                    horizon,
+                    state_dim.saturating_add(act_dim),
+                ],
             )
     }
 }
@@ -186,6 +246,35 @@ pub fn linearize(policy: &GlobalPolicy, samples: &TrajectorySamples) -> Result<T
     }
     let cov = DMatrix::from_diagonal(&DVector::from_column_slice(&policy.variance));
     Ok(TvlgController::new(gains, offsets, vec![cov; t_len])?)
+}
+
+/// The TVLG controller fitted to `policy` around `samples` by regression (GPS's policy
+/// linearization): `fit`'s prior keeps the samples' states and is refitted over `[x, μ(x)]` at
+/// all its kept states with the policy as it is now, then at every step the policy's mean actions
+/// at the sampled states are regressed on those states under that prior
+/// ([`TvlgPolicyFit::fit`]), the residual covariance plus `diag(σ²)` the controller's covariance.
+pub fn linearize_by_regression(
+    policy: &GlobalPolicy,
+    samples: &TrajectorySamples,
+    fit: &mut TvlgPolicyFit,
+) -> Result<TvlgController> {
+    let (rows, t_len, m) = samples.actions.dim();
+    let states = samples.states.slice(s![.., ..t_len, ..]).to_owned();
+    let mut ws = policy.net().workspace();
+    fit.update_prior(states.view(), |x: &DMatrix<f64>| -> Result<DMatrix<f64>> {
+        // Row-major rows of the states: the column-major storage of the transpose.
+        let u = policy.mean(x.transpose().as_slice(), &mut ws)?;
+        Ok(DMatrix::from_row_slice(x.nrows(), m, &u))
+    })?;
+    let flat = states
+        .as_slice()
+        .expect("an owned array is in standard layout");
+    let mu = policy.mean(flat, &mut ws)?;
+    let actions = ndarray::Array3::from_shape_vec((rows, t_len, m), mu)
+        .map_err(|e| AlgoError::Config(e.to_string()))?;
+    let cov = DMatrix::from_diagonal(&DVector::from_column_slice(&policy.variance));
+    let lin = fit.fit(states.view(), actions.view(), &cov)?;
+    Ok(TvlgController::new(lin.gains, lin.offsets, lin.cov)?)
 }
 
 /// One point of an MDGPS run.
@@ -271,6 +360,10 @@ struct MdgpsState {
     /// MDGPS's step rule: the multiplier, and per condition the last anchor and model.
     mult: f64,
     prev: Vec<Option<(TvlgController, LocalModel)>>,
+    /// Per condition, the regression's policy prior ([`Linearization::Regression`]; empty with
+    /// the point Jacobian, and in checkpoints written before the regression existed).
+    #[serde(default)]
+    policy_fits: Vec<TvlgPolicyFit>,
 }
 
 const STATE: &str = "mdgps.state";
@@ -334,6 +427,7 @@ impl<'a> Mdgps<'a> {
                 drawn: 0,
                 mult: 1.0,
                 prev: (0..k).map(|_| None).collect(),
+                policy_fits: policy_fits(&cfg.linearization, k),
             },
         })
     }
@@ -361,6 +455,11 @@ impl Algorithm for Mdgps<'_> {
         let (system, horizon) = (&*problem.system, problem.horizon);
         let (n, m) = (system.state_dim(), system.action_dim());
         let k = problem.conditions.len();
+        // A checkpoint from before the regression existed has no fits: start them.
+        let regression = matches!(cfg.linearization, Linearization::Regression(_));
+        if st.policy_fits.len() != if regression { k } else { 0 } {
+            st.policy_fits = policy_fits(&cfg.linearization, k);
+        }
         let mut batches = Vec::with_capacity(k);
         let mut local_sum = 0.0;
         for (c, cond) in problem.conditions.iter().enumerate() {
@@ -381,12 +480,25 @@ impl Algorithm for Mdgps<'_> {
                     st.failed += 1;
                 }
             }
+            // GPS's policy prior keeps every iteration's states, these too (PI² linearizes
+            // nothing; with the point Jacobian there are no fits).
+            if method != LocalMethod::Pi2 {
+                for (fit, samples) in st.policy_fits.iter_mut().zip(&batches) {
+                    fit.add_states(samples.states.slice(s![.., ..horizon, ..]))?;
+                }
+            }
         } else {
             // Bounded against the global policy linearized around each condition's samples.
             let mut cur = Vec::with_capacity(k);
             for (c, cond) in problem.conditions.iter().enumerate() {
                 let model = locals[c].model(&batches[c], &cond.objective)?;
-                cur.push((linearize(policy, &batches[c])?, model));
+                let anchor = match &cfg.linearization {
+                    Linearization::Regression(_) => {
+                        linearize_by_regression(policy, &batches[c], &mut st.policy_fits[c])?
+                    }
+                    Linearization::PointJacobian => linearize(policy, &batches[c])?,
+                };
+                cur.push((anchor, model));
             }
             let kl_step = if method == LocalMethod::LqrFlm {
                 if cfg.step.adjust {
@@ -518,6 +630,16 @@ impl Algorithm for Mdgps<'_> {
     }
 }
 
+/// One fresh policy fit per condition for the regression, none for the point Jacobian.
+fn policy_fits(lin: &Linearization, conditions: usize) -> Vec<TvlgPolicyFit> {
+    match lin {
+        Linearization::Regression(cfg) => (0..conditions)
+            .map(|_| TvlgPolicyFit::new(cfg.clone()))
+            .collect(),
+        Linearization::PointJacobian => Vec::new(),
+    }
+}
+
 /// MDGPS's step rule ([`MdgpsStep`]) over the conditions that have both a previous and a current
 /// anchor and model; `locals` hold the controllers the previous update produced (those sampled
 /// this iteration). Conditions whose expected costs are not finite are left out; with none left
@@ -634,13 +756,16 @@ mod tests {
             starts: held_out.iter().map(|x| x.to_vec()).collect(),
             measure: Box::new(|x| x[0].abs()),
         };
-        // Measured: uniform 1.1, 11.2, 0.3 % above the optimum; precision-weighted 1.9, 5.2,
-        // 2.1 %; uniform with the step rule 5.2, 27, 1.8 %. (Before LQR-FLM's search kept every
-        // step within its KL bound, the local steps were larger: uniform 0.4, 6.4, 0.9 %.)
-        for (weighting, adjust, bound) in [
-            (Weighting::Uniform, false, 1.15),
-            (Weighting::Precision, false, 1.1),
-            (Weighting::Uniform, true, 1.5),
+        // Measured with the point Jacobian: uniform 1.1, 11.2, 0.3 % above the optimum;
+        // precision-weighted 1.9, 5.2, 2.1 %; uniform with the step rule 5.2, 27, 1.8 %. (Before
+        // LQR-FLM's search kept every step within its KL bound, the local steps were larger:
+        // uniform 0.4, 6.4, 0.9 %.) With the regression (the default), uniform: 1.5, 5.7, 0.5 %.
+        let jacobian = Linearization::PointJacobian;
+        for (weighting, adjust, linearization, bound) in [
+            (Weighting::Uniform, false, jacobian.clone(), 1.15),
+            (Weighting::Precision, false, jacobian.clone(), 1.1),
+            (Weighting::Uniform, true, jacobian, 1.5),
+            (Weighting::Uniform, false, Linearization::default(), 1.1),
         ] {
             let c = MdgpsConfig {
                 local: cfg(8),
@@ -655,6 +780,7 @@ mod tests {
                     adjust,
                     ..Default::default()
                 },
+                linearization,
             };
             let run = train_mdgps(
                 LocalMethod::LqrFlm,
@@ -666,13 +792,21 @@ mod tests {
                 &mut |_| {},
             )
             .unwrap();
-            let case = format!("{weighting:?}, step rule {adjust}");
+            let lin = match c.linearization {
+                Linearization::Regression(_) => "regression",
+                Linearization::PointJacobian => "point Jacobian",
+            };
+            let case = format!("{weighting:?}, step rule {adjust}, {lin}");
             assert_eq!(run.failed_updates, 0, "{case}");
             let samples: Vec<u64> = run.curve.iter().map(|p| p.samples).collect();
             assert_eq!(samples, (1..=8).map(|i| 40 * i).collect::<Vec<u64>>());
             let obj = &p.conditions[0].objective;
             for x0 in held_out {
                 let (got, opt) = (policy_cost(&run.policy, obj, x0), riccati_cost(x0));
+                eprintln!(
+                    "{case}: {x0:?}: {:.2} % above the optimum",
+                    100.0 * (got / opt - 1.0)
+                );
                 assert!(
                     got < bound * opt,
                     "{case}: {x0:?}: policy {got}, optimum {opt}"
@@ -699,8 +833,36 @@ mod tests {
             local: cfg(2),
             policy: PolicyConfig::default(),
             step: MdgpsStep::default(),
+            linearization: Linearization::default(),
         };
         ok.validate().unwrap();
+        let mut c = ok.clone();
+        c.linearization = Linearization::Regression(PolicyFitConfig {
+            regularization: f64::NAN,
+            ..Default::default()
+        });
+        let e = c.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("linearization") && e.contains("regularization"),
+            "{e}"
+        );
+        if let Linearization::Regression(fit) = &mut c.linearization {
+            fit.regularization = 1e-6;
+            fit.prior.as_mut().unwrap().max_clusters = 1;
+        }
+        let e = c.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("linearization") && e.contains("max_clusters"),
+            "{e}"
+        );
+        for lin in [Linearization::default(), Linearization::PointJacobian] {
+            let c = MdgpsConfig {
+                linearization: lin,
+                ..ok.clone()
+            };
+            let back: MdgpsConfig = toml::from_str(&toml::to_string(&c).unwrap()).unwrap();
+            assert_eq!(back.linearization, c.linearization);
+        }
         for (min_mult, max_mult) in [(0.0, 10.0), (2.0, 10.0), (0.1, 0.5), (0.1, f64::NAN)] {
             let mut c = ok.clone();
             c.step = MdgpsStep {
@@ -720,9 +882,20 @@ mod tests {
             .next()
             .unwrap()
             .replace("weighting = \"uniform\"\n", "");
+        assert!(!old.contains("linearization"), "{old}");
         let read: MdgpsConfig = toml::from_str(&old).unwrap();
         assert_eq!(read.policy.weighting, Weighting::Uniform);
         assert_eq!(read.step, MdgpsStep::default());
+        // Settings recorded before the regression ran the point Jacobian, and read as it.
+        assert_eq!(read.linearization, Linearization::PointJacobian);
+        // The memory estimate counts the regression prior's kept states and actions: 2 conditions
+        // x 20 trajectories x 15 steps x (2 + 1) f64s.
+        let total = |c: &MdgpsConfig| c.memory(2, T, 2, 1, 2).total().unwrap();
+        let jacobian = MdgpsConfig {
+            linearization: Linearization::PointJacobian,
+            ..ok.clone()
+        };
+        assert_eq!(total(&ok) - total(&jacobian), 2 * 20 * T as u64 * 3 * 8);
     }
 
     /// The linearization of a policy is its Jacobian: for a network that is linear (no hidden
@@ -730,9 +903,14 @@ mod tests {
     /// Trajectories of unit-variance noise on the double integrator from `(1, 0)`: states to
     /// linearize a policy around.
     fn noise_samples(rng: &mut Rng) -> TrajectorySamples {
+        noise_samples_of(1.0, rng)
+    }
+
+    /// [`noise_samples`] with noise of `variance`.
+    fn noise_samples_of(variance: f64, rng: &mut Rng) -> TrajectorySamples {
         let p = problem(&[[1.0, 0.0]]);
         sample_trajectories(
-            &TvlgController::constant(T, 2, &[0.0], 1.0).unwrap(),
+            &TvlgController::constant(T, 2, &[0.0], variance).unwrap(),
             &*p.system,
             &p.conditions[0].objective,
             &p.conditions[0].x0,
@@ -794,10 +972,116 @@ mod tests {
         assert!(policy.mean(&[0.0; 3], &mut ws).is_err());
     }
 
+    /// A policy whose network is a line (no hidden layer) is recovered by the regression too:
+    /// gains its weights, offset its bias, and the covariance its own variance (the residual is
+    /// the network's `f32` rounding). From step 3: before, the positions have hardly spread from
+    /// the common start (at step 0 not at all, and the prior alone sets the gain there), and the
+    /// `regularization` of 10⁻⁶ shrinks the gain measurably (4·10⁻³ at step 1, 4·10⁻⁴ at step 3,
+    /// 10⁻⁵ at the last).
+    #[test]
+    fn regression_linearizes_a_linear_policy_to_its_weights() {
+        let mut rng = rng_from_seed(1);
+        let policy = GlobalPolicy::new(2, 1, &[], 0.3, None, &mut rng).unwrap();
+        let w = policy.net().weight(0).to_vec();
+        let bias = f64::from(policy.net().bias(0)[0]);
+        let samples = noise_samples(&mut rng);
+        let mut fit = TvlgPolicyFit::new(PolicyFitConfig::default());
+        let lin = linearize_by_regression(&policy, &samples, &mut fit).unwrap();
+        assert_eq!(fit.kept_trajectories(), samples.len());
+        for t in 3..T {
+            for (j, wj) in w.iter().enumerate() {
+                let err = (lin.gains[t][(0, j)] - f64::from(*wj)).abs();
+                assert!(err < 1e-3, "step {t}, state {j}: {err}");
+            }
+            assert!((lin.offsets[t][0] - bias).abs() < 1e-3, "step {t}");
+            assert!((lin.cov[t][(0, 0)] - 0.3).abs() < 1e-6, "step {t}");
+        }
+    }
+
+    /// `policy` with its network's parameters replaced by `params` (through a checkpoint: the
+    /// policy has no setter, and its standardization stays the identity of an unfitted policy).
+    fn with_params(policy: &mut GlobalPolicy, params: &[f32]) {
+        let mut ckpt = Checkpoint::new();
+        policy.save_to("p", &mut ckpt).unwrap();
+        let mut net = policy.net().clone();
+        net.set_params(params).unwrap();
+        net.save_to("p.net", &mut ckpt).unwrap();
+        policy.load_from("p", &ckpt).unwrap();
+    }
+
+    /// A policy steep at the samples' mean but saturated around it: `u = clamp(w (x₀ − x̄₀), ±wδ)`
+    /// with `w = 1000`, `δ = 0.002` (two ReLUs), at one step's mean position `x̄₀` of noise
+    /// samples (variance 100) on the double integrator. The point Jacobian there is the slope
+    /// `w`; the regression over the samples, spread far beyond `±δ`, sees an almost constant
+    /// policy: its gain is bounded by the spread of the policy's actions over the samples'
+    /// positions (Cauchy–Schwarz, with a margin for the second state) and two orders smaller than
+    /// the point Jacobian, and the policy's departure from linear widens the covariance beyond
+    /// `σ²`.
+    #[test]
+    fn regression_is_bounded_where_the_point_jacobian_runs_away() {
+        let mut rng = rng_from_seed(5);
+        let samples = noise_samples_of(100.0, &mut rng);
+        let t = 10;
+        let xs: Vec<f64> = (0..samples.len())
+            .map(|i| samples.states[[i, t, 0]])
+            .collect();
+        let xbar = xs.iter().sum::<f64>() / xs.len() as f64;
+        let (w, delta) = (1000.0f32, 0.002f32);
+        let mut policy = GlobalPolicy::new(2, 1, &[2], 0.05, None, &mut rng).unwrap();
+        // Hidden: relu(x₀ − x̄₀ + δ), relu(x₀ − x̄₀ − δ); output w (h₁ − h₂) − w δ.
+        let c = xbar as f32;
+        with_params(
+            &mut policy,
+            &[
+                1.0,
+                0.0,
+                1.0,
+                0.0,
+                -c + delta,
+                -c - delta,
+                w,
+                -w,
+                -w * delta,
+            ],
+        );
+        let mut ws = policy.net().workspace();
+        let u: Vec<f64> = xs
+            .iter()
+            .enumerate()
+            .map(|(i, _)| {
+                let x = [samples.states[[i, t, 0]], samples.states[[i, t, 1]]];
+                policy.mean(&x, &mut ws).unwrap()[0]
+            })
+            .collect();
+        let std = |v: &[f64]| {
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            (v.iter().map(|a| (a - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
+        };
+        let bound = std(&u) / std(&xs);
+        let point = linearize(&policy, &samples).unwrap();
+        let mut fit = TvlgPolicyFit::new(PolicyFitConfig::default());
+        let lin = linearize_by_regression(&policy, &samples, &mut fit).unwrap();
+        let (kp, kr) = (point.gains[t][(0, 0)], lin.gains[t][(0, 0)]);
+        let (cov, sigma2) = (lin.cov[t][(0, 0)], policy.variance[0]);
+        eprintln!(
+            "point Jacobian {kp}, regression gain {kr} (and {}), std(u)/std(x) {bound}, \
+             S {cov} against σ² {sigma2}",
+            lin.gains[t][(0, 1)]
+        );
+        assert!((kp - f64::from(w)).abs() < 1.0, "point Jacobian {kp}");
+        assert!(kr.abs() <= 2.0 * bound, "regression {kr}, bound {bound}");
+        assert!(kr.abs() < kp / 100.0, "regression {kr}, point {kp}");
+        assert!(cov > sigma2 + 0.1 * std(&u).powi(2), "S {cov}, σ² {sigma2}");
+        for s in 0..T {
+            assert!(lin.cov[s][(0, 0)] >= sigma2, "step {s}");
+        }
+    }
+
     /// An MDGPS run stopped after any iteration resumes from its checkpoint and ends exactly as
     /// an uninterrupted one (curve, failures, the policy's parameters and variances), for every
-    /// local method: the local controllers, the policy's network, standardization and Adam state,
-    /// the step rule's multiplier and anchors, and the generator travel with it. A checkpoint of
+    /// local method and both linearizations: the local controllers, the policy's network,
+    /// standardization and Adam state, the step rule's multiplier and anchors, the regression's
+    /// policy priors, and the generator travel with it. A checkpoint of
     /// another seed is refused.
     #[test]
     fn a_run_stopped_after_any_iteration_resumes_to_the_same_record() {
@@ -819,15 +1103,23 @@ mod tests {
                 adjust: true,
                 ..Default::default()
             },
+            linearization: Linearization::default(),
         };
         c.local.samples = 5;
         let batch = (2 * c.local.samples) as u64;
-        for (method, weighting) in [
-            (LocalMethod::LqrFlm, Weighting::Uniform),
-            (LocalMethod::Pi2, Weighting::Precision),
-            (LocalMethod::Pilqr, Weighting::Uniform),
+        let regression = Linearization::default();
+        for (method, weighting, linearization) in [
+            (LocalMethod::LqrFlm, Weighting::Uniform, regression.clone()),
+            (LocalMethod::Pi2, Weighting::Precision, regression.clone()),
+            (LocalMethod::Pilqr, Weighting::Uniform, regression),
+            (
+                LocalMethod::LqrFlm,
+                Weighting::Uniform,
+                Linearization::PointJacobian,
+            ),
         ] {
             c.policy.weighting = weighting;
+            c.linearization = linearization;
             let run = |store: &mut dyn Checkpoints, on: &mut dyn FnMut(u64)| {
                 train_mdgps(method, &p, &test, &c, 3, store, on)
             };
@@ -845,7 +1137,11 @@ mod tests {
                     first.get_or_insert(n);
                 })
                 .unwrap();
-                let case = format!("{} stopped after {stop_after}", method.name());
+                let lin = match c.linearization {
+                    Linearization::Regression(_) => "regression",
+                    Linearization::PointJacobian => "point Jacobian",
+                };
+                let case = format!("{} ({lin}) stopped after {stop_after}", method.name());
                 assert_eq!(first, Some(stop_after * batch + c.local.samples as u64));
                 assert_eq!(resumed.curve, whole.curve, "{case}");
                 assert_eq!(resumed.failed_updates, whole.failed_updates, "{case}");

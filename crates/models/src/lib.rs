@@ -27,6 +27,8 @@
 //! * [`TvlgFit`]: time-varying linear-Gaussian dynamics from trajectories with a GMM
 //!   normal-inverse-Wishart prior (p4 / guided policy search). Time-varying, so not a
 //!   `DynamicsModel`: it returns [`TvlgDynamics`] for LQR-type trajectory optimizers.
+//!   [`TvlgPolicyFit`] linearizes a policy the same way (GPS's policy prior): the regression of
+//!   its actions on the sampled states under a GMM prior, a [`TvlgPolicy`].
 //! * Data helpers: [`TransitionsBuilder`], [`Transitions::from_episode`],
 //!   [`Transitions::validate`], holdout splits.
 //!
@@ -118,6 +120,7 @@ mod model_env;
 #[cfg(feature = "pixels")]
 mod pixel_model;
 mod plant_model;
+mod policy_fit;
 mod residual;
 #[cfg(test)]
 mod testutil;
@@ -143,6 +146,7 @@ pub use pixel_model::{
     PixelModelEnv, PixelPrediction,
 };
 pub use plant_model::PlantModel;
+pub use policy_fit::{PolicyFitConfig, TvlgPolicy, TvlgPolicyFit};
 pub use residual::{ResidualModel, ResidualModelConfig};
 pub use train::{OptimizerConfig, Standardizer};
 pub use tvlg::{GmmPriorConfig, TvlgConfig, TvlgDynamics, TvlgFit};

@@ -27,7 +27,9 @@ use tandem_core::seeding::rng_from_seed;
 use crate::gmm::{robust_cholesky, Gmm};
 use crate::model::ModelError;
 
-/// Settings of the GMM dynamics prior. Defaults are the GPS code's `DYN_PRIOR_GMM`.
+/// Settings of a GMM prior: the dynamics' ([`TvlgConfig`]) and the policy linearization's
+/// ([`crate::PolicyFitConfig`]). Defaults are the GPS code's `DYN_PRIOR_GMM` (its
+/// `POLICY_PRIOR_GMM` has the same values).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct GmmPriorConfig {
@@ -69,7 +71,7 @@ impl GmmPriorConfig {
             || self.max_iterations == 0
         {
             return Err(ModelError::Other(format!(
-                "dynamics prior: max_clusters {} must be >= 2, and min_samples_per_cluster {}, \
+                "GMM prior: max_clusters {} must be >= 2, and min_samples_per_cluster {}, \
                  max_samples {} and max_iterations {} >= 1",
                 self.max_clusters,
                 self.min_samples_per_cluster,
@@ -79,7 +81,7 @@ impl GmmPriorConfig {
         }
         if !(self.strength.is_finite() && self.strength > 0.0) {
             return Err(ModelError::Other(format!(
-                "dynamics prior: strength {} must be finite and > 0",
+                "GMM prior: strength {} must be finite and > 0",
                 self.strength
             )));
         }
@@ -238,6 +240,68 @@ fn joint_at(states: &ArrayView3<'_, f64>, actions: &ArrayView3<'_, f64>, t: usiz
     })
 }
 
+/// A Gaussian `y | a ~ N(gain a + offset, cov)`: the last block of a joint Gaussian conditioned
+/// on its first.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Conditional {
+    /// `Σ_{y,a} Σ_{a,a}⁻¹`, `dY x dA`.
+    pub(crate) gain: DMatrix<f64>,
+    /// `μ_y − gain μ_a`.
+    pub(crate) offset: DVector<f64>,
+    /// `Σ_{yy} − gain Σ_{a,a} gainᵀ`, symmetrized.
+    pub(crate) cov: DMatrix<f64>,
+}
+
+/// Fits the joint Gaussian of the rows `[a, y]` of `ys` (`N x (dA + dY)`, `dA = d_in`) and
+/// conditions `y` on `a` (GPS `gauss_fit_joint_prior`): the empirical covariance, or with
+/// `prior = Some((gmm, strength))` the MAP of the normal-inverse-Wishart posterior whose prior is
+/// the mixture's inference for these rows (`m`, `n0`, `Φ` scaled by `strength`), with
+/// `regularization` added to the diagonal of the `a` block. `None` when that block is not
+/// positive definite even with jitter. The dynamics fit ([`TvlgFit`]) and the policy fit
+/// ([`crate::TvlgPolicyFit`]) share it.
+pub(crate) fn fit_conditional(
+    ys: &DMatrix<f64>,
+    prior: Option<(&Gmm, f64)>,
+    regularization: f64,
+    d_in: usize,
+) -> Result<Option<Conditional>, ModelError> {
+    let nf = ys.nrows() as f64;
+    let d_out = ys.ncols() - d_in;
+    let mun = ys.row_mean().transpose();
+    let mut diff = ys.clone();
+    for mut row in diff.row_iter_mut() {
+        row -= mun.transpose();
+    }
+    let empsig = diff.transpose() * &diff / nf;
+    let empsig = (&empsig + empsig.transpose()) * 0.5;
+    let mut sigma = match prior {
+        Some((gmm, strength)) => {
+            let (mu0, phi, m, n0) = gmm.inference(ys)?;
+            let (m, n0) = (m * strength, n0 * strength);
+            let phi = phi * m;
+            let dm = &mun - mu0;
+            let denom = (nf + n0).max(1e-12);
+            (&empsig * nf + phi + &dm * dm.transpose() * (nf * m / (nf + m))) / denom
+        }
+        None => empsig,
+    };
+    sigma = (&sigma + sigma.transpose()) * 0.5;
+    for i in 0..d_in {
+        sigma[(i, i)] += regularization;
+    }
+    let sxx = sigma.view((0, 0), (d_in, d_in)).into_owned();
+    let sxy = sigma.view((0, d_in), (d_in, d_out)).into_owned();
+    let Some(chol) = robust_cholesky(&sxx) else {
+        return Ok(None);
+    };
+    let gain = chol.solve(&sxy).transpose(); // dY x dA
+    let offset = mun.rows(d_in, d_out) - &gain * mun.rows(0, d_in);
+    let syy = sigma.view((d_in, d_in), (d_out, d_out)).into_owned();
+    let cov = syy - &gain * &sxx * gain.transpose();
+    let cov = (&cov + cov.transpose()) * 0.5;
+    Ok(Some(Conditional { gain, offset, cov }))
+}
+
 impl TvlgFit {
     /// A fitter with no prior data yet.
     pub fn new(cfg: TvlgConfig) -> Self {
@@ -371,44 +435,23 @@ impl TvlgFit {
             out.x0_mean[j] = mean;
             out.x0_cov[(j, j)] = var.max(1e-6);
         }
-        let nf = n as f64;
+        let prior = self
+            .gmm
+            .as_ref()
+            .filter(|_| strength > 0.0)
+            .map(|g| (g, strength));
         for t in 0..steps {
             let ys = joint_at(&states, &actions, t);
-            let mun = ys.row_mean().transpose();
-            let mut diff = ys.clone();
-            for mut row in diff.row_iter_mut() {
-                row -= mun.transpose();
-            }
-            let empsig = diff.transpose() * &diff / nf;
-            let empsig = (&empsig + empsig.transpose()) * 0.5;
-            let mut sigma = match (&self.gmm, strength > 0.0) {
-                (Some(gmm), true) => {
-                    let (mu0, phi, m, n0) = gmm.inference(&ys)?;
-                    let (m, n0) = (m * strength, n0 * strength);
-                    let phi = phi * m;
-                    let dm = &mun - mu0;
-                    let denom = (nf + n0).max(1e-12);
-                    (&empsig * nf + phi + &dm * dm.transpose() * (nf * m / (nf + m))) / denom
-                }
-                _ => empsig,
-            };
-            sigma = (&sigma + sigma.transpose()) * 0.5;
-            for i in 0..dxu {
-                sigma[(i, i)] += self.cfg.regularization;
-            }
-            let sxx = sigma.view((0, 0), (dxu, dxu)).into_owned();
-            let sxy = sigma.view((0, dxu), (dxu, dx)).into_owned();
-            let chol = robust_cholesky(&sxx).ok_or_else(|| {
+            let Conditional {
+                gain: fd,
+                offset: fc,
+                cov: dynsig,
+            } = fit_conditional(&ys, prior, self.cfg.regularization, dxu)?.ok_or_else(|| {
                 ModelError::Other(format!(
                     "TVLG fit, step {t}: the [x; u] covariance is not positive definite \
                      (raise `regularization`)"
                 ))
             })?;
-            let fd = chol.solve(&sxy).transpose(); // dX x dXU
-            let fc = mun.rows(dxu, dx) - &fd * mun.rows(0, dxu);
-            let syy = sigma.view((dxu, dxu), (dx, dx)).into_owned();
-            let dynsig = syy - &fd * &sxx * fd.transpose();
-            let dynsig = (&dynsig + dynsig.transpose()) * 0.5;
             if fd
                 .iter()
                 .chain(fc.iter())
