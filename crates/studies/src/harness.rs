@@ -250,7 +250,7 @@ struct StudyName {
 
 /// A file of a study's directory (`config.json`, a record, its checksum), read up to
 /// [`tandem_core::MAX_INPUT_BYTES`].
-fn read_study_file(path: &Path) -> std::io::Result<String> {
+pub(crate) fn read_study_file(path: &Path) -> std::io::Result<String> {
     tandem_core::read_file_capped(path, tandem_core::MAX_INPUT_BYTES)
 }
 
@@ -264,7 +264,7 @@ pub fn study_of(dir: &Path) -> Result<String> {
 }
 
 /// The error of `op` on `path` failing.
-fn failed(op: IoOp, path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
+pub(crate) fn failed(op: IoOp, path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
     move |source| Error::io(op, path, source)
 }
 
@@ -487,6 +487,19 @@ pub fn selected_jobs<S: Study>(
     jobs
 }
 
+/// The jobs of the run `rc` records, each with its seed, in the order a run starts them: the
+/// cells of a sweep.
+pub fn cells<S: Study>(study: &S, rc: &RunConfig<S::Settings>) -> Result<Vec<(u64, Vec<String>)>> {
+    let methods = rc.methods.as_deref();
+    Ok(seed_range(rc.first_seed, rc.seeds)?
+        .flat_map(|seed| {
+            selected_jobs(study, &rc.config, seed, methods)
+                .into_iter()
+                .map(move |job| (seed, job))
+        })
+        .collect())
+}
+
 /// Every run of `seeds` that `methods` selects, once each, in the order the study lists them.
 fn runs_of<S: Study>(
     study: &S,
@@ -549,8 +562,7 @@ pub fn select_methods<S: Study>(
 fn check_memory<S: Study>(
     study: &S,
     settings: &S::Settings,
-    seeds: std::ops::Range<u64>,
-    methods: Option<&[String]>,
+    cells: &[(u64, Vec<String>)],
     jobs: u64,
     what: &str,
 ) -> Result<u64> {
@@ -558,14 +570,12 @@ fn check_memory<S: Study>(
     // Runs are the same on most seeds: estimate each distinct job once.
     let mut distinct: Vec<Vec<String>> = Vec::new();
     let mut count: Vec<u64> = Vec::new();
-    for seed in seeds {
-        for job in selected_jobs(study, settings, seed, methods) {
-            match distinct.iter().position(|j| *j == job) {
-                Some(k) => count[k] += 1,
-                None => {
-                    distinct.push(job);
-                    count.push(1);
-                }
+    for (_, job) in cells {
+        match distinct.iter().position(|j| j == job) {
+            Some(k) => count[k] += 1,
+            None => {
+                distinct.push(job.clone());
+                count.push(1);
             }
         }
     }
@@ -860,9 +870,13 @@ fn layout<S: Study>(study: &S, merged: bool) -> Layout {
 }
 
 /// The settings the command line asks for (or `--resume` records), checked whole before any
-/// work: each setting's range, the seed range, and the memory of `--jobs` parallel jobs. Returns
-/// them with the estimated peak memory in bytes.
-pub fn check<S: Study>(study: &S, args: &StudyArgs) -> Result<(RunConfig<S::Settings>, u64)> {
+/// work: each setting's range, the seed range, the methods, and the memory of `--jobs` parallel
+/// jobs. Returns them with the estimated peak memory in bytes and the jobs ([`cells`]).
+#[allow(clippy::type_complexity)]
+pub fn check<S: Study>(
+    study: &S,
+    args: &StudyArgs,
+) -> Result<(RunConfig<S::Settings>, u64, Vec<(u64, Vec<String>)>)> {
     let mut rc = match &args.resume {
         Some(dir) => recorded(study, args, dir)?,
         None => fresh(study, args)?,
@@ -886,23 +900,16 @@ pub fn check<S: Study>(study: &S, args: &StudyArgs) -> Result<(RunConfig<S::Sett
         }
     }
     rc.methods = methods;
-    let what = harness_what(args);
-    let bytes = check_memory(
-        study,
-        &rc.config,
-        seeds,
-        rc.methods.as_deref(),
-        args.jobs,
-        &what,
-    )?;
-    Ok((rc, bytes))
+    let jobs = cells(study, &rc)?;
+    let bytes = check_memory(study, &rc.config, &jobs, args.jobs, &harness_what(args))?;
+    Ok((rc, bytes, jobs))
 }
 
 /// Runs (or resumes) `study` as the command line says, after [`check`].
 pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
     tandem_nn::set_gemm_threads(1);
     let stop = args.stop.clone();
-    let (mut rc, bytes) = check(study, args)?;
+    let (mut rc, bytes, jobs) = check(study, args)?;
     if args.check {
         println!(
             "{}: settings valid; {} seeds from {}; estimated peak memory {} with {} parallel jobs \
@@ -942,14 +949,6 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> ");
     let settings = &rc.config;
-    let methods = rc.methods.as_deref();
-    let jobs: Vec<(u64, Vec<String>)> = seed_range(rc.first_seed, rc.seeds)?
-        .flat_map(|seed| {
-            selected_jobs(study, settings, seed, methods)
-                .into_iter()
-                .map(move |j| (seed, j))
-        })
-        .collect();
     let next = AtomicUsize::new(0);
     let errors: Mutex<Vec<(u64, String)>> = Mutex::new(Vec::new());
     std::thread::scope(|scope| {
@@ -1005,7 +1004,7 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
     }
     let seeds = seed_range(rc.first_seed, rc.seeds)?;
     let report = || -> Result<String> {
-        let records = read_records(study, settings, dir.path(), seeds, methods)?;
+        let records = read_records(study, settings, dir.path(), seeds, rc.methods.as_deref())?;
         remove_dir(&dir.path().join("state"))?;
         let records: Vec<S::Record> = records.into_iter().map(|r| r.record).collect();
         study.report(&dir, settings, &records, wall)

@@ -172,15 +172,8 @@ impl<S: Study> Registered for S {
         harness::run(self, args)
     }
     fn check(&self, args: &StudyArgs) -> Result<Checked> {
-        let (rc, memory) = harness::check(self, args)?;
+        let (rc, memory, cells) = harness::check(self, args)?;
         let settings = serde_json::to_value(&rc.config).map_err(Error::other)?;
-        let cells = harness::seed_range(rc.first_seed, rc.seeds)?
-            .flat_map(|seed| {
-                harness::selected_jobs(self, &rc.config, seed, rc.methods.as_deref())
-                    .into_iter()
-                    .map(move |job| (seed, job))
-            })
-            .collect();
         Ok(Checked {
             settings,
             memory,

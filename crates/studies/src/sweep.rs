@@ -26,6 +26,7 @@ use std::process::Command;
 use clap::Args;
 use serde::{Deserialize, Serialize};
 
+use crate::harness::{failed, read_study_file};
 use crate::interrupt::Stop;
 use crate::run::{Existing, Layout, RunDir, LOCK_FILE};
 use crate::{Error, IoOp, Result, StudyArgs, StudyOptions};
@@ -159,15 +160,11 @@ fn layout() -> Layout {
     }
 }
 
-fn io(op: IoOp, path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
-    move |source| Error::io(op, path, source)
-}
-
 fn write_file(path: &Path, text: &str) -> Result<()> {
     if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent).map_err(io(IoOp::Create, parent))?;
+        std::fs::create_dir_all(parent).map_err(failed(IoOp::Create, parent))?;
     }
-    tandem_nn::write_atomic(path, text.as_bytes()).map_err(io(IoOp::Write, path))
+    tandem_nn::write_atomic(path, text.as_bytes()).map_err(failed(IoOp::Write, path))
 }
 
 /// A path as one single-quoted shell word; refused if it holds a quote or a line break.
@@ -186,16 +183,15 @@ impl Sweep {
     /// Reads `dir/sweep.json`.
     pub fn read(dir: &Path) -> Result<Self> {
         let path = dir.join(SWEEP_FILE);
-        let text =
-            tandem_core::read_file_capped(&path, tandem_core::MAX_INPUT_BYTES).map_err(|e| {
-                Error::input(
-                    dir.display().to_string(),
-                    format!(
-                        "{} cannot be read ({e}): not a sweep's directory",
-                        path.display()
-                    ),
-                )
-            })?;
+        let text = read_study_file(&path).map_err(|e| {
+            Error::input(
+                dir.display().to_string(),
+                format!(
+                    "{} cannot be read ({e}): not a sweep's directory",
+                    path.display()
+                ),
+            )
+        })?;
         serde_json::from_str(&text)
             .map_err(|e| Error::input(path.display().to_string(), e.to_string()))
     }
@@ -339,7 +335,7 @@ pub fn create(
             .clone()
             .unwrap_or_else(|| PathBuf::from(format!("runs/{name}-sweep__<time>")));
         (
-            std::path::absolute(&dir).map_err(io(IoOp::Read, &dir))?,
+            std::path::absolute(&dir).map_err(failed(IoOp::Read, &dir))?,
             None,
         )
     } else {
@@ -355,7 +351,7 @@ pub fn create(
             existing,
         )
         .map_err(Error::other)?;
-        let dir = std::path::absolute(rd.path()).map_err(io(IoOp::Read, rd.path()))?;
+        let dir = std::path::absolute(rd.path()).map_err(failed(IoOp::Read, rd.path()))?;
         (dir, Some(rd))
     };
     let sweep = Sweep {
@@ -378,14 +374,14 @@ pub fn create(
     if run_dir.is_some() {
         if let Some(config) = &args.config {
             let text = tandem_core::read_file_capped(config, tandem_core::MAX_CONFIG_BYTES)
-                .map_err(io(IoOp::Read, config))?;
+                .map_err(failed(IoOp::Read, config))?;
             write_file(&dir.join(SETTINGS_FILE), &text)?;
         }
         write_file(&dir.join("slurm/cells.sbatch"), &cells_script)?;
         write_file(&dir.join("slurm/merge.sbatch"), &merge_script)?;
         for sub in ["cells", "tasks", "logs"] {
             let path = dir.join(sub);
-            std::fs::create_dir_all(&path).map_err(io(IoOp::Create, &path))?;
+            std::fs::create_dir_all(&path).map_err(failed(IoOp::Create, &path))?;
         }
         sweep.write(&dir)?;
     }
@@ -518,7 +514,7 @@ fn starts_path(dir: &Path, index: usize) -> PathBuf {
 
 fn read_starts(dir: &Path, index: usize) -> Result<Vec<Start>> {
     let path = starts_path(dir, index);
-    match tandem_core::read_file_capped(&path, tandem_core::MAX_INPUT_BYTES) {
+    match read_study_file(&path) {
         Ok(text) => serde_json::from_str(&text)
             .map_err(|e| Error::input(path.display().to_string(), e.to_string())),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Vec::new()),
@@ -536,7 +532,7 @@ fn cell_status(cell_dir: &Path) -> Result<Option<(String, Option<String>)>> {
         error: Option<String>,
     }
     let path = cell_dir.join("config.json");
-    match tandem_core::read_file_capped(&path, tandem_core::MAX_INPUT_BYTES) {
+    match read_study_file(&path) {
         Ok(text) => {
             let s: Status = serde_json::from_str(&text)
                 .map_err(|e| Error::input(path.display().to_string(), e.to_string()))?;
