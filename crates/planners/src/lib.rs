@@ -54,8 +54,10 @@ pub use objective::{
     TerminationFn, TransitionFn, ValueFn,
 };
 pub use pi2::{pi2_update, pi2_update_with_temperatures, pi2_weights, Pi2Config, Pi2Step};
-pub use pilqr::{model_cost_to_go, reparametrize, Pilqr, PilqrConfig, PilqrStep};
+pub use pilqr::{
+    model_cost_to_go, model_costs, reparametrize, PerStep, Pilqr, PilqrConfig, PilqrStep, Residual,
+};
 pub use tvlg::{
-    expected_cost, forward_moments, policy_kl, quadratize_cost, sample_trajectories, QuadraticCost,
-    SampleConfig, TrajectoryMoments, TrajectorySamples, TvlgController,
+    costs_to_go, expected_cost, forward_moments, policy_kl, quadratize_cost, sample_trajectories,
+    QuadraticCost, SampleConfig, TrajectoryMoments, TrajectorySamples, TvlgController,
 };

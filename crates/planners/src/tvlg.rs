@@ -161,6 +161,21 @@ pub struct TrajectorySamples {
     pub costs: Array2<f64>,
 }
 
+/// Costs-to-go `S_{i,t} = Σ_{j ≥ t} c_{i,j}` of per-step costs `N x (T+1)` whose last column is
+/// the terminal cost, `N x T`.
+pub fn costs_to_go(costs: &Array2<f64>) -> Array2<f64> {
+    let (n, t1) = costs.dim();
+    let mut s = Array2::zeros((n, t1 - 1));
+    for i in 0..n {
+        let mut acc = costs[(i, t1 - 1)];
+        for t in (0..t1 - 1).rev() {
+            acc += costs[(i, t)];
+            s[(i, t)] = acc;
+        }
+    }
+    s
+}
+
 impl TrajectorySamples {
     /// Number of trajectories.
     pub fn len(&self) -> usize {
@@ -172,16 +187,7 @@ impl TrajectorySamples {
     }
     /// Costs-to-go `S_{i,t} = Σ_{j ≥ t} c_{i,j}` including the terminal cost, `N x T` (p4 §II-B).
     pub fn cost_to_go(&self) -> Array2<f64> {
-        let (n, t1) = self.costs.dim();
-        let mut s = Array2::zeros((n, t1 - 1));
-        for i in 0..n {
-            let mut acc = self.costs[(i, t1 - 1)];
-            for t in (0..t1 - 1).rev() {
-                acc += self.costs[(i, t)];
-                s[(i, t)] = acc;
-            }
-        }
-        s
+        costs_to_go(&self.costs)
     }
     /// Adds per-step quadratic terms to the stored costs: `costs[i, t] += extra[t](x_{i,t}, u_{i,t})`
     /// for `t < T` and `extra[T](x_{i,T})` to the terminal column (`T + 1` terms), e.g. the KL

@@ -608,7 +608,7 @@ impl P4Table {
         md.push_str(&format!(
             "\nLQR-FLM: base KL bound {} per step with GPS's step rule for LQR-FLM; PI²: KL {}, \
              covariance damping {}, gains {}; PILQR: the same LQR-FLM and PI² stages, per-step \
-             bounds from the residual ratio ({} / {}). Initial controllers `K = 0, k = 0, Σ = {} I`. \
+             bounds from the residual ratio ({} / {}{}). Initial controllers `K = 0, k = 0, Σ = {} I`. \
              Updates that failed numerically (controller kept): {failed}. Runs took {run_wall:.0} s \
              in all; the study's wall time {wall:.0} s.\n",
             t.lqr.kl_step,
@@ -617,8 +617,34 @@ impl P4Table {
             if t.pi2.update_gains { "refitted" } else { "kept" },
             t.res_ratio_dec,
             t.res_ratio_inc,
+            pilqr_bounds(t),
             local.init_variance,
         ));
         md
     }
+}
+
+/// How PILQR's residuals and per-step bounds were set, when not as in the first version (whose
+/// reports said nothing more, and still read the same).
+fn pilqr_bounds(t: &tandem_planners::PilqrConfig) -> String {
+    use tandem_planners::{PerStep, Residual};
+    let words = |p: &PerStep| match p {
+        PerStep::Constant(v) => format!("{v}"),
+        PerStep::Linear { first, last } => format!("{first} → {last} over the steps"),
+    };
+    let mut s = String::new();
+    if t.residual == Residual::FromStart {
+        s.push_str("; residuals of the model's replay of each sample from the mean start");
+    }
+    if let Some(k) = &t.kl_step {
+        s.push_str(&format!("; base bound {}", words(k)));
+    }
+    if t.min_step_mult != PerStep::Constant(0.01) || t.max_step_mult != PerStep::Constant(10.0) {
+        s.push_str(&format!(
+            "; multipliers from {} to {}",
+            words(&t.min_step_mult),
+            words(&t.max_step_mult)
+        ));
+    }
+    s
 }
