@@ -159,6 +159,7 @@ pub fn reacher_config() -> super::mdgps::MdgpsConfig {
         policy: Default::default(),
         step: Default::default(),
         linearization: Default::default(),
+        first_iteration: super::mdgps::FirstIteration::Unbounded,
     }
 }
 
