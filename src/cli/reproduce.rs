@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Subcommand};
 use tandem_studies::interrupt::Stop;
+use tandem_studies::p4::Preset;
 use tandem_studies::sweep::Resources;
 use tandem_studies::{StudyArgs, StudyOptions};
 
@@ -44,7 +45,7 @@ pub enum ReproduceCommand {
     P4Door(P4Args),
     /// p4 (PILQR) Fig. 4 on gymnasium's reacher (MuJoCo, needs `--features mujoco`): neural
     /// policies by MDGPS with LQR-FLM, PI² or PILQR and by DDPG, final distance on 300 test targets.
-    P4Reacher(ReacherArgs),
+    P4Reacher(P4Args),
     /// Combine p0-pendulum, p0-leo, p1, p2-cartpole, p2-maze, p3-leg, p3-mujoco, p4-pusher,
     /// p4-door or p4-reacher reproductions of disjoint (seed, method) cells (e.g. one process
     /// per seed and method, `--first-seed`, `--methods`) into one table and figure; their
@@ -125,7 +126,7 @@ pub struct P3MujocoArgs {
     pub env: Option<String>,
 }
 
-/// Arguments of `tandem reproduce p4-pusher` and `p4-door`.
+/// Arguments of `tandem reproduce p4-pusher`, `p4-door` and `p4-reacher`.
 #[derive(Debug, Clone, Args)]
 pub struct P4Args {
     /// Seeds, output, jobs, resume: as every study.
@@ -134,17 +135,11 @@ pub struct P4Args {
     /// `--slurm`: submit the study to a SLURM cluster instead.
     #[command(flatten)]
     pub slurm: SlurmArgs,
-}
-
-/// Arguments of `tandem reproduce p4-reacher`.
-#[derive(Debug, Clone, Args)]
-pub struct ReacherArgs {
-    /// Seeds, output, jobs, resume: as every study.
-    #[command(flatten)]
-    pub study: StudyArgs,
-    /// `--slurm`: submit the study to a SLURM cluster instead.
-    #[command(flatten)]
-    pub slurm: SlurmArgs,
+    /// The settings to start from, before `--quick` and `--config`: `authors` (the authors' GPS
+    /// experiment files where the paper is silent) or `ours` (our first settings) [default:
+    /// authors; on `--resume`, the recorded settings].
+    #[arg(long, value_enum)]
+    pub preset: Option<Preset>,
 }
 
 /// `tandem reproduce <study> --slurm`: the study as a SLURM job array of (seed, method) cells
@@ -203,6 +198,7 @@ impl P3Args {
             env,
             ablate_elites: self.ablate_elites,
             oracle: self.oracle,
+            ..StudyOptions::default()
         }
     }
 }
@@ -211,6 +207,10 @@ impl P3Args {
 pub fn run(cmd: ReproduceCommand) -> Result<()> {
     let on = |env| StudyOptions {
         env,
+        ..StudyOptions::default()
+    };
+    let p4 = |preset| StudyOptions {
+        preset,
         ..StudyOptions::default()
     };
     let (name, args, slurm, options) = match cmd {
@@ -227,9 +227,9 @@ pub fn run(cmd: ReproduceCommand) -> Result<()> {
             let options = a.p3.options(a.env);
             ("p3-mujoco", a.p3.study, a.p3.slurm, options)
         }
-        ReproduceCommand::P4Pusher(a) => ("p4-pusher", a.study, a.slurm, on(None)),
-        ReproduceCommand::P4Door(a) => ("p4-door", a.study, a.slurm, on(None)),
-        ReproduceCommand::P4Reacher(a) => ("p4-reacher", a.study, a.slurm, on(None)),
+        ReproduceCommand::P4Pusher(a) => ("p4-pusher", a.study, a.slurm, p4(a.preset)),
+        ReproduceCommand::P4Door(a) => ("p4-door", a.study, a.slurm, p4(a.preset)),
+        ReproduceCommand::P4Reacher(a) => ("p4-reacher", a.study, a.slurm, p4(a.preset)),
         ReproduceCommand::Merge(a) => {
             return tandem_studies::merge(&a.dirs, a.out.as_deref(), a.overwrite)
         }

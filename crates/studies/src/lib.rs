@@ -154,6 +154,9 @@ pub struct StudyOptions {
     pub ablate_elites: bool,
     /// p3 on the leg: also run MBPO with the true system as its model.
     pub oracle: bool,
+    /// p4: the settings to start from [default: the authors'].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preset: Option<p4::Preset>,
 }
 
 /// A study as the registry holds it: run and merge with its settings type erased.
@@ -203,9 +206,11 @@ fn registry(options: &StudyOptions) -> Vec<Box<dyn Registered>> {
             options.ablate_elites,
             options.oracle,
         )),
-        Box::new(P4Study::<Pusher>::new()),
-        Box::new(P4Study::<Door>::new()),
-        Box::new(p4_reacher::ReacherStudy),
+        Box::new(P4Study::<Pusher>::new(options.preset)),
+        Box::new(P4Study::<Door>::new(options.preset)),
+        Box::new(p4_reacher::ReacherStudy {
+            preset: options.preset,
+        }),
     ]
 }
 

@@ -38,6 +38,36 @@ use crate::harness::{self, JobError, Study};
 use crate::{Error, Result};
 use tandem_nn::budget::MemoryEstimate;
 
+/// The settings a p4 study starts from, before `--quick` and `--config`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum Preset {
+    /// The authors' own settings where the paper is silent (their GPS experiment files, each
+    /// setting citing its source in `crates/studies/presets/`), applied over ours.
+    #[default]
+    Authors,
+    /// Our first settings, chosen before we followed the authors' files (the committed
+    /// `results/p4-*` directories without `-authors`).
+    Ours,
+}
+
+impl Preset {
+    /// `ours` with this preset's file applied (`what` names the study in errors).
+    pub(crate) fn apply<C: Serialize + DeserializeOwned>(
+        self,
+        ours: C,
+        authors: &str,
+        what: &str,
+    ) -> Result<C> {
+        match self {
+            Preset::Ours => Ok(ours),
+            Preset::Authors => {
+                harness::override_settings(&ours, authors, &format!("{what}'s authors' preset"))
+            }
+        }
+    }
+}
+
 /// What differs between p4's local-controller tasks.
 pub trait P4Task: Sync {
     /// The cost's weights (recorded in the settings).
@@ -59,8 +89,10 @@ pub trait P4Task: Sync {
     const LOWER_IS_BETTER: bool;
     /// The measure's words, with its unit.
     const MEASURE: &'static str;
-    /// The default settings.
+    /// Our first settings ([`Preset::Ours`]).
     fn defaults() -> P4Settings<Self::Cost>;
+    /// The authors' preset, TOML applied over [`P4Task::defaults`] ([`Preset::Authors`]).
+    const AUTHORS: &'static str;
     /// The problem with `cost`.
     fn problem(cost: Self::Cost) -> AlgoResult<LocalProblem>;
     /// The cost's own checks.
@@ -83,6 +115,7 @@ impl P4Task for Pusher {
     const REPORT_FILES: &'static [&'static str] = &["table.json", "table.md", "fig3.svg"];
     const LOWER_IS_BETTER: bool = true;
     const MEASURE: &'static str = "final block–goal distance (m)";
+    const AUTHORS: &'static str = include_str!("../presets/p4-pusher-authors.toml");
     fn defaults() -> P4Settings<PusherCost> {
         P4Settings {
             local: LocalConfig::default(),
@@ -124,6 +157,7 @@ impl P4Task for Door {
     const REPORT_FILES: &'static [&'static str] = &["table.json", "table.md", "door.svg"];
     const LOWER_IS_BETTER: bool = false;
     const MEASURE: &'static str = "final door angle (rad)";
+    const AUTHORS: &'static str = include_str!("../presets/p4-door-authors.toml");
     fn defaults() -> P4Settings<DoorCost> {
         P4Settings {
             local: LocalConfig {
@@ -233,19 +267,26 @@ impl LocalRecord {
     }
 }
 
-/// A p4 local-controller study on task `T`.
-pub struct P4Study<T>(std::marker::PhantomData<T>);
+/// A p4 local-controller study on task `T`, from a preset (`None`: the default, and a resumed
+/// run keeps what its `config.json` records).
+pub struct P4Study<T> {
+    preset: Option<Preset>,
+    task: std::marker::PhantomData<T>,
+}
 
 impl<T> P4Study<T> {
-    /// The study.
-    pub fn new() -> Self {
-        Self(std::marker::PhantomData)
+    /// The study from `preset`.
+    pub fn new(preset: Option<Preset>) -> Self {
+        Self {
+            preset,
+            task: std::marker::PhantomData,
+        }
     }
 }
 
 impl<T> Default for P4Study<T> {
     fn default() -> Self {
-        Self::new()
+        Self::new(None)
     }
 }
 
@@ -258,7 +299,8 @@ impl<T: P4Task> Study for P4Study<T> {
     }
 
     fn settings(&self, quick: bool, config: Option<&Path>) -> Result<Self::Settings> {
-        let mut base = T::defaults();
+        let preset = self.preset.unwrap_or_default();
+        let mut base = preset.apply(T::defaults(), T::AUTHORS, T::NAME)?;
         if quick {
             base.local.iterations = 3;
             base.local.samples = 4;
@@ -267,6 +309,10 @@ impl<T: P4Task> Study for P4Study<T> {
         let what = harness::settings_name(config);
         s.validate::<T>(&what)?;
         Ok(s)
+    }
+
+    fn overrides_settings(&self) -> bool {
+        self.preset.is_some()
     }
 
     fn jobs(&self, _s: &Self::Settings, _seed: u64) -> Vec<Vec<String>> {
@@ -647,4 +693,60 @@ fn pilqr_bounds(t: &tandem_planners::PilqrConfig) -> String {
         ));
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tandem_planners::{PerStep, Residual};
+
+    /// The authors' presets name only settings that exist (the settings refuse unknown keys), and
+    /// what they give is valid; `ours` is the settings as first chosen.
+    #[test]
+    fn the_presets_read_and_are_valid() {
+        let pusher = Preset::Authors
+            .apply(Pusher::defaults(), Pusher::AUTHORS, "test")
+            .unwrap();
+        pusher.local.validate().unwrap();
+        let t = &pusher.local.trajopt;
+        assert_eq!(
+            t.kl_step,
+            Some(PerStep::Linear {
+                first: 0.6,
+                last: 0.2
+            })
+        );
+        assert_eq!((t.pi2.kl_step, t.pi2.covariance_damping), (1.0, 10.0));
+        assert_eq!(t.residual, Residual::FromStart);
+        let door = Preset::Authors
+            .apply(Door::defaults(), Door::AUTHORS, "test")
+            .unwrap();
+        door.local.validate().unwrap();
+        assert!(!door.local.trajopt.adjust_step);
+        assert_eq!(door.local.trajopt.pi2.kl_step, 0.5);
+        let reacher = Preset::Authors
+            .apply(
+                crate::p4_reacher::ReacherSettings::default(),
+                crate::p4_reacher::AUTHORS,
+                "test",
+            )
+            .unwrap();
+        reacher.mdgps.validate().unwrap();
+        assert_eq!(reacher.mdgps.local.samples, 5);
+        assert_eq!(
+            reacher.mdgps.first_iteration,
+            tandem_algos::mdgps::FirstIteration::CatchUp
+        );
+        let ours = Preset::Ours.apply(Pusher::defaults(), Pusher::AUTHORS, "test");
+        assert_eq!(ours.unwrap(), Pusher::defaults());
+        // A preset with a misspelt key is an error that names it, not a silent default.
+        let e = Preset::Authors
+            .apply(Pusher::defaults(), "[local]\nsampels = 3\n", "p4-pusher")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sampels") && e.contains("authors' preset"),
+            "{e}"
+        );
+    }
 }

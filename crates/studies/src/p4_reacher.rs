@@ -21,6 +21,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use crate::p4::Preset;
 use crate::report::{to_json_pretty, Curve, Figure, SamplesToTarget};
 use crate::run::RunDir;
 use serde::{Deserialize, Serialize};
@@ -162,9 +163,16 @@ impl ReacherRecord {
     }
 }
 
-/// The study.
+/// The study, from a preset (`None`: the default, and a resumed run keeps what its
+/// `config.json` records).
 #[derive(Debug, Default)]
-pub struct ReacherStudy;
+pub struct ReacherStudy {
+    /// The settings it starts from.
+    pub preset: Option<Preset>,
+}
+
+/// The authors' preset, TOML applied over [`ReacherSettings::default`] ([`Preset::Authors`]).
+pub(crate) const AUTHORS: &str = include_str!("../presets/p4-reacher-authors.toml");
 
 impl Study for ReacherStudy {
     type Settings = ReacherSettings;
@@ -179,7 +187,8 @@ impl Study for ReacherStudy {
     }
 
     fn settings(&self, quick: bool, config: Option<&Path>) -> Result<ReacherSettings> {
-        let mut base = ReacherSettings::default();
+        let preset = self.preset.unwrap_or_default();
+        let mut base = preset.apply(ReacherSettings::default(), AUTHORS, "p4-reacher")?;
         if quick {
             base.conditions = 2;
             base.mdgps.local.iterations = 2;
@@ -196,6 +205,10 @@ impl Study for ReacherStudy {
         let what = harness::settings_name(config);
         s.validate(&what)?;
         Ok(s)
+    }
+
+    fn overrides_settings(&self) -> bool {
+        self.preset.is_some()
     }
 
     fn memory(&self, s: &ReacherSettings, run: &str) -> Result<MemoryEstimate> {
