@@ -56,6 +56,6 @@ pub use objective::{
 pub use pi2::{pi2_update, pi2_update_with_temperatures, pi2_weights, Pi2Config, Pi2Step};
 pub use pilqr::{model_cost_to_go, reparametrize, Pilqr, PilqrConfig, PilqrStep};
 pub use tvlg::{
-    expected_cost, forward_moments, policy_kl, quadratize_cost, sample_trajectories, QuadraticCost,
-    SampleConfig, TrajectoryMoments, TrajectorySamples, TvlgController,
+    expected_cost, forward_moments, policy_kl, quadratize_cost, sample_trajectories, InitLqr,
+    QuadraticCost, SampleConfig, TrajectoryMoments, TrajectorySamples, TvlgController,
 };
