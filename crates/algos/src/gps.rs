@@ -30,8 +30,8 @@ use tandem_models::{DynamicsModel, TvlgConfig, TvlgDynamics, TvlgFit};
 use tandem_nn::budget::MemoryEstimate;
 use tandem_nn::Checkpoint;
 use tandem_planners::{
-    classic_step_mult, pi2_update, quadratize_cost, sample_trajectories, LqrFlm, Objective, Pilqr,
-    PilqrConfig, QuadraticCost, SampleConfig, TrajectorySamples, TvlgController,
+    classic_step_mult, pi2_update, quadratize_cost, sample_trajectories, InitLqr, LqrFlm,
+    Objective, Pilqr, PilqrConfig, QuadraticCost, SampleConfig, TrajectorySamples, TvlgController,
 };
 
 use super::{AlgoError, Checkpoints, Result};
@@ -77,8 +77,14 @@ pub struct LocalConfig {
     pub iterations: usize,
     /// Trajectories per iteration and condition.
     pub samples: usize,
-    /// Variance of the initial controller's actions (`K = 0`, `k = 0`, `Σ = variance · I`).
+    /// Variance of the initial controller's actions (`K = 0`, `k = 0`, `Σ = variance · I`) with
+    /// [`InitController::Zero`]; unused by [`InitController::Lqr`], which has its own. MDGPS
+    /// also starts its global policy's variance from it.
     pub init_variance: f64,
+    /// The initial controller of every condition: [`InitController::Zero`] (the default, and
+    /// what a configuration without the key reads) or GPS's LQR one.
+    #[serde(default, skip_serializing_if = "InitController::is_zero")]
+    pub init: InitController,
     /// The trajectory optimizers' settings, shared by the three methods where they have the part:
     /// LQR-FLM (`trajopt.lqr`, whose `kl_step` is the base bound `ε` per time step, alone and in
     /// PILQR), PI² (`trajopt.pi2`, alone and in PILQR) and PILQR's step rule.
@@ -96,6 +102,7 @@ impl Default for LocalConfig {
             iterations: 20,
             samples: 20,
             init_variance: 1.0,
+            init: InitController::Zero,
             trajopt: PilqrConfig::default(),
             dynamics: TvlgConfig::default(),
         }
@@ -119,6 +126,10 @@ impl LocalConfig {
             if !(v.is_finite() && v > 0.0) {
                 return bad(format!("{name} = {v} must be finite and > 0"));
             }
+        }
+        if let InitController::Lqr(lqr) = &self.init {
+            lqr.validate()
+                .map_err(|e| AlgoError::Config(format!("init.lqr: {e}")))?;
         }
         self.trajopt
             .validate()
@@ -159,6 +170,27 @@ impl LocalConfig {
                 "learning curve (conditions x iterations)",
                 &[4, conditions, self.iterations],
             )
+    }
+}
+
+/// How the local controllers start.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InitController {
+    /// `K = 0`, `k = 0`, `Σ = init_variance · I`: zero mean actions and exploration alike in
+    /// every action.
+    #[default]
+    Zero,
+    /// GPS's `init_lqr` (the authors' p4 experiments start from it): the LQR controller that
+    /// holds the condition's initial state on guessed double-integrator dynamics, `Σ` its
+    /// `Q_uu⁻¹` ([`TvlgController::init_lqr`]).
+    Lqr(InitLqr),
+}
+
+impl InitController {
+    /// Whether it is [`InitController::Zero`] (which configurations leave out).
+    pub fn is_zero(&self) -> bool {
+        *self == InitController::Zero
     }
 }
 
@@ -230,10 +262,18 @@ pub(crate) struct Local {
 }
 
 impl Local {
-    /// The initial controller (`K = 0`, `k = 0`, `Σ = init_variance · I`) and fresh optimizers.
-    pub(crate) fn new(horizon: usize, n: usize, m: usize, cfg: &LocalConfig) -> Result<Self> {
+    /// The initial controller of a condition starting at `x0` (`cfg.init`: `K = 0`, `k = 0`,
+    /// `Σ = init_variance · I`, or GPS's LQR controller holding `x0`) and fresh optimizers.
+    pub(crate) fn new(horizon: usize, x0: &[f64], m: usize, cfg: &LocalConfig) -> Result<Self> {
+        let controller = match &cfg.init {
+            InitController::Zero => {
+                TvlgController::constant(horizon, x0.len(), &vec![0.0; m], cfg.init_variance)?
+            }
+            InitController::Lqr(lqr) => TvlgController::init_lqr(lqr, x0, m, horizon)
+                .map_err(|e| AlgoError::Config(format!("init.lqr: {e}")))?,
+        };
         Ok(Self {
-            controller: TvlgController::constant(horizon, n, &vec![0.0; m], cfg.init_variance)?,
+            controller,
             fit: TvlgFit::new(cfg.dynamics.clone()),
             lqr: LqrState {
                 mult: 1.0,
@@ -581,11 +621,11 @@ pub(crate) fn start_locals(
     problem: &LocalProblem,
     cfg: &LocalConfig,
 ) -> Result<(LqrFlm, Vec<Local>)> {
-    let (n, m) = (problem.system.state_dim(), problem.system.action_dim());
+    let m = problem.system.action_dim();
     let locals = problem
         .conditions
         .iter()
-        .map(|_| Local::new(problem.horizon, n, m, cfg))
+        .map(|c| Local::new(problem.horizon, &c.x0, m, cfg))
         .collect::<Result<Vec<_>>>()?;
     Ok((LqrFlm::new(cfg.trajopt.lqr.clone())?, locals))
 }
@@ -859,5 +899,67 @@ pub(crate) mod tests {
         let other = train_local(LocalMethod::Pilqr, &p, &c, 8, &mut store, &mut |_| {}).unwrap();
         let fresh = train_local(LocalMethod::Pilqr, &p, &c, 8, &mut Ephemeral, &mut |_| {});
         assert_eq!(other.curves, fresh.unwrap().curves);
+    }
+
+    /// A configuration without `init` reads as today's zero controller and is written without
+    /// the key; GPS's LQR start reads from TOML, starts every condition at its own `x0`, and
+    /// settings that do not fit the system are refused by name before any sample.
+    #[test]
+    fn the_initial_controller_is_configurable() {
+        let plain = toml::to_string(&LocalConfig::default()).unwrap();
+        assert!(!plain.contains("init."), "{plain}");
+        let back: LocalConfig = toml::from_str(&plain).unwrap();
+        assert_eq!(back, LocalConfig::default());
+        assert_eq!(back.init, InitController::Zero);
+        let with = format!(
+            "{plain}\n[init.lqr]\ndt = 0.1\npositions = [0]\nvelocities = [1]\nvariance = 0.5\n"
+        );
+        let lqr: LocalConfig = toml::from_str(&with).unwrap();
+        let InitController::Lqr(init) = &lqr.init else {
+            panic!("{:?}", lqr.init)
+        };
+        assert_eq!(init.variance, 0.5);
+        assert_eq!(init.stiffness_vel, 0.5);
+        // Written back with the key, read back the same.
+        let again: LocalConfig = toml::from_str(&toml::to_string(&lqr).unwrap()).unwrap();
+        assert_eq!(again, lqr);
+
+        let starts = [[1.0, 0.0], [-0.5, 0.0]];
+        let p = problem(&starts);
+        let c = LocalConfig {
+            init: lqr.init.clone(),
+            ..cfg(2)
+        };
+        let (_, locals) = start_locals(&p, &c).unwrap();
+        for (l, x0) in locals.iter().zip(&starts) {
+            let want = TvlgController::init_lqr(init, x0, 1, T).unwrap();
+            assert_eq!(l.controller, want);
+            // It holds its start.
+            assert!(l.controller.mean(0, &DVector::from_column_slice(x0))[0].abs() < 1e-12);
+        }
+        let run = train_local(LocalMethod::LqrFlm, &p, &c, 0, &mut Ephemeral, &mut |_| {});
+        assert_eq!(run.unwrap().failed_updates, vec![0, 0]);
+
+        let bad = |init: InitLqr| {
+            let c = LocalConfig {
+                init: InitController::Lqr(init),
+                ..cfg(2)
+            };
+            train_local(LocalMethod::Pi2, &p, &c, 0, &mut Ephemeral, &mut |_| {})
+                .unwrap_err()
+                .to_string()
+        };
+        let e = bad(InitLqr::new(0.1, vec![0], vec![2]));
+        assert!(e.contains("init.lqr") && e.contains("index 2"), "{e}");
+        let e = bad(InitLqr {
+            variance: -1.0,
+            ..init.clone()
+        });
+        assert!(e.contains("init.lqr") && e.contains("variance"), "{e}");
+        let e = bad(InitLqr {
+            gains: vec![1.0, 1.0],
+            ..init.clone()
+        });
+        assert!(e.contains("gains"), "{e}");
     }
 }

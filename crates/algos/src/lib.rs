@@ -49,6 +49,7 @@ pub mod mbpo;
 pub mod mdgps;
 pub mod model_free;
 pub mod pets;
+pub mod state_features;
 
 use tandem_agents::AgentError;
 use tandem_envs::EnvError;

@@ -55,6 +55,10 @@ pub fn pusher_objective(cond: PusherCondition, cost: PusherCost, horizon: usize)
 
 /// The gripper pusher's four conditions on MuJoCo, with `cost`. Needs the feature `mujoco`;
 /// without it, an error saying so.
+///
+/// With `cost.end_effector_features` the state is `qpos ++ qvel ++ [p, ṗ]` (16): the gripper
+/// point and its velocity ([`tandem_robots::p4::pusher_features`]) appended by
+/// [`super::state_features::with_features`].
 pub fn pusher_problem(cost: PusherCost) -> Result<LocalProblem> {
     cost.validate().map_err(AlgoError::Config)?;
     let conditions = PUSHER_CONDITIONS
@@ -64,13 +68,25 @@ pub fn pusher_problem(cost: PusherCost) -> Result<LocalProblem> {
             objective: pusher_objective(*c, cost, PUSHER_HORIZON),
         })
         .collect();
-    Ok(LocalProblem {
+    let problem = LocalProblem {
         system: pusher_system()?,
         conditions,
         horizon: PUSHER_HORIZON,
         measure: Box::new(|c, x| PUSHER_CONDITIONS[c].block_goal_distance(x)),
         policy_input: None,
-    })
+    };
+    if !cost.end_effector_features {
+        return Ok(problem);
+    }
+    let features: super::state_features::FeatureFn =
+        std::sync::Arc::new(|x: &[f64], out: &mut [f64]| {
+            if let Some(v) = x.iter().find(|v| !v.is_finite()) {
+                return Err(format!("the pusher's features of a state with {v}"));
+            }
+            tandem_robots::p4::pusher_features(x, out);
+            Ok(())
+        });
+    super::state_features::with_features(problem, tandem_robots::p4::PUSHER_FEATURES_DIM, features)
 }
 
 #[cfg(feature = "mujoco")]
@@ -215,20 +231,23 @@ mod door {
     use tandem_planners::{Objective, QuadTerminal};
     use tandem_robots::p4::{
         door_initial_state, door_plant, DoorCost, DoorKinematics, DOOR_ACTION_DIM, DOOR_ANGLE,
-        DOOR_CONDITIONS, DOOR_HORIZON, DOOR_STATE_DIM,
+        DOOR_CONDITIONS, DOOR_FEATURES_DIM, DOOR_HORIZON, DOOR_STATE_DIM,
     };
 
     use super::super::gps::{Condition, LocalProblem};
+    use super::super::state_features::{with_features, FeatureFn};
     use super::super::{AlgoError, Result};
 
-    /// Value, gradient and Gauss–Newton Hessian in the state of the state terms of the cost.
-    fn expansion(
+    /// Value, gradient and Gauss–Newton Hessian in the state of the state terms of the cost at
+    /// step `t` (`DOOR_HORIZON` for the terminal state).
+    pub(super) fn expansion(
         kin: &DoorKinematics,
         cost: &DoorCost,
         x: &[f64],
+        t: usize,
     ) -> (f64, DVector<f64>, DMatrix<f64>) {
         let r = kin.offset_or_nan(x);
-        let (v, g, h) = cost.hand_expansion(&r);
+        let (v, g, h) = cost.offset_expansion(&r, t, DOOR_HORIZON);
         let (g, h) = (
             DVector::from_column_slice(&g),
             DMatrix::from_fn(3, 3, |i, j| h[i][j]),
@@ -251,9 +270,31 @@ mod door {
         let mut cx = jac.transpose() * g;
         let mut cxx = jac.transpose() * h * &jac;
         let e = x[DOOR_ANGLE] - cost.target;
-        cx[DOOR_ANGLE] += 2.0 * cost.angle * e;
-        cxx[(DOOR_ANGLE, DOOR_ANGLE)] += 2.0 * cost.angle;
-        (v + cost.angle * e * e, cx, cxx)
+        // Exactly `cost.angle` without the ramp.
+        let w = cost.angle * cost.angle_ramp_at(t, DOOR_HORIZON);
+        cx[DOOR_ANGLE] += 2.0 * w * e;
+        cxx[(DOOR_ANGLE, DOOR_ANGLE)] += 2.0 * w;
+        (v + w * e * e, cx, cxx)
+    }
+
+    /// The door's objective for one condition: [`DoorCost::running_at`] at every step, the
+    /// last step's state terms at the end, with the Gauss–Newton expansion through
+    /// finite-difference site Jacobians.
+    pub(super) fn objective(kin: &DoorKinematics, cost: DoorCost) -> Objective {
+        let (k1, k2, k3, k4) = (kin.clone(), kin.clone(), kin.clone(), kin.clone());
+        let hz = DOOR_HORIZON;
+        Objective::time_varying(DOOR_STATE_DIM, DOOR_ACTION_DIM, move |x, u, t| {
+            cost.running_at(&k1.offset_or_nan(x), x[DOOR_ANGLE], u, t, hz)
+        })
+        .with_terminal(move |x| cost.running_at(&k2.offset_or_nan(x), x[DOOR_ANGLE], &[], hz, hz))
+        .with_running_derivatives(move |x, u, t| {
+            let (c, cx, cxx) = expansion(&k3, &cost, x, t);
+            super::with_action_cost(c, cx, cxx, u, cost.action)
+        })
+        .with_terminal_derivatives(move |x| {
+            let (c, cx, cxx) = expansion(&k4, &cost, x, hz);
+            QuadTerminal { c, cx, cxx }
+        })
     }
 
     pub(super) fn problem(cost: DoorCost) -> Result<LocalProblem> {
@@ -261,32 +302,25 @@ mod door {
         let plant = door_plant().map_err(bad)?;
         let kin = DoorKinematics::new(plant.scene().clone()).map_err(bad)?;
         let conditions = (0..DOOR_CONDITIONS.len())
-            .map(|c| {
-                let (k1, k2, k3, k4) = (kin.clone(), kin.clone(), kin.clone(), kin.clone());
-                Condition {
-                    x0: door_initial_state(c),
-                    objective: Objective::new(DOOR_STATE_DIM, DOOR_ACTION_DIM, move |x, u| {
-                        cost.running(&k1.offset_or_nan(x), x[DOOR_ANGLE], u)
-                    })
-                    .with_terminal(move |x| cost.running(&k2.offset_or_nan(x), x[DOOR_ANGLE], &[]))
-                    .with_running_derivatives(move |x, u, _| {
-                        let (c, cx, cxx) = expansion(&k3, &cost, x);
-                        super::with_action_cost(c, cx, cxx, u, cost.action)
-                    })
-                    .with_terminal_derivatives(move |x| {
-                        let (c, cx, cxx) = expansion(&k4, &cost, x);
-                        QuadTerminal { c, cx, cxx }
-                    }),
-                }
+            .map(|c| Condition {
+                x0: door_initial_state(c),
+                objective: objective(&kin, cost),
             })
             .collect();
-        Ok(LocalProblem {
+        let problem = LocalProblem {
             system: Box::new(tandem_models::PlantModel::new(plant)),
             conditions,
             horizon: DOOR_HORIZON,
             measure: Box::new(|_, x| x[DOOR_ANGLE]),
             policy_input: None,
-        })
+        };
+        if !cost.end_effector_features {
+            return Ok(problem);
+        }
+        let features: FeatureFn = std::sync::Arc::new(move |x: &[f64], out: &mut [f64]| {
+            kin.features(x, out).map_err(|e| e.to_string())
+        });
+        with_features(problem, DOOR_FEATURES_DIM, features)
     }
 }
 
@@ -550,5 +584,187 @@ mod ddpg {
             "p4's reacher needs a build with `--features mujoco` after scripts/setup-mujoco.sh"
                 .into(),
         ))
+    }
+}
+
+#[cfg(all(test, feature = "mujoco"))]
+mod tests {
+    use super::*;
+    use ndarray::{s, Array2};
+    use tandem_core::seeding::rng_from_seed;
+    use tandem_models::ModelInput;
+    use tandem_robots::p4::{
+        pusher_features, DoorKinematics, DoorWaypoints, DOOR_ANGLE, DOOR_FEATURES_DIM,
+        DOOR_HORIZON, DOOR_STATE_DIM, PUSHER_FEATURES_DIM,
+    };
+
+    /// The states of `steps` of fixed pseudo-random actions (the same for every problem) from
+    /// every condition's start: `steps + 1` arrays of one row per condition.
+    fn roll(p: &LocalProblem, steps: usize, scale: f64) -> Vec<Array2<f64>> {
+        let (n, m) = (p.system.state_dim(), p.system.action_dim());
+        let k = p.conditions.len();
+        let mut x = Array2::zeros((k, n));
+        for (i, c) in p.conditions.iter().enumerate() {
+            x.row_mut(i)
+                .iter_mut()
+                .zip(&c.x0)
+                .for_each(|(d, v)| *d = *v);
+        }
+        let mut out = vec![x.clone()];
+        let mut rng = rng_from_seed(0);
+        for t in 0..steps {
+            let u = Array2::from_shape_fn((k, m), |(i, j)| {
+                scale * ((1 + i + 2 * j + 3 * t) as f64 * 0.7).sin()
+            });
+            x = p
+                .system
+                .predict(&ModelInput::new(x.view(), u.view()), &mut rng)
+                .unwrap()
+                .next_states;
+            out.push(x.clone());
+        }
+        out
+    }
+
+    /// The pusher with features: its base part is the plain pusher's under the same actions,
+    /// bit for bit, the features are the gripper point and velocity of it, and the costs are
+    /// the plain objective's.
+    #[test]
+    fn pusher_features_extend_the_state_only() {
+        let plain = pusher_problem(PusherCost::default()).unwrap();
+        let with = pusher_problem(PusherCost {
+            end_effector_features: true,
+            ..PusherCost::default()
+        })
+        .unwrap();
+        let n = PUSHER_STATE_DIM;
+        assert_eq!(with.system.state_dim(), n + PUSHER_FEATURES_DIM);
+        let (a, b) = (roll(&plain, 12, 3.0), roll(&with, 12, 3.0));
+        let mut f = [0.0; PUSHER_FEATURES_DIM];
+        for (t, (xa, xb)) in a.iter().zip(&b).enumerate() {
+            assert_eq!(xa, &xb.slice(s![.., ..n]), "step {t}");
+            for (c, row) in xb.rows().into_iter().enumerate() {
+                let x = row.to_vec();
+                pusher_features(&x[..n], &mut f);
+                assert_eq!(&x[n..], &f, "step {t}, condition {c}");
+                let (oa, ob) = (
+                    &plain.conditions[c].objective,
+                    &with.conditions[c].objective,
+                );
+                assert_eq!(
+                    oa.running_cost(&x[..n], &[0.1; 4], t).unwrap(),
+                    ob.running_cost(&x, &[0.1; 4], t).unwrap()
+                );
+                assert_eq!(
+                    oa.terminal_cost(&x[..n]).unwrap(),
+                    ob.terminal_cost(&x).unwrap()
+                );
+            }
+        }
+        // At the start the arm rests stretched: the gripper at (1.05, 0), still.
+        let x0 = &with.conditions[0].x0;
+        assert!((x0[n] - 1.05).abs() < 1e-15 && x0[n + 1].abs() < 1e-15);
+        assert_eq!(&x0[n + 2..], &[0.0, 0.0]);
+    }
+
+    /// The door with features: the base part is the plain door's under the same actions; the
+    /// features are the hook and grasp points (their difference the cost's offset) and their
+    /// velocities, which equal the points' Jacobian (by per-coordinate central differences)
+    /// times the joint velocities.
+    #[test]
+    fn door_features_are_the_kinematics() {
+        let plain = door_problem(DoorCost::default()).unwrap();
+        let with = door_problem(DoorCost {
+            end_effector_features: true,
+            ..DoorCost::default()
+        })
+        .unwrap();
+        let n = DOOR_STATE_DIM;
+        assert_eq!(with.system.state_dim(), n + DOOR_FEATURES_DIM);
+        let kin = DoorKinematics::load().unwrap();
+        let (a, b) = (roll(&plain, 8, 0.8), roll(&with, 8, 0.8));
+        for (t, (xa, xb)) in a.iter().zip(&b).enumerate() {
+            assert_eq!(xa, &xb.slice(s![.., ..n]), "step {t}");
+            for row in xb.rows() {
+                let x = row.to_vec();
+                let f = &x[n..];
+                let r = kin.offset(&x).unwrap();
+                for i in 0..3 {
+                    assert!((f[i] - f[3 + i] - r[i]).abs() < 1e-12);
+                }
+                let eps = 1e-6;
+                let mut vel = [0.0; 6];
+                for j in 0..=DOOR_ANGLE {
+                    let (mut qp, mut qm) = (x[..=DOOR_ANGLE].to_vec(), x[..=DOOR_ANGLE].to_vec());
+                    qp[j] += eps;
+                    qm[j] -= eps;
+                    let (pp, pm) = (kin.points(&qp).unwrap(), kin.points(&qm).unwrap());
+                    for k in 0..2 {
+                        for i in 0..3 {
+                            vel[3 * k + i] +=
+                                (pp[k][i] - pm[k][i]) / (2.0 * eps) * x[DOOR_ANGLE + 1 + j];
+                        }
+                    }
+                }
+                for i in 0..6 {
+                    assert!(
+                        (f[6 + i] - vel[i]).abs() < 1e-6 * (1.0 + vel[i].abs()),
+                        "step {t}, velocity {i}: {} vs {}",
+                        f[6 + i],
+                        vel[i]
+                    );
+                }
+            }
+        }
+        // Some steps moved: the test saw velocities.
+        assert!(b[8].slice(s![.., n + 6..]).iter().any(|v| v.abs() > 1e-3));
+    }
+
+    /// With the ramp and the waypoints, the door's expansion is the cost's: its value, its
+    /// gradient against central differences of the cost in the state (both waypoint phases),
+    /// and the angle term's curvature `2 w_angle ((t+1)/T)²`.
+    #[test]
+    fn door_expansion_with_ramp_and_waypoints() {
+        let cost = DoorCost {
+            angle_ramp: true,
+            waypoints: DoorWaypoints::authors(),
+            angle: 5.0,
+            ..DoorCost::default()
+        };
+        let kin = DoorKinematics::load().unwrap();
+        let obj = door::objective(&kin, cost);
+        let no_angle = door::objective(&kin, DoorCost { angle: 0.0, ..cost });
+        let mut x = tandem_robots::p4::door_initial_state(2);
+        x[DOOR_ANGLE] = 0.3;
+        x[8] = 0.2;
+        let u = [0.1, -0.2, 0.0, 0.3, 0.0, 0.1];
+        for t in [3, 24, 25, 70, DOOR_HORIZON - 1] {
+            let q = obj.running_quadratic(&x, &u, t).unwrap();
+            let c = obj.running_cost(&x, &u, t).unwrap();
+            assert!((q.c - c).abs() < 1e-12 * c, "t {t}: {} vs {c}", q.c);
+            let eps = 1e-6;
+            for i in 0..DOOR_STATE_DIM {
+                let (mut xp, mut xm) = (x.clone(), x.clone());
+                xp[i] += eps;
+                xm[i] -= eps;
+                let fd = (obj.running_cost(&xp, &u, t).unwrap()
+                    - obj.running_cost(&xm, &u, t).unwrap())
+                    / (2.0 * eps);
+                assert!(
+                    (fd - q.cx[i]).abs() < 1e-5 * (1.0 + fd.abs()),
+                    "t {t}, d/dx{i}: {fd} vs {}",
+                    q.cx[i]
+                );
+            }
+            let q0 = no_angle.running_quadratic(&x, &u, t).unwrap();
+            let ramp = ((t + 1) as f64 / DOOR_HORIZON as f64).powi(2);
+            let curv = q.cxx[(DOOR_ANGLE, DOOR_ANGLE)] - q0.cxx[(DOOR_ANGLE, DOOR_ANGLE)];
+            assert!((curv - 2.0 * 5.0 * ramp).abs() < 1e-12, "t {t}: {curv}");
+        }
+        let (qt, c) = (
+            obj.terminal_quadratic(&x).unwrap(),
+            obj.terminal_cost(&x).unwrap(),
+        );
+        assert!((qt.c - c).abs() < 1e-12 * c, "{} vs {c}", qt.c);
     }
 }

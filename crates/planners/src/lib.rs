@@ -59,5 +59,5 @@ pub use pilqr::{
 };
 pub use tvlg::{
     costs_to_go, expected_cost, forward_moments, policy_kl, quadratize_cost, sample_trajectories,
-    QuadraticCost, SampleConfig, TrajectoryMoments, TrajectorySamples, TvlgController,
+    InitLqr, QuadraticCost, SampleConfig, TrajectoryMoments, TrajectorySamples, TvlgController,
 };

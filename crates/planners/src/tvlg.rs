@@ -118,6 +118,93 @@ impl TvlgController {
         )
     }
 
+    /// GPS's initial controller (`init_lqr` in cbfinn/gps,
+    /// `python/gps/algorithm/policy/lin_gauss_init.py`): the LQR controller that holds `x0` on
+    /// guessed double-integrator dynamics under a stiffness cost, with `Σ_t = Q_uu,t⁻¹`, so that
+    /// the initial exploration is wide where an action moves the joints little and scales with
+    /// `cfg.variance`.
+    ///
+    /// Each action `j` drives one joint whose angle is `x[cfg.positions[j]]` and velocity
+    /// `x[cfg.velocities[j]]`: `a_j = gain_j u_j + acc_j`, `q' = q + dt v + dt² a`, `v' = v + dt a`
+    /// (GPS's `guess_dynamics`); every other state entry has zero cost and a zero row in the
+    /// guessed dynamics (as GPS's), so the controller's gains on it are zero. The cost per step is
+    /// `½ (z − z₀)ᵀ L (z − z₀)` with `z = [x; u]`, `z₀ = [x0; 0]` and
+    /// `L = diag(stiffness on the angles, stiffness · stiffness_vel on the velocities, 1 on the
+    /// actions) / variance`, times `final_weight` at the last step `T − 1`.
+    ///
+    /// GPS assumes that the first `dU` state entries are the joint angles and the next `dU` their
+    /// velocities ("TODO: Use packing instead of assuming which indices are the joint angles").
+    /// Our states are MuJoCo's `qpos ++ qvel`, where unactuated coordinates sit among them (the
+    /// pusher's block `x, y` after the four arm joints, the door's hinge after the six), so the
+    /// indices are explicit here.
+    ///
+    /// Errors: settings out of range or of the wrong length for `x0` and the `action_dim`
+    /// ([`InitLqr::check`]), a zero horizon, or a non-finite `x0`.
+    pub fn init_lqr(cfg: &InitLqr, x0: &[f64], action_dim: usize, horizon: usize) -> Result<Self> {
+        let (n, m) = (x0.len(), action_dim);
+        cfg.check(n, m)?;
+        crate::mpc::nonzero("init_lqr horizon", horizon)?;
+        if x0.iter().any(|v| !v.is_finite()) {
+            return Err(PlanError::NonFinite("init_lqr's x0".into()));
+        }
+        let gain = |j: usize| cfg.gains.get(j).copied().unwrap_or(1.0);
+        let acc = |j: usize| cfg.acc.get(j).copied().unwrap_or(0.0);
+        let dt = cfg.dt;
+        // Guessed dynamics x' = F [x; u] + f.
+        let mut f = DMatrix::zeros(n, n + m);
+        let mut fc = DVector::zeros(n);
+        for (j, (&p, &v)) in cfg.positions.iter().zip(&cfg.velocities).enumerate() {
+            f[(p, p)] = 1.0;
+            f[(p, v)] = dt;
+            f[(p, n + j)] = dt * dt * gain(j);
+            fc[p] = dt * dt * acc(j);
+            f[(v, v)] = 1.0;
+            f[(v, n + j)] = dt * gain(j);
+            fc[v] = dt * acc(j);
+        }
+        // The stiffness cost around [x0; 0].
+        let mut l = DVector::zeros(n + m);
+        for (&p, &v) in cfg.positions.iter().zip(&cfg.velocities) {
+            l[p] = cfg.stiffness;
+            l[v] = cfg.stiffness * cfg.stiffness_vel;
+        }
+        l.rows_mut(n, m).fill(1.0);
+        let ltt = DMatrix::from_diagonal(&(l / cfg.variance));
+        let mut z0 = DVector::zeros(n + m);
+        z0.rows_mut(0, n).copy_from_slice(x0);
+        let lt = -(&ltt * z0);
+        let (mut vxx, mut vx) = (DMatrix::<f64>::zeros(n, n), DVector::<f64>::zeros(n));
+        let mut gains = vec![DMatrix::zeros(m, n); horizon];
+        let mut offsets = vec![DVector::zeros(m); horizon];
+        let mut cov = vec![DMatrix::zeros(m, m); horizon];
+        for t in (0..horizon).rev() {
+            let w = if t + 1 == horizon {
+                cfg.final_weight
+            } else {
+                1.0
+            };
+            let qtt = &ltt * w + f.transpose() * &vxx * &f;
+            let qt = &lt * w + f.transpose() * (&vx + &vxx * &fc);
+            let quu = qtt.view((n, n), (m, m)).into_owned();
+            let chol = quu.cholesky().ok_or_else(|| {
+                PlanError::Numerical(format!(
+                    "init_lqr: Q_uu at step {t} is not positive definite"
+                ))
+            })?;
+            let qux = qtt.view((n, 0), (m, n)).into_owned();
+            let k_t = -chol.solve(&qux);
+            let kk_t = -chol.solve(&qt.rows(n, m).into_owned());
+            let qxu = qtt.view((0, n), (n, m));
+            vxx = qtt.view((0, 0), (n, n)) + qxu * &k_t;
+            vxx = (&vxx + vxx.transpose()) * 0.5;
+            vx = qt.rows(0, n) + qxu * &kk_t;
+            cov[t] = chol.inverse();
+            gains[t] = k_t;
+            offsets[t] = kk_t;
+        }
+        Self::new(gains, offsets, cov)
+    }
+
     /// Horizon `T`.
     pub fn horizon(&self) -> usize {
         self.gains.len()
@@ -145,6 +232,142 @@ impl TvlgController {
     /// The action for noise `ξ ~ N(0, I)`: `K_t x + k_t + chol(Σ_t) ξ` (p4 eq. 6).
     pub fn act(&self, t: usize, x: &DVector<f64>, xi: &DVector<f64>) -> DVector<f64> {
         self.mean(t, x) + &self.chol[t] * xi
+    }
+}
+
+/// The settings of GPS's LQR initial controller ([`TvlgController::init_lqr`]). The defaults of
+/// the optional fields are GPS's `INIT_LG_LQR` (`python/gps/algorithm/policy/config.py`):
+/// variance 1, stiffness 1, velocity stiffness 0.5, final weight 1, gains 1, accelerations 0.
+/// The authors' p4 experiments (`experiments/mjc_gripper_pusher_pilqr/hyperparams.py`,
+/// `mjc_door_opening_pilqr/hyperparams.py`) used variance 10 and gains `1 / their motor gains`
+/// at `dt = 0.05`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InitLqr {
+    /// Per action, the acceleration a unit action gives its joint (`init_gains`); empty: all 1.
+    #[serde(default)]
+    pub gains: Vec<f64>,
+    /// Per action, a constant acceleration of its joint (`init_acc`); empty: all 0.
+    #[serde(default)]
+    pub acc: Vec<f64>,
+    /// `init_var`: divides the whole cost, so `Σ` scales with it (and the gains do not).
+    #[serde(default = "InitLqr::default_variance")]
+    pub variance: f64,
+    /// Weight of the joint angles' distance from `x0`.
+    #[serde(default = "InitLqr::default_stiffness")]
+    pub stiffness: f64,
+    /// Weight of the joint velocities, relative to `stiffness`.
+    #[serde(default = "InitLqr::default_stiffness_vel")]
+    pub stiffness_vel: f64,
+    /// Multiplier of the last step's cost.
+    #[serde(default = "InitLqr::default_final_weight")]
+    pub final_weight: f64,
+    /// The control period of the guessed dynamics (s).
+    pub dt: f64,
+    /// Per action, the state index of its joint's angle.
+    pub positions: Vec<usize>,
+    /// Per action, the state index of its joint's velocity.
+    pub velocities: Vec<usize>,
+}
+
+impl InitLqr {
+    fn default_variance() -> f64 {
+        1.0
+    }
+    fn default_stiffness() -> f64 {
+        1.0
+    }
+    fn default_stiffness_vel() -> f64 {
+        0.5
+    }
+    fn default_final_weight() -> f64 {
+        1.0
+    }
+
+    /// GPS's defaults for a system of control period `dt` whose action `j` drives the joint at
+    /// state indices `positions[j]` (angle) and `velocities[j]` (velocity).
+    pub fn new(dt: f64, positions: Vec<usize>, velocities: Vec<usize>) -> Self {
+        Self {
+            gains: Vec::new(),
+            acc: Vec::new(),
+            variance: Self::default_variance(),
+            stiffness: Self::default_stiffness(),
+            stiffness_vel: Self::default_stiffness_vel(),
+            final_weight: Self::default_final_weight(),
+            dt,
+            positions,
+            velocities,
+        }
+    }
+
+    /// Checks the settings that do not depend on the system: finite values, a positive
+    /// variance, `dt` and final weight (the last step's `Q_uu` is `final_weight / variance · I`),
+    /// non-negative stiffnesses.
+    pub fn validate(&self) -> Result<()> {
+        for (what, v) in [
+            ("init_lqr variance", self.variance),
+            ("init_lqr dt", self.dt),
+            ("init_lqr final_weight", self.final_weight),
+        ] {
+            crate::mpc::positive(what, v)?;
+        }
+        for (what, v) in [
+            ("init_lqr stiffness", self.stiffness),
+            ("init_lqr stiffness_vel", self.stiffness_vel),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(PlanError::Config(format!(
+                    "{what} must be finite and >= 0, got {v}"
+                )));
+            }
+        }
+        if let Some(v) = self.gains.iter().chain(&self.acc).find(|v| !v.is_finite()) {
+            return Err(PlanError::Config(format!(
+                "init_lqr gains and acc must be finite, got {v}"
+            )));
+        }
+        Ok(())
+    }
+
+    /// [`InitLqr::validate`], and that the settings fit a state of `state_dim` entries and
+    /// `action_dim` actions: one gain and acceleration per action (or none), one angle and one
+    /// velocity index per action, all inside the state and no index used twice.
+    pub fn check(&self, state_dim: usize, action_dim: usize) -> Result<()> {
+        self.validate()?;
+        for (what, len) in [
+            ("init_lqr gains", self.gains.len()),
+            ("init_lqr acc", self.acc.len()),
+        ] {
+            if len != 0 && len != action_dim {
+                return Err(PlanError::Config(format!(
+                    "{what} has {len} entries: give one per action ({action_dim}) or none"
+                )));
+            }
+        }
+        check_len(
+            "init_lqr positions (one per action)",
+            action_dim,
+            self.positions.len(),
+        )?;
+        check_len(
+            "init_lqr velocities (one per action)",
+            action_dim,
+            self.velocities.len(),
+        )?;
+        let mut seen = vec![false; state_dim];
+        for &i in self.positions.iter().chain(&self.velocities) {
+            if i >= state_dim {
+                return Err(PlanError::Config(format!(
+                    "init_lqr state index {i} is outside the state of {state_dim} entries"
+                )));
+            }
+            if std::mem::replace(&mut seen[i], true) {
+                return Err(PlanError::Config(format!(
+                    "init_lqr state index {i} is used twice among positions and velocities"
+                )));
+            }
+        }
+        Ok(())
     }
 }
 

@@ -141,6 +141,36 @@ pub fn pusher_gripper(q: &[f64]) -> [f64; 2] {
     p
 }
 
+/// The gripper point's velocity in the plane for a state `qpos ++ qvel`: the kinematic Jacobian
+/// of [`pusher_gripper`] times the arm's joint velocities `x[6..9]`.
+pub fn pusher_gripper_velocity(x: &[f64]) -> [f64; 2] {
+    let (mut a, mut w) = (0.0, 0.0);
+    let mut v = [0.0, 0.0];
+    for ((l, qi), wi) in PUSHER_LINKS
+        .iter()
+        .zip(&x[..3])
+        .zip(&x[PUSHER_STATE_DIM / 2..])
+    {
+        // The angle of link k and its rate: sums of the joints up to k.
+        a += qi;
+        w += wi;
+        v[0] -= l * a.sin() * w;
+        v[1] += l * a.cos() * w;
+    }
+    v
+}
+
+/// Number of the pusher's end-effector features ([`pusher_features`]).
+pub const PUSHER_FEATURES_DIM: usize = 4;
+
+/// The pusher's end-effector features of a state `qpos ++ qvel` into `out`: the gripper point
+/// and its velocity (`[p_x, p_y, ṗ_x, ṗ_y]`, GPS's order: points, then their velocities). The
+/// block's position is already in the state.
+pub fn pusher_features(x: &[f64], out: &mut [f64]) {
+    let (p, v) = (pusher_gripper(x), pusher_gripper_velocity(x));
+    out[..PUSHER_FEATURES_DIM].copy_from_slice(&[p[0], p[1], v[0], v[1]]);
+}
+
 /// The smooth l1-l2 penalty `½ l₂ d² + l₁ √(α + d²)` of a distance `d`.
 pub fn l12(d: f64, l1: f64, l2: f64, alpha: f64) -> f64 {
     0.5 * l2 * d * d + l1 * (alpha + d * d).sqrt()
@@ -186,6 +216,18 @@ pub struct PusherCost {
     pub l2: f64,
     /// `α` of the penalty.
     pub alpha: f64,
+    /// Append the gripper point and its velocity ([`pusher_features`]) to the local
+    /// controllers' state, as the authors' `state_include` of `END_EFFECTOR_POINTS` and
+    /// `END_EFFECTOR_POINT_VELOCITIES` (`experiments/mjc_gripper_pusher_pilqr/hyperparams.py`):
+    /// the TVLG dynamics fit and the controllers' gains then see the kinematics' own coordinates.
+    /// Off by default. The cost reads the scene's state part; [`PusherTask`] ignores it.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub end_effector_features: bool,
+}
+
+/// Whether a flag is off (configurations leave such keys out).
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 impl Default for PusherCost {
@@ -199,6 +241,7 @@ impl Default for PusherCost {
             l1: 0.1,
             l2: 10.0,
             alpha: 1e-5,
+            end_effector_features: false,
         }
     }
 }
@@ -460,6 +503,123 @@ pub struct DoorCost {
     pub l2: f64,
     /// `α` of the penalty.
     pub alpha: f64,
+    /// Ramp the angle term by `((t+1)/T)²` over the horizon, as GPS's `RAMP_QUADRATIC`
+    /// (`python/gps/algorithm/cost/cost_utils.py`, `get_ramp_multiplier`) on the authors' door
+    /// angle cost (`experiments/mjc_door_opening_pilqr/hyperparams.py`): the door need not move
+    /// early, while the hook is still on its way. Off by default (the weight is constant).
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub angle_ramp: bool,
+    /// The authors' waypoints for the hook ([`DoorWaypoints`]); off by default (weight 0).
+    #[serde(default, skip_serializing_if = "DoorWaypoints::is_off")]
+    pub waypoints: DoorWaypoints,
+    /// Append the hook point, the grasp point and their velocities (`DoorKinematics::features`)
+    /// to the local controllers' state, as the authors' `state_include` of
+    /// `END_EFFECTOR_POINTS` and `END_EFFECTOR_POINT_VELOCITIES`. Off by default. The cost reads
+    /// the scene's state part; `DoorTask` ignores it.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub end_effector_features: bool,
+}
+
+/// The waypoint terms of the authors' door cost (`CostLinWP` in
+/// `python/gps/algorithm/cost/cost_lin_wp.py`, set up in
+/// `experiments/mjc_door_opening_pilqr/hyperparams.py`), mapped onto our scene.
+///
+/// Theirs: the hook is a segment between two sites (`link_top`, and `link_bottom` 0.15 m below
+/// it), the door has `handle` and `above_handle` 0.15 m above it. `CostLinWP` applies waypoint
+/// `i` on the steps from the previous waypoint's step to `⌈waypoint_time_i · T⌉` (exclusive), each
+/// with the penalty `ℓ(‖A_i [x; u]‖)`. With `waypoint_time = [0.25, 1.0]`: on the first quarter
+/// of the horizon `A_0` picks `link_bottom − above_handle` (the hook's lower end above the
+/// handle), on the rest `A_1` picks `link_top − above_handle` and `link_bottom − handle` (the
+/// hook hanging into the handle), with `ℓ(d) = ½ d² + 0.1 √(10⁻⁵ + d²)` and weight 1.
+///
+/// Ours has one hook point `h` (site `hand`, on the finger) and the grasp point `g` behind the
+/// bar (site `handle`), whose offset `h − g` the hand term already pays. So the first waypoint is
+/// `h − (g + above · ẑ)` (the hook `above` metres over the grasp point; the hinge is vertical, so
+/// "over" stays world `z` as the door turns) on the steps `t < ⌈switch · T⌉`, and the second is
+/// `h − g` on the others and at the end: the finger's orientation, which their second point pins,
+/// is the scene's own (it hangs from the palm). Both paid as `weight · ℓ(‖·‖)` with this
+/// struct's `l1`, `l2`, `alpha`. The authors' door has no separate hand term: set the cost's
+/// `hand` to 0 to follow it.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DoorWaypoints {
+    /// Weight of the waypoint terms; 0 turns them off (the default). The authors': 1.
+    pub weight: f64,
+    /// The fraction of the horizon the first waypoint holds for (their `waypoint_time[0]`,
+    /// 0.25).
+    pub switch: f64,
+    /// Height of the first waypoint over the grasp point (m; their `above_handle` sits 0.15 m
+    /// over `handle`).
+    pub above: f64,
+    /// `l₁` of the waypoints' penalty (theirs 0.1).
+    pub l1: f64,
+    /// `l₂` of the waypoints' penalty (theirs 1).
+    pub l2: f64,
+    /// `α` of the waypoints' penalty (theirs 10⁻⁵).
+    pub alpha: f64,
+}
+
+impl Default for DoorWaypoints {
+    /// Off (weight 0), with the authors' other settings.
+    fn default() -> Self {
+        Self {
+            weight: 0.0,
+            switch: 0.25,
+            above: 0.15,
+            l1: 0.1,
+            l2: 1.0,
+            alpha: 1e-5,
+        }
+    }
+}
+
+impl DoorWaypoints {
+    /// The authors' waypoints: weight 1 and the defaults.
+    pub fn authors() -> Self {
+        Self {
+            weight: 1.0,
+            ..Self::default()
+        }
+    }
+
+    /// Whether the terms are off (weight 0).
+    pub fn is_off(&self) -> bool {
+        self.weight == 0.0
+    }
+
+    /// The waypoint of step `t` of `horizon` as an offset from the grasp point: `above · ẑ`
+    /// before `⌈switch · horizon⌉`, the grasp point itself from there on (and at `t ≥ horizon`,
+    /// the terminal state).
+    pub fn target(&self, t: usize, horizon: usize) -> [f64; 3] {
+        if (t as f64) < (self.switch * horizon as f64).ceil() {
+            [0.0, 0.0, self.above]
+        } else {
+            [0.0; 3]
+        }
+    }
+
+    /// Checks finite, non-negative weights, `α > 0` and `switch` in `[0, 1]`.
+    pub fn validate(&self) -> Result<(), String> {
+        check_weights(
+            &[
+                ("waypoints.weight", self.weight),
+                ("waypoints.l1", self.l1),
+                ("waypoints.l2", self.l2),
+            ],
+            self.alpha,
+        )
+        .map_err(|e| format!("{e} (waypoints)"))?;
+        if !(0.0..=1.0).contains(&self.switch) {
+            return Err(format!(
+                "waypoints.switch = {} must be in [0, 1]",
+                self.switch
+            ));
+        }
+        if !self.above.is_finite() {
+            return Err(format!("waypoints.above = {} must be finite", self.above));
+        }
+        Ok(())
+    }
 }
 
 impl Default for DoorCost {
@@ -475,11 +635,70 @@ impl Default for DoorCost {
             l1: 0.1,
             l2: 1.0,
             alpha: 1e-5,
+            angle_ramp: false,
+            waypoints: DoorWaypoints::default(),
+            end_effector_features: false,
         }
     }
 }
 
 impl DoorCost {
+    /// The angle term's multiplier at step `t` of `horizon`: `((t+1)/T)²` with `angle_ramp`
+    /// (GPS's `RAMP_QUADRATIC`; 1 at the last step `T − 1` and at the terminal state), else 1.
+    pub fn angle_ramp_at(&self, t: usize, horizon: usize) -> f64 {
+        if self.angle_ramp {
+            (((t + 1).min(horizon)) as f64 / horizon as f64).powi(2)
+        } else {
+            1.0
+        }
+    }
+
+    /// `c` at step `t` of `horizon` (`t = horizon` for the terminal state, with an empty `u`):
+    /// [`DoorCost::running`] with the angle term ramped ([`DoorCost::angle_ramp_at`]) and the
+    /// waypoint term ([`DoorWaypoints`]) added when they are on; [`DoorCost::running`] itself
+    /// when they are off.
+    pub fn running_at(&self, r: &[f64; 3], angle: f64, u: &[f64], t: usize, horizon: usize) -> f64 {
+        let d = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+        let c = self.hand * l12(d, self.l1, self.l2, self.alpha)
+            + self.angle * self.angle_ramp_at(t, horizon) * (angle - self.target).powi(2)
+            + self.action * u.iter().map(|v| v * v).sum::<f64>();
+        if self.waypoints.is_off() {
+            return c;
+        }
+        let w = &self.waypoints;
+        let a = w.target(t, horizon);
+        let e = [r[0] - a[0], r[1] - a[1], r[2] - a[2]];
+        let d = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+        c + w.weight * l12(d, w.l1, w.l2, w.alpha)
+    }
+
+    /// The offset terms at step `t` of `horizon` (the hand term and, when on, the waypoint
+    /// term) with their gradient and (positive definite) Hessian in the offset `r`:
+    /// [`DoorCost::hand_expansion`] itself when the waypoints are off.
+    pub fn offset_expansion(
+        &self,
+        r: &[f64; 3],
+        t: usize,
+        horizon: usize,
+    ) -> (f64, [f64; 3], [[f64; 3]; 3]) {
+        let (mut v, mut g, mut h) = self.hand_expansion(r);
+        if self.waypoints.is_off() {
+            return (v, g, h);
+        }
+        let w = &self.waypoints;
+        let a = w.target(t, horizon);
+        let e = [r[0] - a[0], r[1] - a[1], r[2] - a[2]];
+        let (wv, wg, wh) = l12_expansion(&e, w.l1, w.l2, w.alpha);
+        v += w.weight * wv;
+        for i in 0..3 {
+            g[i] += w.weight * wg[i];
+            for j in 0..3 {
+                h[i][j] += w.weight * wh[(i, j)];
+            }
+        }
+        (v, g, h)
+    }
+
     /// `c` given the hand–handle offset `r = h − g`, the door angle and the action.
     pub fn running(&self, r: &[f64; 3], angle: f64, u: &[f64]) -> f64 {
         let d = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
@@ -522,9 +741,13 @@ impl DoorCost {
         if !self.target.is_finite() {
             return Err(format!("target angle {} must be finite", self.target));
         }
-        Ok(())
+        self.waypoints.validate()
     }
 }
+
+/// Number of the door's end-effector features (`DoorKinematics::features`): the hook and grasp
+/// points and their velocities.
+pub const DOOR_FEATURES_DIM: usize = 12;
 
 /// Length of `DoorTask`'s observation: the state and the hook's offset from the grasp point.
 pub const DOOR_OBS_DIM: usize = DOOR_STATE_DIM + 3;
@@ -587,6 +810,55 @@ mod door_scene {
             }
             let p = self.scene.site_positions(&x[..nq], &self.ids)?;
             Ok([p[0][0] - p[1][0], p[0][1] - p[1][1], p[0][2] - p[1][2]])
+        }
+
+        /// The hook point (site `hand`) and the grasp point (site `handle`) of a state (or of its
+        /// joint positions: the first 7 entries are read), world frame. Errors as
+        /// [`DoorKinematics::offset`].
+        pub fn points(&self, x: &[f64]) -> Result<[[f64; 3]; 2], MujocoError> {
+            let nq = DOOR_ANGLE + 1;
+            if x.len() < nq {
+                return Err(MujocoError::Model {
+                    path: self.scene.path().to_path_buf(),
+                    message: format!(
+                        "the door's points need {nq} joint positions, got {}",
+                        x.len()
+                    ),
+                });
+            }
+            let p = self.scene.site_positions(&x[..nq], &self.ids)?;
+            Ok([p[0], p[1]])
+        }
+
+        /// The door's end-effector features of a whole state `qpos ++ qvel` into `out`
+        /// ([`DOOR_FEATURES_DIM`]): the hook point, the grasp point, then their velocities (GPS's
+        /// order: points, then their velocities). A velocity is the points' Jacobian times
+        /// `qvel`, taken as one central difference of the kinematics along `qvel` (step
+        /// `10⁻⁶ / max(1, |qvel|∞)`). Errors: a state shorter than 14 or not finite.
+        pub fn features(&self, x: &[f64], out: &mut [f64]) -> Result<(), MujocoError> {
+            let nq = DOOR_ANGLE + 1;
+            if x.len() < DOOR_STATE_DIM {
+                return Err(MujocoError::Model {
+                    path: self.scene.path().to_path_buf(),
+                    message: format!(
+                        "the door's features need a state of {DOOR_STATE_DIM}, got {}",
+                        x.len()
+                    ),
+                });
+            }
+            let (q, v) = (&x[..nq], &x[nq..DOOR_STATE_DIM]);
+            let at = self.points(q)?;
+            let h = 1e-6 / v.iter().fold(1.0f64, |m, vi| m.max(vi.abs()));
+            let moved =
+                |s: f64| -> Vec<f64> { q.iter().zip(v).map(|(a, b)| a + s * h * b).collect() };
+            let (fwd, back) = (self.points(&moved(1.0))?, self.points(&moved(-1.0))?);
+            for k in 0..2 {
+                for i in 0..3 {
+                    out[3 * k + i] = at[k][i];
+                    out[6 + 3 * k + i] = (fwd[k][i] - back[k][i]) / (2.0 * h);
+                }
+            }
+            Ok(())
         }
 
         /// [`DoorKinematics::offset`] for a cost: NaN where the state is not finite, so that the
@@ -678,10 +950,16 @@ mod door_scene {
             o.extend_from_slice(&self.kinematics.offset_or_nan(state));
             o
         }
+        /// A step's reward cannot see the step's index: the cost of the episode's last step
+        /// (the angle ramp, if on, is 1 there; the waypoint, if on, is the grasp point).
         fn reward(&self, _state: &[f64], u: &[f64], next: &[f64]) -> f64 {
-            -self
-                .cost
-                .running(&self.kinematics.offset_or_nan(next), next[DOOR_ANGLE], u)
+            -self.cost.running_at(
+                &self.kinematics.offset_or_nan(next),
+                next[DOOR_ANGLE],
+                u,
+                DOOR_HORIZON - 1,
+                DOOR_HORIZON,
+            )
         }
         fn max_episode_steps(&self) -> Option<usize> {
             Some(DOOR_HORIZON)
@@ -1181,5 +1459,211 @@ mod tests {
             epsilon = 1e-15
         );
         assert_eq!(task.max_episode_steps(), Some(REACHER_HORIZON));
+    }
+
+    /// The gripper velocity is the derivative of the gripper point along the joint velocities
+    /// (central differences of the kinematics), and the features are the point and it.
+    #[test]
+    fn gripper_velocity_is_the_kinematics_rate() {
+        let x = [
+            0.4, -0.7, 1.1, 0.01, 0.5, -0.3, 0.8, -1.5, 2.0, 0.3, 0.05, 0.0,
+        ];
+        let v = pusher_gripper_velocity(&x);
+        let h = 1e-6;
+        let at = |s: f64| {
+            let q: Vec<f64> = (0..3).map(|i| x[i] + s * h * x[6 + i]).collect();
+            pusher_gripper(&q)
+        };
+        let (p, m) = (at(1.0), at(-1.0));
+        for k in 0..2 {
+            let fd = (p[k] - m[k]) / (2.0 * h);
+            assert!((fd - v[k]).abs() < 1e-8, "{k}: {fd} vs {}", v[k]);
+        }
+        let mut f = [0.0; PUSHER_FEATURES_DIM];
+        pusher_features(&x, &mut f);
+        let g = pusher_gripper(&x);
+        assert_eq!(f, [g[0], g[1], v[0], v[1]]);
+        // The block's coordinates and the finger do not move the gripper point.
+        let mut y = x;
+        (y[4], y[5], y[3], y[9], y[10], y[11]) = (9.0, 9.0, 0.5, 7.0, 7.0, 7.0);
+        assert_eq!(pusher_gripper_velocity(&y), v);
+    }
+
+    /// GPS's `RAMP_QUADRATIC`: `((t+1)/T)²`, `1/T²` at the first step, 1 at the last and at
+    /// the terminal state; 1 throughout when off.
+    #[test]
+    fn door_angle_ramp_is_gps_quadratic_ramp() {
+        let off = DoorCost::default();
+        let on = DoorCost {
+            angle_ramp: true,
+            ..off
+        };
+        let hz = DOOR_HORIZON;
+        assert_relative_eq!(on.angle_ramp_at(0, hz), 1e-4, epsilon = 1e-18);
+        assert_eq!(on.angle_ramp_at(49, hz), 0.25);
+        assert_eq!(on.angle_ramp_at(hz - 1, hz), 1.0);
+        assert_eq!(on.angle_ramp_at(hz, hz), 1.0);
+        for t in [0, 49, hz - 1, hz] {
+            assert_eq!(off.angle_ramp_at(t, hz), 1.0);
+        }
+        let r = [0.1, -0.2, 0.05];
+        let u = [0.3, 0.0, -0.1, 0.0, 0.2, 0.0];
+        let pay = |c: &DoorCost, t| c.running_at(&r, 0.3, &u, t, hz);
+        assert_relative_eq!(
+            pay(&off, 0) - pay(&on, 0),
+            off.angle * (1.0 - 1e-4) * 0.49,
+            epsilon = 1e-12
+        );
+        assert_eq!(pay(&on, hz - 1), pay(&off, hz - 1));
+    }
+
+    /// With the new terms off, the time-indexed cost and its expansion are the old ones to the
+    /// bit, at every step.
+    #[test]
+    fn door_cost_without_the_options_is_unchanged() {
+        let c = DoorCost::default();
+        let u = [0.3, 0.0, -0.1, 0.0, 0.2, 0.7];
+        for (r, angle) in [([0.1, -0.2, 0.05], 0.3), ([-0.31, 0.0, 0.2], 0.0)] {
+            for t in [0, 24, 25, 99, 100] {
+                assert_eq!(
+                    c.running_at(&r, angle, &u, t, DOOR_HORIZON).to_bits(),
+                    c.running(&r, angle, &u).to_bits()
+                );
+                assert_eq!(
+                    c.offset_expansion(&r, t, DOOR_HORIZON),
+                    c.hand_expansion(&r)
+                );
+            }
+        }
+    }
+
+    /// The waypoints: the hook 0.15 m over the grasp point on the first quarter of the horizon
+    /// (`t < ⌈0.25 T⌉`, as `CostLinWP` discretizes `waypoint_time`), at the grasp point from
+    /// there on and at the end; their expansion's value, gradient and Hessian in the offset are
+    /// the cost's (central differences), in both phases.
+    #[test]
+    fn door_waypoints_and_their_expansion() {
+        let c = DoorCost {
+            waypoints: DoorWaypoints::authors(),
+            ..DoorCost::default()
+        };
+        let w = c.waypoints;
+        let hz = DOOR_HORIZON;
+        assert_eq!(w.target(0, hz), [0.0, 0.0, 0.15]);
+        assert_eq!(w.target(24, hz), [0.0, 0.0, 0.15]);
+        assert_eq!(w.target(25, hz), [0.0; 3]);
+        assert_eq!(w.target(hz, hz), [0.0; 3]);
+        // T = 10: ⌈2.5⌉ = 3 steps of the first waypoint.
+        assert_eq!(w.target(2, 10), [0.0, 0.0, 0.15]);
+        assert_eq!(w.target(3, 10), [0.0; 3]);
+        let base = DoorCost::default();
+        for (t, a) in [(3, 0.15), (24, 0.15), (25, 0.0), (hz, 0.0)] {
+            let r: [f64; 3] = [0.12, -0.07, 0.21];
+            let e = [r[0], r[1], r[2] - a];
+            let d = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+            let u: &[f64] = if t == hz { &[] } else { &[0.5; 6] };
+            assert_relative_eq!(
+                c.running_at(&r, 0.4, u, t, hz),
+                base.running_at(&r, 0.4, u, t, hz) + l12(d, w.l1, w.l2, w.alpha),
+                epsilon = 1e-14
+            );
+            let (v, g, h) = c.offset_expansion(&r, t, hz);
+            let f = |r: &[f64; 3]| c.running_at(r, c.target, &[], t, hz);
+            assert_relative_eq!(v, f(&r), epsilon = 1e-14);
+            let eps = 1e-6;
+            for i in 0..3 {
+                let (mut rp, mut rm) = (r, r);
+                rp[i] += eps;
+                rm[i] -= eps;
+                let fd = (f(&rp) - f(&rm)) / (2.0 * eps);
+                assert!((fd - g[i]).abs() < 1e-7, "t {t}, d/dr{i}: {fd} vs {}", g[i]);
+                let (gp, gm) = (
+                    c.offset_expansion(&rp, t, hz).1,
+                    c.offset_expansion(&rm, t, hz).1,
+                );
+                for j in 0..3 {
+                    let fd = (gp[j] - gm[j]) / (2.0 * eps);
+                    assert!(
+                        (fd - h[i][j]).abs() < 1e-6,
+                        "t {t}, ({i},{j}): {fd} vs {}",
+                        h[i][j]
+                    );
+                }
+            }
+        }
+    }
+
+    /// Committed settings (no new keys) read as the defaults and are written back without them;
+    /// the options read from their keys; bad waypoint settings are named.
+    #[test]
+    fn door_and_pusher_options_read_and_write() {
+        let committed = r#"{"hand": 10.0, "angle": 1.0, "target": 1.0, "action": 0.001,
+            "l1": 0.1, "l2": 1.0, "alpha": 0.00001}"#;
+        let c: DoorCost = serde_json::from_str(committed).unwrap();
+        assert_eq!(c, DoorCost::default());
+        let text = serde_json::to_string(&c).unwrap();
+        for key in ["angle_ramp", "waypoints", "end_effector_features"] {
+            assert!(!text.contains(key), "{text}");
+        }
+        let on: DoorCost = serde_json::from_str(
+            r#"{"hand": 0.0, "angle": 5.0, "target": 1.0, "action": 0.001, "l1": 0.1,
+            "l2": 1.0, "alpha": 0.00001, "angle_ramp": true, "waypoints": {"weight": 1.0},
+            "end_effector_features": true}"#,
+        )
+        .unwrap();
+        assert!(on.angle_ramp && on.end_effector_features);
+        assert_eq!(on.waypoints, DoorWaypoints::authors());
+        let back: DoorCost = serde_json::from_str(&serde_json::to_string(&on).unwrap()).unwrap();
+        assert_eq!(back, on);
+        assert!(serde_json::from_str::<DoorCost>(
+            r#"{"hand": 0.0, "angle": 5.0, "target": 1.0, "action": 0.001, "l1": 0.1,
+            "l2": 1.0, "alpha": 0.00001, "waypoints": {"weight": 1.0, "height": 2}}"#
+        )
+        .is_err());
+        for (bad, what) in [
+            (
+                DoorWaypoints {
+                    weight: -1.0,
+                    ..DoorWaypoints::authors()
+                },
+                "waypoints.weight",
+            ),
+            (
+                DoorWaypoints {
+                    switch: 1.5,
+                    ..DoorWaypoints::authors()
+                },
+                "switch",
+            ),
+            (
+                DoorWaypoints {
+                    alpha: 0.0,
+                    ..DoorWaypoints::authors()
+                },
+                "alpha",
+            ),
+            (
+                DoorWaypoints {
+                    above: f64::NAN,
+                    ..DoorWaypoints::authors()
+                },
+                "above",
+            ),
+        ] {
+            let e = DoorCost {
+                waypoints: bad,
+                ..DoorCost::default()
+            }
+            .validate()
+            .unwrap_err();
+            assert!(e.contains(what), "{what}: {e}");
+        }
+        let p: PusherCost = serde_json::from_str(
+            r#"{"goal": 4.0, "block": 1.0, "action": 0.001, "l1": 0.1, "l2": 10.0,
+            "alpha": 0.00001}"#,
+        )
+        .unwrap();
+        assert_eq!(p, PusherCost::default());
+        assert!(!serde_json::to_string(&p).unwrap().contains("end_effector"));
     }
 }
