@@ -654,7 +654,7 @@ impl P4Table {
         md.push_str(&format!(
             "\nLQR-FLM: base KL bound {} per step with GPS's step rule for LQR-FLM; PI²: KL {}, \
              covariance damping {}, gains {}; PILQR: the same LQR-FLM and PI² stages, per-step \
-             bounds from the residual ratio ({} / {}{}). Initial controllers `K = 0, k = 0, Σ = {} I`. \
+             bounds from the residual ratio ({} / {}{}). Initial controllers {}. \
              Updates that failed numerically (controller kept): {failed}. Runs took {run_wall:.0} s \
              in all; the study's wall time {wall:.0} s.\n",
             t.lqr.kl_step,
@@ -664,9 +664,23 @@ impl P4Table {
             t.res_ratio_dec,
             t.res_ratio_inc,
             pilqr_bounds(t),
-            local.init_variance,
+            init_words(local),
         ));
         md
+    }
+}
+
+/// The initial controllers, in the report's words.
+fn init_words(local: &LocalConfig) -> String {
+    match &local.init {
+        tandem_algos::gps::InitController::Zero => {
+            format!("`K = 0, k = 0, Σ = {} I`", local.init_variance)
+        }
+        tandem_algos::gps::InitController::Lqr(l) => format!(
+            "GPS's LQR start holding each condition's initial state (variance {}, stiffness {}, \
+             velocity stiffness {})",
+            l.variance, l.stiffness, l.stiffness_vel
+        ),
     }
 }
 
