@@ -798,18 +798,8 @@ mod door_scene {
         /// Hook point minus grasp point of a state (or of its joint positions: the first 7
         /// entries are read). Errors: fewer than 7 entries, or a non-finite one among them.
         pub fn offset(&self, x: &[f64]) -> Result<[f64; 3], MujocoError> {
-            let nq = DOOR_ANGLE + 1;
-            if x.len() < nq {
-                return Err(MujocoError::Model {
-                    path: self.scene.path().to_path_buf(),
-                    message: format!(
-                        "the door's offset needs {nq} joint positions, got {}",
-                        x.len()
-                    ),
-                });
-            }
-            let p = self.scene.site_positions(&x[..nq], &self.ids)?;
-            Ok([p[0][0] - p[1][0], p[0][1] - p[1][1], p[0][2] - p[1][2]])
+            let [h, g] = self.points(x)?;
+            Ok([h[0] - g[0], h[1] - g[1], h[2] - g[2]])
         }
 
         /// The hook point (site `hand`) and the grasp point (site `handle`) of a state (or of its
@@ -821,7 +811,7 @@ mod door_scene {
                 return Err(MujocoError::Model {
                     path: self.scene.path().to_path_buf(),
                     message: format!(
-                        "the door's points need {nq} joint positions, got {}",
+                        "the door's kinematics need {nq} joint positions, got {}",
                         x.len()
                     ),
                 });
