@@ -24,7 +24,9 @@ use tandem_models::TvlgDynamics;
 
 use crate::error::{check_len, PlanError, Result};
 use crate::mpc::positive;
-use crate::tvlg::{expected_cost, forward_moments, policy_kl, QuadraticCost, TvlgController};
+use crate::tvlg::{
+    expected_cost, forward_moments, lqr_step, policy_kl, QuadraticCost, TvlgController,
+};
 
 /// Settings of [`LqrFlm`]. Defaults follow GPS's `traj_opt_lqr_python` with per-step constraints
 /// (η bounds `[1e-8, 1e16]`, 20 bracketing passes then up to 200 Adam steps, constraint met within
@@ -382,17 +384,9 @@ impl LqrFlm {
                     etas[t] = (etas[t] * 10.0).min(self.cfg.max_eta);
                     continue 'retry;
                 };
-                let qux = qtt.view((n, 0), (m, n)).into_owned();
-                let qu = qt.rows(n, m).into_owned();
-                let k = -chol.solve(&qu);
-                let kk = -chol.solve(&qux);
-                let qxu = qtt.view((0, n), (n, m));
-                vxx = qtt.view((0, 0), (n, n)) + qxu * &kk;
-                vxx = (&vxx + vxx.transpose()) * 0.5;
-                vx = qt.rows(0, n) + qxu * &k;
-                covs[t] = chol.inverse();
-                gains[t] = kk;
-                offsets[t] = k;
+                let step = lqr_step(&chol, &qtt, &qt, n);
+                (vxx, vx) = (step.vxx, step.vx);
+                (gains[t], offsets[t], covs[t]) = (step.gain, step.offset, step.cov);
                 // Values are in units of the cost divided by η_t; the next step (t−1) divides by
                 // η_{t−1}: rescale so that each step's Q is consistently scaled by its own η.
                 if t > 0 {

@@ -191,16 +191,9 @@ impl TvlgController {
                     "init_lqr: Q_uu at step {t} is not positive definite"
                 ))
             })?;
-            let qux = qtt.view((n, 0), (m, n)).into_owned();
-            let k_t = -chol.solve(&qux);
-            let kk_t = -chol.solve(&qt.rows(n, m).into_owned());
-            let qxu = qtt.view((0, n), (n, m));
-            vxx = qtt.view((0, 0), (n, n)) + qxu * &k_t;
-            vxx = (&vxx + vxx.transpose()) * 0.5;
-            vx = qt.rows(0, n) + qxu * &kk_t;
-            cov[t] = chol.inverse();
-            gains[t] = k_t;
-            offsets[t] = kk_t;
+            let step = lqr_step(&chol, &qtt, &qt, n);
+            (vxx, vx) = (step.vxx, step.vx);
+            (gains[t], offsets[t], cov[t]) = (step.gain, step.offset, step.cov);
         }
         Self::new(gains, offsets, cov)
     }
@@ -382,6 +375,40 @@ pub struct TrajectorySamples {
     pub noise: Array3<f64>,
     /// Costs `c(x_t, u_t)` and, in the last column, the terminal cost: `N x (T+1)`.
     pub costs: Array2<f64>,
+}
+
+/// One step of a maximum-entropy LQR backward pass, from the step's Q-function `qtt`, `qt` over
+/// `z = [x; u]` (`n` states) and the Cholesky factor of its `Q_uu`: the controller `u = K x + k`
+/// with `Σ = Q_uu⁻¹`, and the value function `V_xx`, `v_x` it leaves for the step before.
+pub(crate) struct LqrStep {
+    pub(crate) gain: DMatrix<f64>,
+    pub(crate) offset: DVector<f64>,
+    pub(crate) cov: DMatrix<f64>,
+    pub(crate) vxx: DMatrix<f64>,
+    pub(crate) vx: DVector<f64>,
+}
+
+/// [`LqrStep`] of `qtt`, `qt` with `chol` the factor of their `Q_uu`.
+pub(crate) fn lqr_step(
+    chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>,
+    qtt: &DMatrix<f64>,
+    qt: &DVector<f64>,
+    n: usize,
+) -> LqrStep {
+    let m = qtt.nrows() - n;
+    let gain = -chol.solve(&qtt.view((n, 0), (m, n)).into_owned());
+    let offset = -chol.solve(&qt.rows(n, m).into_owned());
+    let qxu = qtt.view((0, n), (n, m));
+    let vxx = qtt.view((0, 0), (n, n)) + qxu * &gain;
+    let vxx = (&vxx + vxx.transpose()) * 0.5;
+    let vx = qt.rows(0, n) + qxu * &offset;
+    LqrStep {
+        gain,
+        offset,
+        cov: chol.inverse(),
+        vxx,
+        vx,
+    }
 }
 
 /// Costs-to-go `S_{i,t} = Σ_{j ≥ t} c_{i,j}` of per-step costs `N x (T+1)` whose last column is
