@@ -653,16 +653,17 @@ impl P4Table {
         let t = &local.trajopt;
         md.push_str(&format!(
             "\nLQR-FLM: base KL bound {} per step with GPS's step rule for LQR-FLM; PI²: KL {}, \
-             covariance damping {}, gains {}; PILQR: the same LQR-FLM and PI² stages, per-step \
-             bounds from the residual ratio ({} / {}{}). Initial controllers {}. \
-             Updates that failed numerically (controller kept): {failed}. Runs took {run_wall:.0} s \
-             in all; the study's wall time {wall:.0} s.\n",
+             covariance damping {}, gains {}; PILQR: the same LQR-FLM and PI² stages, {}. \
+             Initial controllers {}. Updates that failed numerically (controller kept): {failed}. \
+             Runs took {run_wall:.0} s in all; the study's wall time {wall:.0} s.\n",
             t.lqr.kl_step,
             t.pi2.kl_step,
             t.pi2.covariance_damping,
-            if t.pi2.update_gains { "refitted" } else { "kept" },
-            t.res_ratio_dec,
-            t.res_ratio_inc,
+            if t.pi2.update_gains {
+                "refitted"
+            } else {
+                "kept"
+            },
             pilqr_bounds(t),
             init_words(local),
         ));
@@ -684,28 +685,39 @@ fn init_words(local: &LocalConfig) -> String {
     }
 }
 
-/// How PILQR's residuals and per-step bounds were set, when not as in the first version (whose
-/// reports said nothing more, and still read the same).
+/// How PILQR's per-step bounds were set. The first version's settings read as its reports did;
+/// later settings add what differs from them.
 fn pilqr_bounds(t: &tandem_planners::PilqrConfig) -> String {
     use tandem_planners::{PerStep, Residual};
     let words = |p: &PerStep| match p {
         PerStep::Constant(v) => format!("{v}"),
         PerStep::Linear { first, last } => format!("{first} → {last} over the steps"),
     };
-    let mut s = String::new();
+    let mut s = if t.adjust_step {
+        format!(
+            "per-step bounds from the residual ratio ({} / {}",
+            t.res_ratio_dec, t.res_ratio_inc
+        )
+    } else {
+        "per-step bounds at the base bound, no step rule (multipliers 1".to_string()
+    };
     if t.residual == Residual::FromStart {
         s.push_str("; residuals of the model's replay of each sample from the mean start");
     }
     if let Some(k) = &t.kl_step {
         s.push_str(&format!("; base bound {}", words(k)));
     }
-    if t.min_step_mult != PerStep::Constant(0.01) || t.max_step_mult != PerStep::Constant(10.0) {
+    if t.adjust_step
+        && (t.min_step_mult != PerStep::Constant(0.01)
+            || t.max_step_mult != PerStep::Constant(10.0))
+    {
         s.push_str(&format!(
             "; multipliers from {} to {}",
             words(&t.min_step_mult),
             words(&t.max_step_mult)
         ));
     }
+    s.push(')');
     s
 }
 
