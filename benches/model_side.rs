@@ -7,6 +7,10 @@
 //!   through a 2×200 MLP and through a 5-member probabilistic ensemble of 3×200 whose rows keep
 //!   their member for the whole rollout and sample its Gaussian (PETS's TS∞, mbrl-lib's
 //!   `fixed_model` propagation);
+//! - `pets_cem_*`: the same CEM plan through the same ensemble as mbrl-lib 0.2.0's PETS runs it:
+//!   20 particles per sequence, each sequence scored by the mean cost of its particles, and
+//!   TS-1 propagation (a random member per row at every step, mbrl-lib's `random_model`): 150
+//!   `predict` calls of 10 000 rows;
 //! - `ensemble_fit_*`: MBPO's ensemble (7 members of 4×200 SiLU, HalfCheetah's 17 + 6 inputs to
 //!   17 + 1 Gaussian outputs, learned log-variance bounds, Adam) fitted for one epoch of 20
 //!   minibatches of 256 per member, plus the held-out evaluation that picks the 5 elites;
@@ -84,23 +88,17 @@ fn pendulum_objective() -> Objective {
     })
 }
 
-fn pendulum_models() -> Vec<(&'static str, Box<dyn DynamicsModel>)> {
+/// 1000 random pendulum transitions and one epoch over them: a short fit gives the models real
+/// input and output standardizations.
+fn pendulum_data() -> (tandem_models::Transitions, FitConfig) {
     let mut rng = rng_from_seed(0);
-    let data = transitions(1000, 3, 1, &mut rng);
-    let fit = one_epoch(0.0);
-    // One short fit gives both models real input and output standardizations.
-    let mut mlp = MlpModel::new(
-        3,
-        1,
-        MlpModelConfig {
-            hidden: vec![200, 200],
-            learn_reward: false,
-            learn_termination: false,
-            ..MlpModelConfig::default()
-        },
-    )
-    .expect("mlp");
-    mlp.fit(&data, &fit).expect("fit");
+    (transitions(1000, 3, 1, &mut rng), one_epoch(0.0))
+}
+
+/// The 5-member probabilistic ensemble of 3×200 on Pendulum-v1's dimensions, sampling its
+/// Gaussian, its rows keeping their member (TS∞) unless a planner names another propagation.
+fn pendulum_ensemble() -> ProbabilisticEnsemble {
+    let (data, fit) = pendulum_data();
     let mut ens = ProbabilisticEnsemble::new(
         3,
         1,
@@ -116,9 +114,26 @@ fn pendulum_models() -> Vec<(&'static str, Box<dyn DynamicsModel>)> {
     )
     .expect("ensemble");
     ens.fit(&data, &fit).expect("fit");
+    ens
+}
+
+fn pendulum_models() -> Vec<(&'static str, Box<dyn DynamicsModel>)> {
+    let (data, fit) = pendulum_data();
+    let mut mlp = MlpModel::new(
+        3,
+        1,
+        MlpModelConfig {
+            hidden: vec![200, 200],
+            learn_reward: false,
+            learn_termination: false,
+            ..MlpModelConfig::default()
+        },
+    )
+    .expect("mlp");
+    mlp.fit(&data, &fit).expect("fit");
     vec![
         ("mlp1_2x200_det", Box::new(mlp)),
-        ("ens5_3x200_prob", Box::new(ens)),
+        ("ens5_3x200_prob", Box::new(pendulum_ensemble())),
     ]
 }
 
@@ -159,6 +174,25 @@ fn planners(c: &mut Criterion) {
             b.iter(|| mppi.plan(&x0, model.as_ref(), &objective).expect("plan"))
         });
     }
+    // PETS at mbrl-lib 0.2.0's settings: 20 particles per sequence (`algorithm/pets.yaml`) and
+    // its ensemble's `random_model` propagation (`dynamics_model/gaussian_mlp_ensemble.yaml`,
+    // PETS's TS-1: every row draws a member at every step): 10 000 rows per prediction.
+    let ens = pendulum_ensemble();
+    let mut pets = Cem::new(CemConfig {
+        horizon: 30,
+        population: 500,
+        particles: 20,
+        propagation: Some(Propagation::RandomMember),
+        iterations: 5,
+        elite_fraction: 0.1,
+        alpha: 0.1,
+        bounds,
+        ..CemConfig::default()
+    })
+    .expect("cem");
+    g.bench_function("pets_cem_ens5_3x200_p20_ts1", |b| {
+        b.iter(|| pets.plan(&x0, &ens, &objective).expect("plan"))
+    });
     g.finish();
 }
 

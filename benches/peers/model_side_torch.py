@@ -11,6 +11,13 @@ elite ratio 0.1, smoothing 0.1) planning one action of Pendulum-v1 (3 observatio
 GaussianMLP of 2x200 (deterministic) or of 5 members of 3x200 (probabilistic, fixed_model
 propagation: each row keeps its member), predicting the state change with input normalization.
 
+pets_mbrl: PETS's planning step at mbrl-lib 0.2.0's settings: its TrajectoryOptimizerAgent
+(replan every step, warm-started from the last plan) with the same CEM, scoring each sequence by
+ModelEnv.evaluate_action_sequences with num_particles=20 (algorithm/pets.yaml) over the same
+5 x 3x200 GaussianMLP with its PETS propagation, random_model (dynamics_model/
+gaussian_mlp_ensemble.yaml; PETS's TS-1: each step a fresh permutation deals the 10 000 rows to
+the members), and the double-precision normalizer pets.yaml asks for; one action per call.
+
 ensemble_fit: 7 members of 4x200 SiLU, 23 inputs -> 18 Gaussian outputs (mean, log-variance with
 PETS's learned soft bounds and 0.01 bound penalty), Adam 1e-3, one epoch of 20 minibatches of 256
 per member (each member its own bootstrap rows, all members in one batched matmul as mbrl-lib and
@@ -22,7 +29,7 @@ mbpo_rollouts: 100 000 one-step rollouts: SAC actor 17-256-256-12 (tanh-Gaussian
 E equal chunks through a batched matmul), a sample of its Gaussian, de-standardized delta and
 reward.
 
-Usage: python model_side_torch.py --threads 2 [--only cem_mbrl,cem_ens_mbrl,fit_raw,fit_mbrl,rollouts_raw]
+Usage: python model_side_torch.py --threads 2 [--only cem_mbrl,cem_ens_mbrl,pets_mbrl,fit_raw,fit_mbrl,rollouts_raw]
 """
 import argparse
 import json
@@ -198,11 +205,12 @@ if not only or "rollouts_raw" in only:
     results["policy_100k_raw_torch"] = dict(ms_median=med, ms_min=mn, ms_all=ts)
     print(f"100k policy only (torch)    t={args.threads} median {med:8.2f} ms  min {mn:8.2f}", flush=True)
 
-def cem_mbrl(ensemble):
+def pendulum_model_env(ensemble, propagation="fixed_model", double_normalizer=False):
+    """A ModelEnv of Pendulum-v1 over a 2x200 MLP or a 5 x 3x200 ensemble, normalized on 1000
+    random transitions, with the cost of tandem's bench as its (negated) reward."""
     import gymnasium as gym
     import mbrl.env.termination_fns as term_fns
     import mbrl.models
-    import mbrl.planning
     import mbrl.types
     import numpy as np
 
@@ -214,11 +222,12 @@ def cem_mbrl(ensemble):
     if ensemble:
         net = mbrl.models.GaussianMLP(in_size=4, out_size=3, device="cpu", num_layers=3,
                                       ensemble_size=5, hid_size=200, deterministic=False,
-                                      propagation_method="fixed_model")
+                                      propagation_method=propagation)
     else:
         net = mbrl.models.GaussianMLP(in_size=4, out_size=3, device="cpu", num_layers=2,
                                       ensemble_size=1, hid_size=200, deterministic=True)
     model = mbrl.models.OneDTransitionRewardModel(net, target_is_delta=True, normalize=True,
+                                                  normalize_double_precision=double_normalizer,
                                                   learned_rewards=False)
     rng = np.random.default_rng(0)
     th = rng.uniform(-np.pi, np.pi, 1000)
@@ -228,27 +237,63 @@ def cem_mbrl(ensemble):
         obs, act, obs, np.zeros(1000, np.float32), np.zeros(1000, bool), np.zeros(1000, bool)))
     gen = torch.Generator()
     gen.manual_seed(0)
-    env = mbrl.models.ModelEnv(gym.make("Pendulum-v1"), model, term_fns.no_termination,
-                               reward_fn=reward, generator=gen)
-    horizon = 30
+    return mbrl.models.ModelEnv(gym.make("Pendulum-v1"), model, term_fns.no_termination,
+                                reward_fn=reward, generator=gen)
+
+
+PENDULUM_X0 = [-1.0, 0.0, 0.0]
+HORIZON = 30
+
+
+def cem_mbrl(ensemble):
+    import mbrl.planning
+    import numpy as np
+
+    env = pendulum_model_env(ensemble)
     opt = mbrl.planning.CEMOptimizer(num_iterations=5, elite_ratio=0.1, population_size=500,
-                                     lower_bound=[[-2.0]] * horizon,
-                                     upper_bound=[[2.0]] * horizon, alpha=0.1, device="cpu",
+                                     lower_bound=[[-2.0]] * HORIZON,
+                                     upper_bound=[[2.0]] * HORIZON, alpha=0.1, device="cpu",
                                      return_mean_elites=True)
-    x0 = np.array([-1.0, 0.0, 0.0], np.float32)
+    x0 = np.array(PENDULUM_X0, np.float32)
 
     def plan():
         with torch.no_grad():
             def objective(seqs):
                 return env.evaluate_action_sequences(seqs, initial_state=x0, num_particles=1)
-            return opt.optimize(objective, torch.zeros(horizon, 1))
+            return opt.optimize(objective, torch.zeros(HORIZON, 1))
 
     return timed(plan, 20)
 
 
-for name, ens in [("cem_mbrl", False), ("cem_ens_mbrl", True)]:
+def pets_mbrl(particles=20):
+    import mbrl.planning
+    import numpy as np
+    import omegaconf
+
+    env = pendulum_model_env(True, propagation="random_model", double_normalizer=True)
+    cem = omegaconf.OmegaConf.create({
+        "_target_": "mbrl.planning.CEMOptimizer", "num_iterations": 5, "elite_ratio": 0.1,
+        "population_size": 500, "alpha": 0.1, "lower_bound": "???", "upper_bound": "???",
+        "return_mean_elites": True, "device": "cpu"})
+    # What create_trajectory_optim_agent_for_model builds, without hydra instantiating the
+    # agent (hydra 1.3 would also instantiate its nested optimizer config).
+    agent = mbrl.planning.TrajectoryOptimizerAgent(cem, action_lb=[-2.0], action_ub=[2.0],
+                                                   planning_horizon=HORIZON, replan_freq=1)
+    agent.set_trajectory_eval_fn(lambda x, seqs: env.evaluate_action_sequences(
+        seqs, initial_state=x, num_particles=particles))
+    x0 = np.array(PENDULUM_X0, np.float32)
+
+    def act():
+        with torch.no_grad():
+            return agent.act(x0)
+
+    return timed(act, 10)
+
+
+for name, run in [("cem_mbrl", lambda: cem_mbrl(False)), ("cem_ens_mbrl", lambda: cem_mbrl(True)),
+                  ("pets_mbrl", pets_mbrl)]:
     if not only or name in only:
-        med, mn, ts = cem_mbrl(ens)
+        med, mn, ts = run()
         results[name] = dict(ms_median=med, ms_min=mn, ms_all=ts)
         print(f"{name:27s} t={args.threads} median {med:8.2f} ms  min {mn:8.2f}", flush=True)
 
