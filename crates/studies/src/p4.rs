@@ -27,11 +27,14 @@ use crate::report::{mean_stderr, to_json_pretty, Curve, Figure, SamplesToTarget}
 use crate::run::RunDir;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
-use tandem_algos::gps::{train_local, LocalConfig, LocalMethod, LocalPoint, LocalProblem};
+use tandem_algos::gps::{
+    train_local, InitController, LocalConfig, LocalMethod, LocalPoint, LocalProblem,
+};
 use tandem_algos::manipulation::{door_problem, pusher_problem};
+use tandem_algos::mdgps::{FirstIteration, Linearization, MdgpsConfig};
 use tandem_algos::{Checkpoints, Result as AlgoResult};
 use tandem_robots::p4::{
-    DoorCost, PusherCost, DOOR_CONDITIONS, DOOR_TARGET, PUSHER_CONDITIONS, PUSHER_HARD,
+    DoorCost, PusherCost, DOOR_CONDITIONS, DOOR_OPENED, PUSHER_CONDITIONS, PUSHER_HARD,
 };
 
 use crate::harness::{self, JobError, Study};
@@ -166,7 +169,7 @@ impl P4Task for Door {
                 ..LocalConfig::default()
             },
             cost: DoorCost::default(),
-            target: 0.8 * DOOR_TARGET,
+            target: DOOR_OPENED,
         }
     }
     fn problem(cost: DoorCost) -> AlgoResult<LocalProblem> {
@@ -187,6 +190,30 @@ impl P4Task for Door {
     fn headline_of(measures: &[f64]) -> f64 {
         measures.iter().copied().fold(f64::INFINITY, f64::min)
     }
+}
+
+/// MDGPS's settings on the door (p4 Fig. 5) and its cost: p4-door's local settings and cost
+/// from `preset` ([`Preset::Authors`]: the authors' door file over ours, as `tandem reproduce
+/// p4-door` runs them) with the zero initial controller (`K = 0`, `k = 0`,
+/// `Σ = local.init_variance · I`, 0.05) instead of the preset's `init_lqr`; a global policy of
+/// two hidden layers of 64 ([`tandem_algos::mdgps::PolicyConfig::default`]), GPS's first
+/// iteration (catch-up) and GPS's regression linearization, the step multiplier fixed (the
+/// authors' door file: `'step_rule': 'const'`).
+pub fn door_mdgps_settings(preset: Preset) -> Result<(MdgpsConfig, DoorCost)> {
+    let s = preset.apply(Door::defaults(), Door::AUTHORS, Door::NAME)?;
+    let local = LocalConfig {
+        init: InitController::Zero,
+        ..s.local
+    };
+    let cfg = MdgpsConfig {
+        local,
+        policy: Default::default(),
+        step: Default::default(),
+        linearization: Linearization::default(),
+        first_iteration: FirstIteration::CatchUp,
+    };
+    cfg.validate().map_err(Error::other)?;
+    Ok((cfg, s.cost))
 }
 
 /// Everything that decides a p4 study's numbers.
