@@ -741,6 +741,33 @@ mod tests {
     use super::*;
     use tandem_planners::{PerStep, Residual};
 
+    /// The door's MDGPS settings are p4-door's under the same preset but for the initial
+    /// controller, which is the zero one at the preset's variance; the cost is p4-door's.
+    #[test]
+    fn door_mdgps_settings_are_the_door_study_s_with_the_zero_start() {
+        for preset in [Preset::Authors, Preset::Ours] {
+            let study = preset
+                .apply(Door::defaults(), Door::AUTHORS, "test")
+                .unwrap();
+            let (cfg, cost) = door_mdgps_settings(preset).unwrap();
+            assert_eq!(cost, study.cost);
+            assert_eq!(
+                cfg.local,
+                LocalConfig {
+                    init: InitController::Zero,
+                    ..study.local.clone()
+                }
+            );
+            // The authors' preset starts p4-door from GPS's init_lqr.
+            if preset == Preset::Authors {
+                assert_ne!(study.local.init, InitController::Zero);
+                assert!(cost.end_effector_features);
+            }
+            assert_eq!(cfg.first_iteration, FirstIteration::CatchUp);
+            assert!(matches!(cfg.linearization, Linearization::Regression(_)));
+        }
+    }
+
     /// The authors' presets name only settings that exist (the settings refuse unknown keys), and
     /// what they give is valid; `ours` is the settings as first chosen.
     #[test]
