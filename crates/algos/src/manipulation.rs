@@ -8,7 +8,9 @@
 //!
 //! The door ([`door_problem`]): the scene `p4_door.xml`, [`tandem_robots::p4::DOOR_CONDITIONS`],
 //! [`DoorCost`] on the hook and grasp points from MuJoCo's kinematics (its expansion Gauss–Newton
-//! through finite-difference site Jacobians), and the final door angle as the measure.
+//! through finite-difference site Jacobians), and the final door angle as the measure. MDGPS's
+//! global policy on it (p4 Fig. 5) sees `DoorTask`'s observation, and [`door_test_set`] is where
+//! it is measured: random arm starts between the four conditions.
 
 use nalgebra::{DMatrix, DVector};
 use tandem_planners::{Objective, QuadCost, QuadTerminal};
@@ -191,6 +193,7 @@ pub fn reacher_test_set(n: usize, seed: u64) -> TestSet {
     TestSet {
         starts: reacher_starts(n, &mut rng),
         measure: Box::new(reacher_distance),
+        solved: None,
     }
 }
 
@@ -220,9 +223,48 @@ fn reacher_system() -> Result<Box<dyn tandem_models::DynamicsModel + Send + Sync
 
 /// The door's four conditions on MuJoCo, with `cost`. Needs the feature `mujoco`; without it, an
 /// error saying so.
+///
+/// A global policy on it (MDGPS) sees `DoorTask`'s observation of the scene's part of the state:
+/// the state `qpos ++ qvel` (14) and the hook's offset from the grasp point (3), what the cost
+/// reads, as the reacher's policy sees its fingertip's offset to the target. With
+/// `cost.end_effector_features` the features appended to the state are the local controllers'
+/// alone.
 pub fn door_problem(cost: DoorCost) -> Result<LocalProblem> {
     cost.validate().map_err(AlgoError::Config)?;
     door::problem(cost)
+}
+
+/// p4's number of door test starts (Fig. 5: "100 random test conditions per iteration").
+pub const DOOR_TEST_CONDITIONS: usize = 100;
+/// The generator of the door's test starts in the example.
+pub const DOOR_TEST_SEED: u64 = 2017;
+
+/// `n` test starts of the door drawn by `seed`'s generator
+/// ([`tandem_robots::p4::door_test_starts`]: the arm's joints a random convex combination of the
+/// four conditions'), in the state of [`door_problem`] with `cost` (its end-effector features
+/// appended when `cost.end_effector_features`), measured by the final door angle; a start is
+/// solved when the door ends opened ([`tandem_robots::p4::DOOR_OPENED`], 0.8 rad). Needs the
+/// feature `mujoco` for the features; without it, an error saying so when they are on.
+pub fn door_test_set(n: usize, seed: u64, cost: &DoorCost) -> Result<TestSet> {
+    cost.validate().map_err(AlgoError::Config)?;
+    if n == 0 {
+        return Err(AlgoError::Config(
+            "the door's test set needs at least one start".into(),
+        ));
+    }
+    let mut rng = tandem_core::seeding::rng_from_seed(seed);
+    let starts = tandem_robots::p4::door_test_starts(n, &mut rng);
+    let starts = if cost.end_effector_features {
+        door::extend_starts(starts)?
+    } else {
+        starts
+    };
+    let angle = tandem_robots::p4::DOOR_ANGLE;
+    Ok(TestSet {
+        starts,
+        measure: Box::new(move |x| x[angle]),
+        solved: Some(Box::new(|a| a >= tandem_robots::p4::DOOR_OPENED)),
+    })
 }
 
 #[cfg(feature = "mujoco")]
@@ -231,7 +273,7 @@ mod door {
     use tandem_planners::{Objective, QuadTerminal};
     use tandem_robots::p4::{
         door_initial_state, door_plant, DoorCost, DoorKinematics, DOOR_ACTION_DIM, DOOR_ANGLE,
-        DOOR_CONDITIONS, DOOR_FEATURES_DIM, DOOR_HORIZON, DOOR_STATE_DIM,
+        DOOR_CONDITIONS, DOOR_FEATURES_DIM, DOOR_HORIZON, DOOR_OBS_DIM, DOOR_STATE_DIM,
     };
 
     use super::super::gps::{Condition, LocalProblem};
@@ -312,7 +354,7 @@ mod door {
             conditions,
             horizon: DOOR_HORIZON,
             measure: Box::new(|_, x| x[DOOR_ANGLE]),
-            policy_input: None,
+            policy_input: Some(policy_input(kin.clone())),
         };
         if !cost.end_effector_features {
             return Ok(problem);
@@ -322,6 +364,33 @@ mod door {
         });
         with_features(problem, DOOR_FEATURES_DIM, features)
     }
+
+    /// `DoorTask`'s observation of a state's first [`DOOR_STATE_DIM`] entries: those entries and
+    /// the hook's offset from the grasp point (NaN for a state that is not finite).
+    fn policy_input(kin: DoorKinematics) -> tandem_agents::PolicyInput {
+        tandem_agents::PolicyInput {
+            dim: DOOR_OBS_DIM,
+            map: std::sync::Arc::new(move |x: &[f64], out: &mut [f64]| {
+                out[..DOOR_STATE_DIM].copy_from_slice(&x[..DOOR_STATE_DIM]);
+                out[DOOR_STATE_DIM..DOOR_OBS_DIM].copy_from_slice(&kin.offset_or_nan(x));
+            }),
+        }
+    }
+
+    /// Scene states with the door's end-effector features appended.
+    pub(super) fn extend_starts(starts: Vec<Vec<f64>>) -> Result<Vec<Vec<f64>>> {
+        let kin = DoorKinematics::load().map_err(|e| AlgoError::Config(e.to_string()))?;
+        starts
+            .into_iter()
+            .map(|mut x| {
+                let mut f = [0.0; DOOR_FEATURES_DIM];
+                kin.features(&x, &mut f)
+                    .map_err(|e| AlgoError::Config(e.to_string()))?;
+                x.extend_from_slice(&f);
+                Ok(x)
+            })
+            .collect()
+    }
 }
 
 #[cfg(not(feature = "mujoco"))]
@@ -330,9 +399,17 @@ mod door {
     use super::super::{AlgoError, Result};
 
     pub(super) fn problem(_cost: tandem_robots::p4::DoorCost) -> Result<LocalProblem> {
-        Err(AlgoError::Config(
+        Err(unavailable())
+    }
+
+    pub(super) fn extend_starts(_starts: Vec<Vec<f64>>) -> Result<Vec<Vec<f64>>> {
+        Err(unavailable())
+    }
+
+    fn unavailable() -> AlgoError {
+        AlgoError::Config(
             "p4's door needs a build with `--features mujoco` after scripts/setup-mujoco.sh".into(),
-        ))
+        )
     }
 }
 
@@ -594,8 +671,8 @@ mod tests {
     use tandem_core::seeding::rng_from_seed;
     use tandem_models::ModelInput;
     use tandem_robots::p4::{
-        pusher_features, DoorKinematics, DoorWaypoints, DOOR_ANGLE, DOOR_FEATURES_DIM,
-        DOOR_HORIZON, DOOR_STATE_DIM, PUSHER_FEATURES_DIM,
+        pusher_features, DoorKinematics, DoorWaypoints, DOOR_ACTION_DIM, DOOR_ANGLE,
+        DOOR_FEATURES_DIM, DOOR_HORIZON, DOOR_STATE_DIM, PUSHER_FEATURES_DIM,
     };
 
     /// The states of `steps` of fixed pseudo-random actions (the same for every problem) from
@@ -718,6 +795,155 @@ mod tests {
         }
         // Some steps moved: the test saw velocities.
         assert!(b[8].slice(s![.., n + 6..]).iter().any(|v| v.abs() > 1e-3));
+    }
+
+    /// The door's test starts: the same for a seed and others for another; each a state of the
+    /// problem (with its end-effector features), the door closed and the arm at rest, none a
+    /// training start; the hook between the training starts: its offset from the grasp point
+    /// within the box their offsets span across and above the handle (2 cm of slack for the
+    /// kinematics' curvature), and in front of the grasp point (over 1000 starts: 0.04–0.28 m in
+    /// front, where the training starts are 0.1–0.3 m; 0.20–0.29 m above it, the starts
+    /// 0.2–0.3 m); and the arm rests there touching nothing: a step of zero commands (the arm is
+    /// gravity-compensated) moves no joint by 10⁻³ rad and leaves the door shut.
+    #[test]
+    fn door_test_starts_lie_between_the_training_starts() {
+        let cost = DoorCost {
+            end_effector_features: true,
+            ..DoorCost::default()
+        };
+        let test = door_test_set(24, 7, &cost).unwrap();
+        assert_eq!(test.starts, door_test_set(24, 7, &cost).unwrap().starts);
+        assert_ne!(test.starts, door_test_set(24, 8, &cost).unwrap().starts);
+        let problem = door_problem(cost).unwrap();
+        let kin = DoorKinematics::load().unwrap();
+        let trained: Vec<[f64; 3]> = problem
+            .conditions
+            .iter()
+            .map(|c| kin.offset(&c.x0).unwrap())
+            .collect();
+        let n = problem.system.state_dim();
+        let mut f = [0.0; DOOR_FEATURES_DIM];
+        for x in &test.starts {
+            assert_eq!(x.len(), n);
+            assert!(problem.conditions.iter().all(|c| {
+                c.x0[..6]
+                    .iter()
+                    .zip(&x[..6])
+                    .any(|(a, b)| (a - b).abs() > 1e-3)
+            }));
+            assert!(x[DOOR_ANGLE..DOOR_STATE_DIM].iter().all(|v| *v == 0.0));
+            kin.features(x, &mut f).unwrap();
+            assert_eq!(&x[DOOR_STATE_DIM..], &f);
+            let r = kin.offset(x).unwrap();
+            for i in 0..3 {
+                let lo = trained.iter().map(|o| o[i]).fold(f64::INFINITY, f64::min);
+                let hi = trained
+                    .iter()
+                    .map(|o| o[i])
+                    .fold(f64::NEG_INFINITY, f64::max);
+                // Towards the door (x) the hull reaches closer than the starts: in front of the
+                // grasp point, not behind the bar.
+                let hi = if i == 0 { 0.0 } else { hi + 0.02 };
+                assert!(
+                    r[i] > lo - 0.02 && r[i] < hi,
+                    "offset {r:?} outside the training starts' {lo}..{hi} in {i}"
+                );
+            }
+        }
+        let x = Array2::from_shape_vec((test.starts.len(), n), test.starts.concat()).unwrap();
+        let u = Array2::zeros((test.starts.len(), DOOR_ACTION_DIM));
+        let next = problem
+            .system
+            .predict(&ModelInput::new(x.view(), u.view()), &mut rng_from_seed(0))
+            .unwrap()
+            .next_states;
+        for (a, b) in x.rows().into_iter().zip(next.rows()) {
+            for j in 0..6 {
+                assert!(
+                    (a[j] - b[j]).abs() < 1e-3,
+                    "joint {j}: {} to {}",
+                    a[j],
+                    b[j]
+                );
+            }
+            assert!(
+                b[DOOR_ANGLE].abs() < 1e-6,
+                "the door moved to {}",
+                b[DOOR_ANGLE]
+            );
+        }
+        // The test's measure is the final angle, and a start is opened from 0.8 rad.
+        let mut end = test.starts[0].clone();
+        end[DOOR_ANGLE] = 0.9;
+        assert_eq!((test.measure)(&end), 0.9);
+        let (mean, opened) = test.summary(&[0.79, 0.8, 1.1, 0.0]);
+        assert!((mean - 2.69 / 4.0).abs() < 1e-12, "{mean}");
+        assert_eq!(opened, Some(0.5));
+    }
+
+    /// MDGPS with PILQR runs on the door with its features and the policy's observation (two
+    /// iterations of two trajectories per start, a small policy, three test starts): a point per
+    /// iteration, the test angle finite and within the hinge's range, the fraction opened a
+    /// fraction of three.
+    #[test]
+    fn mdgps_runs_on_the_door() {
+        use crate::gps::{LocalConfig, LocalMethod};
+        use crate::mdgps::{
+            train_mdgps, FirstIteration, Linearization, MdgpsConfig, PolicyConfig, PolicyFitConfig,
+        };
+        let cost = DoorCost {
+            end_effector_features: true,
+            ..DoorCost::default()
+        };
+        let problem = door_problem(cost).unwrap();
+        let test = door_test_set(3, 1, &cost).unwrap();
+        // Small mixtures for the dynamics' and the policy's priors: a smoke test, not a fit.
+        let prior = Some(tandem_models::GmmPriorConfig {
+            max_clusters: 2,
+            ..Default::default()
+        });
+        let mut local = LocalConfig {
+            iterations: 2,
+            samples: 2,
+            init_variance: 0.05,
+            ..LocalConfig::default()
+        };
+        local.dynamics.prior = prior.clone();
+        let cfg = MdgpsConfig {
+            local,
+            policy: PolicyConfig {
+                hidden: vec![8],
+                epochs: 2,
+                ..PolicyConfig::default()
+            },
+            step: Default::default(),
+            linearization: Linearization::Regression(PolicyFitConfig {
+                prior,
+                ..Default::default()
+            }),
+            first_iteration: FirstIteration::CatchUp,
+        };
+        let run = train_mdgps(
+            LocalMethod::Pilqr,
+            &problem,
+            &test,
+            &cfg,
+            0,
+            &mut crate::Ephemeral,
+            &mut |_| {},
+        )
+        .unwrap();
+        assert_eq!(run.curve.len(), 2);
+        for (i, p) in run.curve.iter().enumerate() {
+            assert_eq!(p.samples, 8 * (i as u64 + 1));
+            assert!((-1e-3..1.58).contains(&p.test_measure), "{p:?}");
+            let opened = p.test_solved.unwrap() * 3.0;
+            assert!((opened - opened.round()).abs() < 1e-12, "{p:?}");
+            assert!(
+                p.local_measure.is_finite() && p.policy_loss.is_finite(),
+                "{p:?}"
+            );
+        }
     }
 
     /// With the ramp and the waypoints, the door's expansion is the cost's: its value, its

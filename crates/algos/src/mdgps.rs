@@ -252,12 +252,18 @@ impl MdgpsConfig {
 /// The task's figure of a final state.
 pub type FinalMeasure = Box<dyn Fn(&[f64]) -> f64 + Send + Sync>;
 
+/// Whether a final measure counts as solving its start (the door: opened).
+pub type Solved = Box<dyn Fn(f64) -> bool + Send + Sync>;
+
 /// Where the global policy is evaluated: starts and the task's measure of a final state.
 pub struct TestSet {
     /// Initial states.
     pub starts: Vec<Vec<f64>>,
     /// The measure of a final state (e.g. the end effector's distance to the target).
     pub measure: FinalMeasure,
+    /// Whether a start's final measure solves it; `None`: the task counts no solved starts, and
+    /// the curve has no [`MdgpsPoint::test_solved`].
+    pub solved: Option<Solved>,
 }
 
 /// The TVLG controller that linearizes `policy` around the samples' mean state at every step:
@@ -318,6 +324,9 @@ pub struct MdgpsPoint {
     pub samples: u64,
     /// The global policy's mean measure over the test starts, after this iteration's fit.
     pub test_measure: f64,
+    /// The fraction of the test starts it solved ([`TestSet::solved`]; `None` without).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_solved: Option<f64>,
     /// The local controllers' mean measure over this iteration's samples (all conditions).
     pub local_measure: f64,
     /// The regression's last-epoch mean (weighted) squared error.
@@ -584,9 +593,12 @@ impl Algorithm for Mdgps<'_> {
             (n, m, horizon),
             &mut st.rng,
         )?;
+        let finals = final_measures(policy, system, self.test, horizon, &mut st.rng)?;
+        let (test_measure, test_solved) = self.test.summary(&finals);
         st.curve.push(MdgpsPoint {
             samples: st.drawn,
-            test_measure: evaluate(policy, system, self.test, horizon, &mut st.rng)?,
+            test_measure,
+            test_solved,
             local_measure: local_sum / (k * local.samples) as f64,
             policy_loss,
             step_mult: st.mult,
@@ -740,8 +752,20 @@ pub fn evaluate(
     horizon: usize,
     rng: &mut Rng,
 ) -> Result<f64> {
+    let finals = final_measures(policy, system, test, horizon, rng)?;
+    Ok(test.summary(&finals).0)
+}
+
+/// The measures of the policy's deterministic rollouts from each test start.
+fn final_measures(
+    policy: &GlobalPolicy,
+    system: &dyn DynamicsModel,
+    test: &TestSet,
+    horizon: usize,
+    rng: &mut Rng,
+) -> Result<Vec<f64>> {
     let mut ws = policy.net().workspace();
-    test.measure_policy(system, horizon, rng, &mut |x| {
+    test.final_measures(system, horizon, rng, &mut |x| {
         Ok(policy.mean(x.as_slice().expect("standard layout"), &mut ws)?)
     })
 }
@@ -757,6 +781,30 @@ impl TestSet {
         rng: &mut Rng,
         act: &mut dyn FnMut(&Array2<f64>) -> Result<Vec<f64>>,
     ) -> Result<f64> {
+        let finals = self.final_measures(system, horizon, rng, act)?;
+        Ok(self.summary(&finals).0)
+    }
+
+    /// The mean of `finals` (one measure per start) and, with [`TestSet::solved`], the fraction
+    /// of them that solve their start.
+    pub fn summary(&self, finals: &[f64]) -> (f64, Option<f64>) {
+        let b = finals.len() as f64;
+        let solved = self
+            .solved
+            .as_ref()
+            .map(|solves| finals.iter().filter(|&&v| solves(v)).count() as f64 / b);
+        (finals.iter().sum::<f64>() / b, solved)
+    }
+
+    /// The measure of the final state of a `horizon`-step rollout on `system` from each start,
+    /// stepped as [`TestSet::measure_policy`] steps them.
+    pub fn final_measures(
+        &self,
+        system: &dyn DynamicsModel,
+        horizon: usize,
+        rng: &mut Rng,
+        act: &mut dyn FnMut(&Array2<f64>) -> Result<Vec<f64>>,
+    ) -> Result<Vec<f64>> {
         let (b, n) = (self.starts.len(), system.state_dim());
         let mut x = Array2::from_shape_vec((b, n), self.starts.concat())
             .map_err(|e| AlgoError::Config(e.to_string()))?;
@@ -770,8 +818,7 @@ impl TestSet {
         Ok(x.rows()
             .into_iter()
             .map(|r| (self.measure)(&r.to_vec()))
-            .sum::<f64>()
-            / b as f64)
+            .collect())
     }
 }
 
@@ -809,6 +856,7 @@ mod tests {
         let test = TestSet {
             starts: held_out.iter().map(|x| x.to_vec()).collect(),
             measure: Box::new(|x| x[0].abs()),
+            solved: None,
         };
         // Measured with the point Jacobian: uniform 1.1, 11.2, 0.3 % above the optimum;
         // precision-weighted 1.9, 5.2, 2.1 %; uniform with the step rule 5.2, 27, 1.8 %. (Before
@@ -1183,6 +1231,7 @@ mod tests {
         let test = TestSet {
             starts: vec![vec![0.7, 0.3], vec![-0.4, -0.8]],
             measure: Box::new(|x| x[0].abs()),
+            solved: None,
         };
         let mut c = MdgpsConfig {
             local: cfg(4),

@@ -485,6 +485,38 @@ pub fn door_initial_state(c: usize) -> Vec<f64> {
     x
 }
 
+/// A door start counts as opened when its final door angle is at least this (rad): 80% of
+/// [`DOOR_TARGET`].
+pub const DOOR_OPENED: f64 = 0.8 * DOOR_TARGET;
+
+/// `n` random door starts for testing a policy that was trained on [`DOOR_CONDITIONS`] (p4
+/// Fig. 5's random test conditions): the six arm joints a random convex combination of the four
+/// conditions' configurations, the weights uniform on the simplex (normalized exponential draws),
+/// the door closed and everything at rest. The combinations stay within the joints' ranges (a
+/// box that holds the four) and put the hook between the four starts' positions: across and
+/// above the handle within the span of theirs (0.2–0.3 m above the grasp point), in front of it
+/// (0.04–0.28 m, where the starts are 0.1–0.3 m: the hull of the configurations reaches closer
+/// to the door than the starts do). `tandem-algos`' tests check this with MuJoCo's kinematics,
+/// and that the arm rests there without touching the door. The four training starts are the
+/// simplex's corners, which a draw reaches with probability zero.
+pub fn door_test_starts(n: usize, rng: &mut tandem_core::Rng) -> Vec<Vec<f64>> {
+    use rand::Rng as _;
+    (0..n)
+        .map(|_| {
+            // −ln(1 − U) is Exp(1); normalized, four of them are uniform on the simplex.
+            let e: [f64; 4] = std::array::from_fn(|_| -(1.0 - rng.random::<f64>()).ln());
+            let total: f64 = e.iter().sum();
+            let mut x = vec![0.0; DOOR_STATE_DIM];
+            for (w, (_, q)) in e.iter().zip(&DOOR_CONDITIONS) {
+                for (xj, qj) in x.iter_mut().zip(q) {
+                    *xj += w / total * qj;
+                }
+            }
+            x
+        })
+        .collect()
+}
+
 /// The door's cost weights (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]

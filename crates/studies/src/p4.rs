@@ -27,11 +27,14 @@ use crate::report::{mean_stderr, to_json_pretty, Curve, Figure, SamplesToTarget}
 use crate::run::RunDir;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
-use tandem_algos::gps::{train_local, LocalConfig, LocalMethod, LocalPoint, LocalProblem};
+use tandem_algos::gps::{
+    train_local, InitController, LocalConfig, LocalMethod, LocalPoint, LocalProblem,
+};
 use tandem_algos::manipulation::{door_problem, pusher_problem};
+use tandem_algos::mdgps::{FirstIteration, Linearization, MdgpsConfig};
 use tandem_algos::{Checkpoints, Result as AlgoResult};
 use tandem_robots::p4::{
-    DoorCost, PusherCost, DOOR_CONDITIONS, DOOR_TARGET, PUSHER_CONDITIONS, PUSHER_HARD,
+    DoorCost, PusherCost, DOOR_CONDITIONS, DOOR_OPENED, PUSHER_CONDITIONS, PUSHER_HARD,
 };
 
 use crate::harness::{self, JobError, Study};
@@ -166,7 +169,7 @@ impl P4Task for Door {
                 ..LocalConfig::default()
             },
             cost: DoorCost::default(),
-            target: 0.8 * DOOR_TARGET,
+            target: DOOR_OPENED,
         }
     }
     fn problem(cost: DoorCost) -> AlgoResult<LocalProblem> {
@@ -187,6 +190,30 @@ impl P4Task for Door {
     fn headline_of(measures: &[f64]) -> f64 {
         measures.iter().copied().fold(f64::INFINITY, f64::min)
     }
+}
+
+/// MDGPS's settings on the door (p4 Fig. 5) and its cost: p4-door's local settings and cost
+/// from `preset` ([`Preset::Authors`]: the authors' door file over ours, as `tandem reproduce
+/// p4-door` runs them) with the zero initial controller (`K = 0`, `k = 0`,
+/// `Σ = local.init_variance · I`, 0.05) instead of the preset's `init_lqr`; a global policy of
+/// two hidden layers of 64 ([`tandem_algos::mdgps::PolicyConfig::default`]), GPS's first
+/// iteration (catch-up) and GPS's regression linearization, the step multiplier fixed (the
+/// authors' door file: `'step_rule': 'const'`).
+pub fn door_mdgps_settings(preset: Preset) -> Result<(MdgpsConfig, DoorCost)> {
+    let s = preset.apply(Door::defaults(), Door::AUTHORS, Door::NAME)?;
+    let local = LocalConfig {
+        init: InitController::Zero,
+        ..s.local
+    };
+    let cfg = MdgpsConfig {
+        local,
+        policy: Default::default(),
+        step: Default::default(),
+        linearization: Linearization::default(),
+        first_iteration: FirstIteration::CatchUp,
+    };
+    cfg.validate().map_err(Error::other)?;
+    Ok((cfg, s.cost))
 }
 
 /// Everything that decides a p4 study's numbers.
@@ -725,6 +752,33 @@ fn pilqr_bounds(t: &tandem_planners::PilqrConfig) -> String {
 mod tests {
     use super::*;
     use tandem_planners::{PerStep, Residual};
+
+    /// The door's MDGPS settings are p4-door's under the same preset but for the initial
+    /// controller, which is the zero one at the preset's variance; the cost is p4-door's.
+    #[test]
+    fn door_mdgps_settings_are_the_door_study_s_with_the_zero_start() {
+        for preset in [Preset::Authors, Preset::Ours] {
+            let study = preset
+                .apply(Door::defaults(), Door::AUTHORS, "test")
+                .unwrap();
+            let (cfg, cost) = door_mdgps_settings(preset).unwrap();
+            assert_eq!(cost, study.cost);
+            assert_eq!(
+                cfg.local,
+                LocalConfig {
+                    init: InitController::Zero,
+                    ..study.local.clone()
+                }
+            );
+            // The authors' preset starts p4-door from GPS's init_lqr.
+            if preset == Preset::Authors {
+                assert_ne!(study.local.init, InitController::Zero);
+                assert!(cost.end_effector_features);
+            }
+            assert_eq!(cfg.first_iteration, FirstIteration::CatchUp);
+            assert!(matches!(cfg.linearization, Linearization::Regression(_)));
+        }
+    }
 
     /// The authors' presets name only settings that exist (the settings refuse unknown keys), and
     /// what they give is valid; `ours` is the settings as first chosen.
