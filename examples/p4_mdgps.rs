@@ -50,10 +50,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let methods = args.get(1).map_or("lqr_flm,pi2,pilqr", |a| a.as_str());
     let seed: u64 = args.get(2).map_or(Ok(0), |a| a.parse())?;
     let conditions: usize = args.get(3).map_or(Ok(24), |a| a.parse())?;
-    let cfg: MdgpsConfig = match std::env::var_os("P4_CONFIG") {
-        Some(path) => toml::from_str(&std::fs::read_to_string(path)?)?,
-        None => reacher_config(),
-    };
+    let cfg: MdgpsConfig = settings_from_env("P4_CONFIG", reacher_config)?;
     let problem = reacher_problem(ReacherCost::default(), conditions, seed)?;
     let test = reacher_test_set(REACHER_TEST_CONDITIONS, REACHER_TEST_SEED);
     println!(
@@ -62,10 +59,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     for name in methods.split(',') {
         if name == "ddpg" {
-            let ddpg: ReacherDdpg = match std::env::var_os("P4_DDPG") {
-                Some(path) => toml::from_str(&std::fs::read_to_string(path)?)?,
-                None => ReacherDdpg::default(),
-            };
+            let ddpg: ReacherDdpg = settings_from_env("P4_DDPG", ReacherDdpg::default)?;
             let t0 = std::time::Instant::now();
             let curve = train_ddpg_reacher(
                 ReacherCost::default(),
@@ -127,10 +121,7 @@ fn door(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
     }
     let methods = args.first().map_or("pilqr", |a| a.as_str());
     let seed: u64 = args.get(1).map_or(Ok(0), |a| a.parse())?;
-    let cfg: MdgpsConfig = match std::env::var_os("P4_CONFIG") {
-        Some(path) => toml::from_str(&std::fs::read_to_string(path)?)?,
-        None => default_cfg,
-    };
+    let cfg: MdgpsConfig = settings_from_env("P4_CONFIG", || default_cfg)?;
     let problem = door_problem(cost)?;
     let test = door_test_set(DOOR_TEST_CONDITIONS, DOOR_TEST_SEED, &cost)?;
     println!(
@@ -184,4 +175,15 @@ fn door(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     Ok(())
+}
+
+/// The settings in the TOML file the environment variable `var` names, else `default()`.
+fn settings_from_env<T: serde::de::DeserializeOwned>(
+    var: &str,
+    default: impl FnOnce() -> T,
+) -> Result<T, Box<dyn std::error::Error>> {
+    Ok(match std::env::var_os(var) {
+        Some(path) => toml::from_str(&std::fs::read_to_string(path)?)?,
+        None => default(),
+    })
 }
