@@ -1,7 +1,8 @@
 //! `tandem reproduce merge` checks what it reads (each record against its folder and its
 //! checksum), merges merged directories again (per node, then across nodes) to the table of
 //! one merge, merges disjoint (seed, method) cells of `--methods` runs to the table of one run,
-//! and refuses a failed study, which `--resume` continues once the cause is gone.
+//! and refuses a failed study, which `--resume` continues once the cause is gone. Each
+//! directory records the build that ran it, and a merge the builds of its parts.
 //! On `p2-cartpole --quick`, the cheapest study.
 
 use std::path::{Path, PathBuf};
@@ -353,5 +354,134 @@ fn disjoint_method_cells_merge_to_the_table_of_one_run() {
     ]);
     fails(&o, &["--methods model_free (the run has with_model)"]);
     assert!(!p("y").exists());
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// Rewrites `dir/config.json` through `edit`.
+fn edit_config(dir: &Path, edit: impl FnOnce(&mut Value)) {
+    let path = dir.join("config.json");
+    let mut config = json(&path);
+    edit(&mut config);
+    std::fs::write(&path, serde_json::to_string_pretty(&config).unwrap()).unwrap();
+}
+
+fn is_commit(c: &Value) -> bool {
+    let c = c.as_str().unwrap();
+    let hex = matches!(c.len(), 40 | 64) && c.bytes().all(|b| b.is_ascii_hexdigit());
+    hex || c == "unknown"
+}
+
+#[test]
+fn a_run_records_its_build_and_directories_without_one_still_merge_and_resume() {
+    let root = root("build");
+    let (s0, s1, s2) = (root.join("s0"), root.join("s1"), root.join("s2"));
+    cartpole(&s0, 1, 0);
+    let build = json(&s0.join("config.json"))["build"].clone();
+    assert!(is_commit(&build["commit"]), "{build}");
+    assert!(build["dirty"].is_boolean(), "{build}");
+    let mujoco = serde_json::json!(["mujoco"]);
+    let features = if cfg!(feature = "mujoco") {
+        mujoco
+    } else {
+        serde_json::json!([])
+    };
+    assert_eq!(build["features"], features);
+    assert!(build.get("resumed_by").is_none(), "{build}");
+
+    // A directory from before builds were recorded merges, with a note.
+    cartpole(&s1, 1, 1);
+    edit_config(&s1, |c| {
+        c.as_object_mut().unwrap().remove("build");
+    });
+    let o = merge(&[&s0, &s1], &root.join("m"));
+    ok(&o);
+    assert!(
+        stderr(&o).contains("1 of 2 merged parts record no build"),
+        "{}",
+        stderr(&o)
+    );
+    let merged = json(&root.join("m/config.json"));
+    let builds = merged["builds"].as_array().unwrap();
+    assert_eq!(builds.len(), 1, "{merged}");
+    assert_eq!(builds[0]["part"], s(&s0));
+    assert_eq!(builds[0]["commit"], build["commit"]);
+    assert!(merged.get("mixed_commits").is_none(), "{merged}");
+    assert_eq!(merged["merged_by"]["commit"], build["commit"]);
+
+    // ... and resumes: what ran it is unrecorded, this build is the resuming one.
+    let resume = |d: &Path| tandem(&["reproduce", "p2-cartpole", "--quiet", "--resume", s(d)]);
+    edit_config(&s1, |c| c["status"] = "interrupted".into());
+    let o = resume(&s1);
+    ok(&o);
+    assert!(stderr(&o).contains("is continued by"), "{}", stderr(&o));
+    let b = json(&s1.join("config.json"))["build"].clone();
+    assert_eq!(b["commit"], "unknown");
+    assert_eq!(b["commit_source"], "unrecorded");
+    assert_eq!(b["resumed_by"][0]["commit"], build["commit"], "{b}");
+
+    // A study of another commit resumed: its build stays first, this one is appended once.
+    cartpole(&s2, 1, 2);
+    let other = "0".repeat(40);
+    edit_config(&s2, |c| {
+        c["status"] = "interrupted".into();
+        c["build"]["commit"] = other.clone().into();
+    });
+    let o = resume(&s2);
+    ok(&o);
+    assert!(
+        stderr(&o).contains("carry the new build's numbers"),
+        "{}",
+        stderr(&o)
+    );
+    let b = json(&s2.join("config.json"))["build"].clone();
+    assert_eq!(b["commit"], other.as_str());
+    assert_eq!(b["resumed_by"].as_array().unwrap().len(), 1, "{b}");
+    assert_eq!(b["resumed_by"][0]["commit"], build["commit"], "{b}");
+    edit_config(&s2, |c| c["status"] = "interrupted".into());
+    let o = resume(&s2);
+    ok(&o);
+    assert!(!stderr(&o).contains("continued by"), "{}", stderr(&o));
+    assert_eq!(json(&s2.join("config.json"))["build"], b);
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+#[test]
+fn parts_of_different_commits_merge_with_a_warning_and_keep_both_builds() {
+    let root = root("commits");
+    let (s0, s1) = (root.join("s0"), root.join("s1"));
+    cartpole(&s0, 1, 0);
+    cartpole(&s1, 1, 1);
+    let p = |n: &str| root.join(n);
+    ok(&merge(&[&s0, &s1], &p("same")));
+    assert!(json(&p("same/config.json")).get("mixed_commits").is_none());
+    let other = "f".repeat(40);
+    edit_config(&s1, |c| c["build"]["commit"] = other.clone().into());
+    let o = merge(&[&s0, &s1], &p("mixed"));
+    ok(&o);
+    assert!(
+        stderr(&o).contains("warning: the merged runs come from 2 commits"),
+        "{}",
+        stderr(&o)
+    );
+    // The builds never make equal settings unequal: the same table as one commit's.
+    for f in ["table.json", "table.md"] {
+        let a = std::fs::read(p("same").join(f)).unwrap();
+        assert!(a == std::fs::read(p("mixed").join(f)).unwrap(), "{f}");
+    }
+    let config = json(&p("mixed/config.json"));
+    let ours = json(&s0.join("config.json"))["build"]["commit"].clone();
+    let commits: Vec<&Value> = config["builds"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| &b["commit"])
+        .collect();
+    assert_eq!(commits, [&ours, &Value::from(other.as_str())]);
+    assert_eq!(config["mixed_commits"], serde_json::json!([ours, other]));
+    // A merge of the merge keeps both, with the parts' directories.
+    ok(&merge(&[&p("mixed")], &p("again")));
+    let again = json(&p("again/config.json"));
+    assert_eq!(again["builds"], config["builds"]);
+    assert_eq!(again["builds"][1]["part"], s(&s1));
     let _ = std::fs::remove_dir_all(&root);
 }

@@ -6,8 +6,10 @@
 //! A [`Study`] says what its settings are, which runs make one seed (grouped into jobs), how one
 //! run goes and what report its records make. [`run`] then writes, in the output directory:
 //!
-//! - `config.json`: the study's name, its settings, the seeds, and how the run stands (`running`,
-//!   `interrupted`, `failed` with its `error`, `complete`) with its wall time;
+//! - `config.json`: the study's name, its settings, the seeds, how the run stands (`running`,
+//!   `interrupted`, `failed` with its `error`, `complete`) with its wall time, and the build
+//!   that ran it ([`Build`]: commit, dirty flag, features; a resume by another build is
+//!   appended to its `resumed_by`);
 //! - `runs/<run>__seed<k>/record.json`, its SHA-256 (`record.json.sha256`, in `sha256sum`'s
 //!   format) and the study's `curve.csv` as soon as a run finishes;
 //! - `state/seed<k>/<job>/`: each unfinished job's checkpoints, removed when the job is done;
@@ -30,6 +32,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use crate::interrupt::{Stop, EXIT_SIGINT};
+use crate::provenance::{self, Build, PartBuild};
 use crate::report::{ensure_finite, to_json_pretty, Curve, Table};
 use crate::run::{Existing, Layout, RunDir};
 use clap::Args;
@@ -235,6 +238,10 @@ pub struct RunConfig<S> {
     pub status: String,
     /// Wall time of the last (or only) process, seconds; absent while running.
     pub wall_seconds: Option<f64>,
+    /// The build that started the study, with those that resumed it; absent in directories
+    /// written before builds were recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub build: Option<Build>,
 }
 
 fn first_study() -> String {
@@ -356,6 +363,12 @@ struct DirConfig<S> {
     wall_seconds: Option<f64>,
     #[serde(default)]
     parts: Vec<Part>,
+    /// A study's build (absent before builds were recorded).
+    #[serde(default)]
+    build: Option<Build>,
+    /// A merge's builds of its parts.
+    #[serde(default)]
+    builds: Vec<PartBuild>,
 }
 
 /// A directory whose process ran seeds: its path (as the merge that read it was given it), first
@@ -391,6 +404,21 @@ impl<S> DirConfig<S> {
                 self.wall_seconds,
             )],
         })
+    }
+
+    /// The builds of [`DirConfig::leaves`] that recorded one.
+    fn leaf_builds(&self, dir: &Path) -> Vec<PartBuild> {
+        match &self.seeds {
+            SeedSet::List(_) if !self.parts.is_empty() => self.builds.clone(),
+            _ => self
+                .build
+                .iter()
+                .map(|b| PartBuild {
+                    part: dir.display().to_string(),
+                    build: b.clone(),
+                })
+                .collect(),
+        }
     }
 }
 
@@ -441,6 +469,7 @@ fn fresh<S: Study>(study: &S, args: &StudyArgs) -> Result<RunConfig<S::Settings>
         jobs: args.jobs,
         status: "running".into(),
         wall_seconds: None,
+        build: Some(Build::current()),
     })
 }
 
@@ -936,6 +965,11 @@ pub fn run<S: Study>(study: &S, args: &StudyArgs) -> Result<()> {
             dir.path().display()
         );
     }
+    if args.resume.is_some() {
+        if let Some(note) = provenance::on_resume(&mut rc.build, Build::current()) {
+            eprintln!("{}: {note}", dir.path().display());
+        }
+    }
     rc.status = "running".into();
     rc.wall_seconds = None;
     write_json(&dir, "config.json", &rc)?;
@@ -1122,8 +1156,17 @@ struct MergeConfig<'a, S> {
     /// The directories whose processes ran the seeds (through merged directories too), by
     /// first seed, with their first seed, seed count and wall time.
     parts: Vec<Part>,
+    /// The builds of the parts that recorded one, in the order of `parts`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    builds: Vec<PartBuild>,
+    /// The commits of `builds` when there are several: the merged numbers are each
+    /// bit-reproducible only at their own.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    mixed_commits: Vec<String>,
     /// The directories this merge read.
     merged: Vec<String>,
+    /// The build that merged them and wrote the report.
+    merged_by: Build,
     /// Sum of the parts' wall times, seconds.
     wall_seconds: f64,
     status: &'static str,
@@ -1190,6 +1233,7 @@ pub fn merge<S: Study>(
     let settings = &first.config;
     let mut seeds: Vec<u64> = Vec::new();
     let mut leaves: Vec<Part> = Vec::new();
+    let mut builds: Vec<PartBuild> = Vec::new();
     let mut stored: Vec<Stored<S::Record>> = Vec::new();
     let mut cells: HashSet<(u64, String)> = HashSet::new();
     for (d, dc) in &parts {
@@ -1229,6 +1273,7 @@ pub fn merge<S: Study>(
         }
         seeds.extend(own);
         leaves.extend(dc.leaves(d)?);
+        builds.extend(dc.leaf_builds(d));
         stored.extend(records);
     }
     seeds.sort_unstable();
@@ -1266,6 +1311,7 @@ pub fn merge<S: Study>(
         order.into_iter().enumerate().map(|(k, c)| (c, k)).collect();
     stored.sort_by_key(|r| rank.get(&(r.seed, r.run.clone())).copied());
     leaves.sort_by(|a, b| (a.1, &a.0).cmp(&(b.1, &b.0)));
+    let mixed_commits = merged_builds(&mut builds, &leaves);
     // Summed in the parts' seed order, so that a merge of merges gives the same number.
     let wall: f64 = leaves.iter().filter_map(|p| p.3).sum();
     let existing = if overwrite {
@@ -1287,7 +1333,10 @@ pub fn merge<S: Study>(
         seeds,
         methods,
         parts: leaves,
+        builds,
+        mixed_commits,
         merged: dirs.iter().map(|d| d.display().to_string()).collect(),
+        merged_by: Build::current(),
         wall_seconds: wall,
         status: "complete",
     };
@@ -1295,6 +1344,54 @@ pub fn merge<S: Study>(
     println!("{md}");
     println!("wrote {}", dir.path().display());
     Ok(())
+}
+
+/// Puts a merge's `builds` in the order of its `leaves` and warns when they are not all of one
+/// commit, or when some parts recorded no build; returns the commits when there are several.
+/// Builds never stop a merge: settings alone decide what merges.
+fn merged_builds(builds: &mut [PartBuild], leaves: &[Part]) -> Vec<String> {
+    let rank = |b: &PartBuild| leaves.iter().position(|l| l.0 == b.part);
+    builds.sort_by_key(rank);
+    let commits = provenance::distinct_commits(builds);
+    if commits.len() > 1 {
+        eprintln!(
+            "warning: the merged runs come from {} commits ({}): each part's numbers are \
+             bit-reproducible only at its own commit; config.json lists them under builds",
+            commits.len(),
+            commits
+                .iter()
+                .map(|c| c.chars().take(12).collect::<String>())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let dirty = builds
+        .iter()
+        .filter(|b| {
+            std::iter::once(&b.build)
+                .chain(&b.build.resumed_by)
+                .any(|b| b.dirty)
+        })
+        .count();
+    if dirty > 0 {
+        eprintln!(
+            "note: {dirty} merged parts ran on a build with uncommitted changes (dirty), which \
+             no commit reproduces"
+        );
+    }
+    let unrecorded = leaves.len().saturating_sub(builds.len());
+    if !builds.is_empty() && unrecorded > 0 {
+        eprintln!(
+            "note: {unrecorded} of {} merged parts record no build (run before builds were \
+             recorded)",
+            leaves.len()
+        );
+    }
+    if commits.len() > 1 {
+        commits
+    } else {
+        Vec::new()
+    }
 }
 
 /// Applies the overrides in `text` (a `--config` file, named `what` in errors) to `base`: the

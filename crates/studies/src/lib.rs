@@ -12,6 +12,7 @@
 //! | [`report`] | tables, comparisons and figures of the reports |
 //! | [`run`] | run directories (no run overwritten by accident), CSV and SVG |
 //! | [`interrupt`] | SIGINT/SIGTERM as a stop request that long runs poll |
+//! | [`provenance`] | the build (git commit, features) a study's `config.json` records |
 //! | [`sweep`] | a study as a SLURM job array of (seed, method) cells and a merge job |
 //!
 //! [`run_study`] and [`merge`] reach every study by its name through one registry, as the
@@ -33,6 +34,8 @@
 //! progress bars, `signal-hook` for [`interrupt`], `thiserror` for [`Error`], and `sha2`
 //! (RustCrypto's, small and widely used) for the records' checksums: SHA-256 rather than the
 //! CRC-32 of the checkpoints, so that `sha256sum -c` checks a committed record without tandem.
+//! The build script (`build.rs`) asks `git` for the commit [`provenance`] records, if git is
+//! there; no crate is needed for it.
 
 #![warn(missing_docs)]
 
@@ -44,6 +47,7 @@ pub mod p2;
 pub mod p3;
 pub mod p4;
 pub mod p4_reacher;
+pub mod provenance;
 pub mod report;
 pub mod run;
 pub mod sweep;
