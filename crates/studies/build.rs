@@ -7,7 +7,7 @@
 // - `TANDEM_BUILD_DIRTY`: `true` when `git status --porcelain --untracked-files=no` lists a
 //   change (or cannot tell), else `false`.
 //
-// It never fails the build. It reruns when HEAD, the branch it points to, the index or a tracked
+// It never fails the build. It reruns when HEAD, the branch it points to or a tracked
 // source file of `crates/` changes (the code the studies' numbers come from), not on every build.
 
 #[path = "../mujoco/build.rs"]
@@ -87,7 +87,9 @@ fn watch(top: &Path) {
             }
         })
     };
-    let mut paths: Vec<PathBuf> = ["HEAD", "index", "packed-refs"]
+    // Not the index: git rewrites it on a mere `git status`, which would rebuild this crate and
+    // the program; the tracked sources below catch the edits that make the tree dirty.
+    let mut paths: Vec<PathBuf> = ["HEAD", "packed-refs"]
         .into_iter()
         .filter_map(git_path)
         .collect();
