@@ -5,6 +5,10 @@
 //! Also (`conv`): each convolution of p2's pixel model (batch 32, forward and backward) through
 //! `tandem_nn::conv` and through candle's own ops.
 //!
+//! Also (`elementwise`): [`tandem_nn::fastmath`]'s vectorized functions beside the standard
+//! library's per-element libm calls over the same 65 536 inputs, and the Gaussian head's forward
+//! pass and loss at one ensemble member's minibatch (256 rows × 18 outputs).
+//!
 //! Run: `cargo bench --bench nn` (medians are what the notes quote).
 
 #![allow(clippy::needless_range_loop)]
@@ -13,8 +17,8 @@ use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use rand::Rng as _;
 use tandem_core::seeding::{rng_from_seed, Rng};
 use tandem_nn::{
-    fill_standard_normal, AdaGrad, AdaGradConfig, Adam, AdamConfig, Mlp, MlpConfig, MlpWorkspace,
-    Optimizer, TanhGaussian, TanhGaussianSample,
+    fastmath, fill_standard_normal, AdaGrad, AdaGradConfig, Adam, AdamConfig, GaussianHead,
+    GaussianOutput, Mlp, MlpConfig, MlpWorkspace, Optimizer, TanhGaussian, TanhGaussianSample,
 };
 
 fn random(n: usize, rng: &mut Rng) -> Vec<f32> {
@@ -582,12 +586,74 @@ fn conv(c: &mut Criterion) {
     group.finish();
 }
 
+/// Each function over 65 536 inputs in [-8, 8]: the vectorized form against libm's, one call per
+/// element, in the same run.
+fn elementwise(c: &mut Criterion) {
+    let mut rng = rng_from_seed(11);
+    let x: Vec<f32> = random(1 << 16, &mut rng).iter().map(|v| 8.0 * v).collect();
+    let mut out = vec![0.0f32; x.len()];
+    let mut group = c.benchmark_group("elementwise");
+    type Pair = (&'static str, fastmath::Function, fn(f32) -> f32);
+    let pairs: [Pair; 5] = [
+        ("exp", fastmath::Function::Exp, f32::exp),
+        ("softplus", fastmath::Function::Softplus, |v| {
+            v.max(0.0) + (-v.abs()).exp().ln_1p()
+        }),
+        ("sigmoid", fastmath::Function::Sigmoid, |v| {
+            1.0 / (1.0 + (-v).exp())
+        }),
+        ("silu", fastmath::Function::Silu, |v| v / (1.0 + (-v).exp())),
+        ("tanh", fastmath::Function::Tanh, f32::tanh),
+    ];
+    // Both sides copy the inputs first, then work in place.
+    for (name, fast, libm) in pairs {
+        group.bench_function(format!("{name} 64k fastmath"), |b| {
+            b.iter(|| {
+                out.copy_from_slice(black_box(&x));
+                fastmath::apply(fast, &mut out);
+            })
+        });
+        group.bench_function(format!("{name} 64k libm"), |b| {
+            b.iter(|| {
+                out.copy_from_slice(black_box(&x));
+                for v in out.iter_mut() {
+                    *v = libm(*v);
+                }
+            })
+        });
+    }
+    let (rows, dim) = (256, 18);
+    let head = GaussianHead::new(dim);
+    let net_out: Vec<f32> = random(rows * 2 * dim, &mut rng)
+        .iter()
+        .map(|v| 3.0 * v)
+        .collect();
+    let target = random(rows * dim, &mut rng);
+    let mut g = GaussianOutput::default();
+    let (mut d_mean, mut d_lv) = (vec![0.0; rows * dim], vec![0.0; rows * dim]);
+    group.bench_function("gaussian head forward + nll 256x18", |b| {
+        b.iter(|| {
+            head.forward(black_box(&net_out), rows, &mut g).unwrap();
+            tandem_nn::gaussian_nll(
+                &g.mean,
+                &g.log_var,
+                &target,
+                Some(&mut d_mean),
+                Some(&mut d_lv),
+            )
+            .unwrap()
+        })
+    });
+    group.finish();
+}
+
 criterion_group!(
     benches,
     critic_update,
     dynamics_step,
     actor_forward,
     sac_update,
-    conv
+    conv,
+    elementwise
 );
 criterion_main!(benches);

@@ -11,7 +11,7 @@ use tandem_core::seeding::SeedStream;
 use tandem_core::Rng;
 use tandem_nn::budget::{widths, MemoryEstimate};
 use tandem_nn::{
-    gaussian_nll, map_side_by_side, Activation, Checkpoint, Checkpointable, GaussianHead,
+    fastmath, gaussian_nll, map_side_by_side, Activation, Checkpoint, Checkpointable, GaussianHead,
     GaussianOutput, Mlp, MlpConfig, MlpWorkspace, NnError, RowBlock, RowDealer,
 };
 
@@ -390,7 +390,8 @@ impl ProbabilisticEnsemble {
 }
 
 /// Reusable buffers of one elite slot's batched inference: its row indices, its gathered inputs
-/// (when the rows are assigned to elites) and its standardized means and log-variances.
+/// (when the rows are assigned to elites) and its standardized means and log-variances (which
+/// `predict` turns into variances in place, in one vectorized pass).
 #[derive(Debug, Default)]
 struct SlotScratch {
     rows: Vec<usize>,
@@ -536,30 +537,30 @@ struct FitScratch {
     grads: Vec<f32>,
 }
 
-/// Held-out `(nll per element, mse per element)` of one member.
+/// Held-out `(nll per element, mse per element)` of one member, in the buffers of its training
+/// steps (a fresh workspace for each epoch's evaluation cost page faults).
 fn member_eval(
     m: &Member,
     data: &FitRows,
     idx: &[usize],
+    sc: &mut FitScratch,
 ) -> Result<(f64, f64), tandem_nn::NnError> {
     if idx.is_empty() {
         return Ok((f64::NAN, f64::NAN));
     }
-    let (mut xb, mut yb) = (Vec::new(), Vec::new());
-    let mut ws = m.net.workspace();
-    let mut g = GaussianOutput::default();
+    let FitScratch { ws, xb, yb, g, .. } = sc;
     let (mut nll, mut mse) = (0.0, 0.0);
     for chunk in idx.chunks(1024) {
-        data.gather_inputs(chunk, &mut xb);
-        data.gather_targets(chunk, &mut yb);
-        let out = m.net.forward(&xb, chunk.len(), &mut ws)?;
-        m.head.predict(out, chunk.len(), &mut g)?;
-        let l = gaussian_nll(&g.mean, &g.log_var, &yb, None, None)?;
+        data.gather_inputs(chunk, xb);
+        data.gather_targets(chunk, yb);
+        let out = m.net.forward(xb, chunk.len(), ws)?;
+        m.head.predict(out, chunk.len(), g)?;
+        let l = gaussian_nll(&g.mean, &g.log_var, yb, None, None)?;
         nll += f64::from(l) * chunk.len() as f64;
         mse += g
             .mean
             .iter()
-            .zip(&yb)
+            .zip(yb.iter())
             .map(|(p, t)| f64::from((p - t) * (p - t)))
             .sum::<f64>()
             / data.dout as f64;
@@ -595,6 +596,9 @@ impl DynamicsModel for ProbabilisticEnsemble {
         match input.propagation.unwrap_or(self.propagation) {
             Propagation::Expectation => {
                 self.elite_forwards(&x, b, None, bufs)?;
+                for sc in &mut bufs.slots[..e] {
+                    fastmath::apply(fastmath::Function::Exp, &mut sc.log_var);
+                }
                 // Mixture moments in original units.
                 let mut mean_acc = Array2::<f64>::zeros((b, dim));
                 let mut sq_acc = Array2::<f64>::zeros((b, dim));
@@ -604,7 +608,7 @@ impl DynamicsModel for ProbabilisticEnsemble {
                         for j in 0..dim {
                             let mu = self.learned.targets.invert(j, sc.mean[r * dim + j]);
                             let sd = self.learned.targets.std[j];
-                            let v = f64::from(sc.log_var[r * dim + j]).exp() * sd * sd;
+                            let v = f64::from(sc.log_var[r * dim + j]) * sd * sd;
                             mean_acc[[r, j]] += mu;
                             sq_acc[[r, j]] += mu * mu;
                             var_acc[[r, j]] += v;
@@ -632,6 +636,9 @@ impl DynamicsModel for ProbabilisticEnsemble {
                     _ => (0..b).map(|r| (r + self.member_offset) % e).collect(),
                 };
                 self.elite_forwards(&x, b, Some(&assign), bufs)?;
+                for sc in &mut bufs.slots[..e] {
+                    fastmath::apply(fastmath::Function::Exp, &mut sc.log_var);
+                }
                 // Noise is drawn elite by elite, rows in order: the same stream whatever ran in
                 // parallel.
                 for sc in &bufs.slots[..e] {
@@ -639,7 +646,7 @@ impl DynamicsModel for ProbabilisticEnsemble {
                         for j in 0..dim {
                             let mu = self.learned.targets.invert(j, sc.mean[q * dim + j]);
                             let sd = self.learned.targets.std[j];
-                            let v = f64::from(sc.log_var[q * dim + j]).exp() * sd * sd;
+                            let v = f64::from(sc.log_var[q * dim + j]) * sd * sd;
                             if j < s {
                                 let noise: f64 = if self.cfg.sample {
                                     StandardNormal.sample(rng)
@@ -796,7 +803,8 @@ fn train_members(
         if data.holdout.is_empty() {
             return Ok((train_nll, None));
         }
-        let (nll, mse) = member_eval(m, data, &data.holdout).map_err(|e| nn_train(e, epoch, 0))?;
+        let (nll, mse) =
+            member_eval(m, data, &data.holdout, sc).map_err(|e| nn_train(e, epoch, 0))?;
         if !nll.is_finite() {
             return Err(ModelError::Diverged { epoch, step: 0 });
         }
@@ -840,8 +848,11 @@ fn train_members(
     }
     // Elites: lowest held-out MSE (training MSE without a holdout).
     if data.holdout.is_empty() {
+        let mut sc = FitScratch::default();
         for (k, m) in members.iter().enumerate() {
-            hold_mse[k] = member_eval(m, data, &data.train).map_err(nn_other)?.1;
+            hold_mse[k] = member_eval(m, data, &data.train, &mut sc)
+                .map_err(nn_other)?
+                .1;
         }
     }
     let mut order: Vec<usize> = (0..members.len()).collect();

@@ -16,9 +16,11 @@ use rand_distr::{Distribution as _, StandardNormal};
 use tandem_core::seeding::Rng;
 
 use crate::error::{check_finite, check_len, NnError, Result};
-use crate::mlp::sigmoid;
+use crate::fastmath;
+use crate::simd::multiversion;
 
-/// `ln(1 + e^x)`, stable for any `x`.
+/// `ln(1 + e^x)`, stable for any `x`, through libm (SAC's log-probabilities; batched kernels use
+/// [`fastmath::softplus`]).
 #[inline]
 pub fn softplus(x: f32) -> f32 {
     x.max(0.0) + (-x.abs()).exp().ln_1p()
@@ -138,21 +140,15 @@ impl GaussianHead {
         out.dim = d;
         out.differentiable = true;
         let (lo, hi) = self.bounds.split_at(d);
-        for r in 0..batch {
-            let row = &net_out[r * 2 * d..(r + 1) * 2 * d];
-            out.mean[r * d..(r + 1) * d].copy_from_slice(&row[..d]);
-            for j in 0..d {
-                let raw = row[d + j];
-                let t = hi[j] - raw;
-                let l1 = hi[j] - softplus(t);
-                let s2 = l1 - lo[j];
-                let lv = lo[j] + softplus(s2);
-                let (st, ss) = (sigmoid(t), sigmoid(s2));
-                out.log_var[r * d + j] = lv;
-                out.dlv_draw[r * d + j] = ss * st;
-                out.dlv_dmin[r * d + j] = 1.0 - ss;
-            }
-        }
+        bound_log_var_with_derivatives(
+            net_out,
+            lo,
+            hi,
+            &mut out.mean,
+            &mut out.log_var,
+            &mut out.dlv_draw,
+            &mut out.dlv_dmin,
+        );
         check_finite("gaussian head log-variance", &out.log_var)
     }
 
@@ -169,17 +165,7 @@ impl GaussianHead {
         out.dim = d;
         out.differentiable = false;
         let (lo, hi) = self.bounds.split_at(d);
-        for (r, row) in net_out.chunks_exact(2 * d).enumerate() {
-            out.mean[r * d..(r + 1) * d].copy_from_slice(&row[..d]);
-            for (j, (lv, raw)) in out.log_var[r * d..(r + 1) * d]
-                .iter_mut()
-                .zip(&row[d..])
-                .enumerate()
-            {
-                let l1 = hi[j] - softplus(hi[j] - raw);
-                *lv = lo[j] + softplus(l1 - lo[j]);
-            }
-        }
+        bound_log_var(net_out, lo, hi, &mut out.mean, &mut out.log_var);
         check_finite("gaussian head log-variance", &out.log_var)
     }
 
@@ -226,6 +212,84 @@ impl GaussianHead {
             }
         }
         Ok(())
+    }
+}
+
+/// `f(x, lo[j], hi[j])` for every element of `x` (rows of `lo.len()` values): the per-column
+/// steps between the vectorized passes over whole buffers in the Gaussian head (a loop over one
+/// row's few values would leave much of it to the scalar tail).
+#[inline(always)]
+fn by_column(x: &mut [f32], lo: &[f32], hi: &[f32], f: impl Fn(f32, f32, f32) -> f32) {
+    for row in x.chunks_exact_mut(lo.len()) {
+        for ((v, lo), hi) in row.iter_mut().zip(lo).zip(hi) {
+            *v = f(*v, *lo, *hi);
+        }
+    }
+}
+
+/// Splits `net_out` (rows of `[mean | raw]`) into `mean` and `t = max - raw` in `log_var`.
+#[inline(always)]
+fn split_head(net_out: &[f32], hi: &[f32], mean: &mut [f32], log_var: &mut [f32]) {
+    let d = hi.len();
+    for ((row, m), t) in net_out
+        .chunks_exact(2 * d)
+        .zip(mean.chunks_exact_mut(d))
+        .zip(log_var.chunks_exact_mut(d))
+    {
+        m.copy_from_slice(&row[..d]);
+        for ((t, raw), hi) in t.iter_mut().zip(&row[d..]).zip(hi) {
+            *t = hi - raw;
+        }
+    }
+}
+
+multiversion! {
+    /// The means and bounded log-variances of [`GaussianHead::predict`]: `lv = min + softplus(max -
+    /// softplus(max - raw) - min)`, each softplus one pass over the whole batch.
+    fn bound_log_var(
+        net_out: &[f32],
+        lo: &[f32],
+        hi: &[f32],
+        mean: &mut [f32],
+        log_var: &mut [f32],
+    ) {
+        split_head(net_out, hi, mean, log_var);
+        for v in log_var.iter_mut() {
+            *v = fastmath::softplus(*v);
+        }
+        by_column(log_var, lo, hi, |sp, lo, hi| (hi - sp) - lo);
+        for v in log_var.iter_mut() {
+            *v = fastmath::softplus(*v);
+        }
+        by_column(log_var, lo, hi, |sp, lo, _| lo + sp);
+    }
+}
+
+multiversion! {
+    /// [`bound_log_var`] (the same bits) with the derivatives [`GaussianHead::backward`] needs:
+    /// `∂lv/∂raw = σ(s2)σ(t)` and `∂lv/∂min = 1 - σ(s2)`, `t = max - raw`, `s2 = max -
+    /// softplus(t) - min`.
+    fn bound_log_var_with_derivatives(
+        net_out: &[f32],
+        lo: &[f32],
+        hi: &[f32],
+        mean: &mut [f32],
+        log_var: &mut [f32],
+        dlv_draw: &mut [f32],
+        dlv_dmin: &mut [f32],
+    ) {
+        split_head(net_out, hi, mean, log_var);
+        for (v, st) in log_var.iter_mut().zip(dlv_draw.iter_mut()) {
+            (*v, *st) = fastmath::softplus_and_sigmoid(*v);
+        }
+        by_column(log_var, lo, hi, |sp, lo, hi| (hi - sp) - lo);
+        for ((v, dr), dm) in log_var.iter_mut().zip(dlv_draw.iter_mut()).zip(dlv_dmin.iter_mut()) {
+            let (sp, ss) = fastmath::softplus_and_sigmoid(*v);
+            *v = sp;
+            *dr *= ss;
+            *dm = 1.0 - ss;
+        }
+        by_column(log_var, lo, hi, |sp, lo, _| lo + sp);
     }
 }
 

@@ -3,8 +3,10 @@
 //! `grad` with `dloss/dprediction`. A non-finite loss is an error.
 
 use crate::error::{check_finite_scalar, check_len, NnError, Result};
+use crate::fastmath;
 use crate::heads::softplus;
 use crate::mlp::sigmoid;
+use crate::simd::multiversion;
 
 fn check_pair(what: &str, pred: &[f32], target: &[f32], grad: Option<&[f32]>) -> Result<()> {
     check_len(&format!("{what} target"), pred.len(), target.len())?;
@@ -99,27 +101,67 @@ pub fn gaussian_nll(
     if let Some(d) = d_log_var.as_deref() {
         check_len("gaussian nll log_var gradient", mean.len(), d.len())?;
     }
-    let n = mean.len() as f32;
     let ln2pi = (2.0 * std::f64::consts::PI).ln();
-    let mut s = 0.0f64;
-    for ((m, lv), y) in mean.iter().zip(log_var).zip(target) {
-        let d = f64::from(y - m);
-        let lv = f64::from(*lv);
-        s += 0.5 * (d * d * (-lv).exp() + lv + ln2pi);
-    }
-    let loss = check_finite_scalar("gaussian nll loss", (s / mean.len() as f64) as f32)?;
-    if let Some(g) = d_mean {
-        for (((g, m), lv), y) in g.iter_mut().zip(mean).zip(log_var).zip(target) {
-            *g = (m - y) * (-lv).exp() / n;
-        }
-    }
-    if let Some(g) = d_log_var {
-        for (((g, m), lv), y) in g.iter_mut().zip(mean).zip(log_var).zip(target) {
-            let d = y - m;
-            *g = 0.5 * (1.0 - d * d * (-lv).exp()) / n;
-        }
-    }
+    let sum = gaussian_nll_pass(
+        mean,
+        log_var,
+        target,
+        d_mean.unwrap_or(&mut []),
+        d_log_var.unwrap_or(&mut []),
+    );
+    let loss = check_finite_scalar(
+        "gaussian nll loss",
+        (0.5 * (sum / mean.len() as f64 + ln2pi)) as f32,
+    )?;
     Ok(loss)
+}
+
+/// Elements per block of [`gaussian_nll_pass`]: its per-element terms wait on the stack for the
+/// f64 sum, which runs in order (a vectorized sum would reassociate it).
+const NLL_BLOCK: usize = 256;
+
+multiversion! {
+    /// `Σ (y - m)² e^{-lv} + lv` over the elements, in f64, and into each non-empty gradient
+    /// buffer the mean's `(m - y) e^{-lv} / n` or the log-variance's `(1 - (y - m)² e^{-lv}) / 2n`
+    /// (`n` elements): one `exp` per element serves all three.
+    fn gaussian_nll_pass(
+        mean: &[f32],
+        log_var: &[f32],
+        target: &[f32],
+        d_mean: &mut [f32],
+        d_log_var: &mut [f32],
+    ) -> f64 {
+        let n = mean.len() as f32;
+        let mut total = 0.0f64;
+        let (mut terms, mut inv_var) = ([0.0f32; NLL_BLOCK], [0.0f32; NLL_BLOCK]);
+        for (start, (m, lv)) in mean.chunks(NLL_BLOCK).zip(log_var.chunks(NLL_BLOCK)).enumerate() {
+            let start = start * NLL_BLOCK;
+            let y = &target[start..start + m.len()];
+            let terms = &mut terms[..m.len()];
+            let inv_var = &mut inv_var[..m.len()];
+            let pairs = terms.iter_mut().zip(inv_var.iter_mut());
+            for ((((q, iv), m), lv), y) in pairs.zip(m).zip(lv).zip(y) {
+                let d = y - m;
+                *iv = fastmath::exp(-lv);
+                *q = d * d * *iv + lv;
+            }
+            if let Some(g) = d_mean.get_mut(start..start + m.len()) {
+                for (((g, m), iv), y) in g.iter_mut().zip(m).zip(inv_var.iter()).zip(y) {
+                    *g = (m - y) * iv / n;
+                }
+            }
+            if let Some(g) = d_log_var.get_mut(start..start + m.len()) {
+                for (((g, m), iv), y) in g.iter_mut().zip(m).zip(inv_var.iter()).zip(y) {
+                    let d = y - m;
+                    *g = 0.5 * (1.0 - d * d * iv) / n;
+                }
+            }
+            for q in terms.iter() {
+                total += f64::from(*q);
+            }
+        }
+        total
+    }
 }
 
 #[cfg(test)]

@@ -57,12 +57,13 @@ impl Activation {
                     fastmath::exp_m1(x)
                 }
             }
-            Activation::Silu => x * fastmath::sigmoid(x),
+            Activation::Silu => fastmath::silu(x),
         }
     }
 
-    /// Whether the derivative needs the pre-activation `z` (only SiLU); the others use `y`.
-    fn needs_pre(self) -> bool {
+    /// Whether the derivative needs `σ(z)` kept from the forward pass (only SiLU's: `σ + y(1 -
+    /// σ)`); the others' derivatives are functions of `y`.
+    fn keeps_sigmoid(self) -> bool {
         matches!(self, Activation::Silu)
     }
 }
@@ -224,7 +225,7 @@ pub struct LayerShape {
     pub bias_offset: usize,
 }
 
-/// One layer's output rows and, when kept, its pre-activations.
+/// One layer's output rows and, when kept, SiLU's `σ(z)`.
 type LayerOut<'a> = (&'a mut [f32], Option<&'a mut [f32]>);
 
 /// A multilayer perceptron with flat `f32` parameters and hand-derived gradients.
@@ -474,8 +475,8 @@ impl Mlp {
                 let n = batch * s.fan_out;
                 buf.dropped = false;
                 let (y1, y2) = buf.y[..n].split_at_mut(h * s.fan_out);
-                let (z1, z2) = if train && self.activation(l).needs_pre() {
-                    let (z1, z2) = buf.z[..n].split_at_mut(h * s.fan_out);
+                let (z1, z2) = if train && self.activation(l).keeps_sigmoid() {
+                    let (z1, z2) = buf.sig[..n].split_at_mut(h * s.fan_out);
                     (Some(z1), Some(z2))
                 } else {
                     (None, None)
@@ -500,8 +501,8 @@ impl Mlp {
                     prev[l - 1].input_of_next()
                 };
                 let n = batch * s.fan_out;
-                let z = (train && self.activation(l).needs_pre()).then(|| &mut cur.z[..n]);
-                self.layer_forward(l, batch, &x[..batch * s.fan_in], &mut cur.y[..n], z);
+                let sig = (train && self.activation(l).keeps_sigmoid()).then(|| &mut cur.sig[..n]);
+                self.layer_forward(l, batch, &x[..batch * s.fan_in], &mut cur.y[..n], sig);
                 cur.dropped = false;
                 if l + 1 < n_layers && dropout.active() {
                     let r = rng.as_deref_mut().expect("dropout active only with an rng");
@@ -524,21 +525,21 @@ impl Mlp {
         Ok(())
     }
 
-    /// Layer `l` over `rows` rows without dropout: `y = act(x Wᵀ + b)`, keeping `z = x Wᵀ + b`
-    /// when given.
+    /// Layer `l` over `rows` rows without dropout: `y = act(x Wᵀ + b)`, keeping SiLU's
+    /// `σ(x Wᵀ + b)` when given.
     fn layer_forward(
         &self,
         l: usize,
         rows: usize,
         x: &[f32],
         y: &mut [f32],
-        z: Option<&mut [f32]>,
+        sig: Option<&mut [f32]>,
     ) {
         let s = self.layers[l];
         let b = &self.params[s.bias_offset..s.bias_offset + s.fan_out];
         let w = &self.params[s.weight_offset..s.bias_offset];
         gemm_nt(rows, s.fan_out, s.fan_in, x, w, y, false);
-        bias_activation(y, b, self.activation(l), z);
+        bias_activation(y, b, self.activation(l), sig);
     }
 
     /// Inference over one block of `rows` rows (`input` and `out` row-major) with the activations
@@ -597,13 +598,13 @@ impl Mlp {
         }
     }
 
-    /// All layers over one block of `rows` rows, each writing its `(y, z)` of `bufs`.
+    /// All layers over one block of `rows` rows, each writing its `(y, σ)` of `bufs`.
     fn layers_forward(&self, rows: usize, input: &[f32], bufs: &mut [LayerOut<'_>]) {
         for l in 0..bufs.len() {
             let (prev, rest) = bufs.split_at_mut(l);
             let x: &[f32] = if l == 0 { input } else { prev[l - 1].0 };
-            let (y, z) = &mut rest[0];
-            self.layer_forward(l, rows, x, y, z.as_deref_mut());
+            let (y, sig) = &mut rest[0];
+            self.layer_forward(l, rows, x, y, sig.as_deref_mut());
         }
     }
 
@@ -699,8 +700,12 @@ impl Mlp {
                 }
                 let act = self.activation(l);
                 if act != Activation::Identity {
-                    let z: &[f32] = if act.needs_pre() { &cur.z[..n] } else { &[] };
-                    activation_backward(act, g, &cur.y[..n], z, &mut g_c[..n]);
+                    let sig: &[f32] = if act.keeps_sigmoid() {
+                        &cur.sig[..n]
+                    } else {
+                        &[]
+                    };
+                    activation_backward(act, g, &cur.y[..n], sig, &mut g_c[..n]);
                     std::mem::swap(g_a, g_c);
                 }
             }
@@ -779,7 +784,7 @@ macro_rules! by_activation {
             Activation::Tanh => $each!(fastmath::tanh),
             Activation::Sigmoid => $each!(fastmath::sigmoid),
             Activation::Elu => $each!(|v: f32| if v > 0.0 { v } else { fastmath::exp_m1(v) }),
-            Activation::Silu => $each!(|v: f32| v * fastmath::sigmoid(v)),
+            Activation::Silu => $each!(fastmath::silu),
         }
     };
 }
@@ -802,26 +807,17 @@ multiversion! {
 }
 
 multiversion! {
-    /// `y[r, :] = act(y[r, :] + b)`, keeping `z = y + b` when asked (SiLU's backward needs it).
-    fn bias_activation(y: &mut [f32], b: &[f32], act: Activation, z: Option<&mut [f32]>) {
+    /// `y[r, :] = act(y[r, :] + b)`; with `sig`, the activation is SiLU and `sig` keeps `σ(y + b)`
+    /// for the backward pass (from the same `exp` as the output).
+    fn bias_activation(y: &mut [f32], b: &[f32], act: Activation, sig: Option<&mut [f32]>) {
         let width = b.len();
-        if let Some(z) = z {
-            // Bias first (keeping z), then the activation over the whole block.
-            for (yr, zr) in y.chunks_exact_mut(width).zip(z.chunks_exact_mut(width)) {
-                for ((yv, zv), bv) in yr.iter_mut().zip(zr.iter_mut()).zip(b) {
-                    let v = *yv + bv;
-                    *zv = v;
-                    *yv = v;
+        if let Some(sig) = sig {
+            debug_assert_eq!(act, Activation::Silu);
+            for (yr, sr) in y.chunks_exact_mut(width).zip(sig.chunks_exact_mut(width)) {
+                for ((yv, sv), bv) in yr.iter_mut().zip(sr.iter_mut()).zip(b) {
+                    (*yv, *sv) = fastmath::silu_and_sigmoid(*yv + bv);
                 }
             }
-            macro_rules! all {
-                ($f:expr) => {
-                    for yv in y.iter_mut() {
-                        *yv = $f(*yv);
-                    }
-                };
-            }
-            by_activation!(act, all);
             return;
         }
         macro_rules! rows {
@@ -838,10 +834,10 @@ multiversion! {
 }
 
 multiversion! {
-    /// `out = g · act'(z)`, using the output `y = act(z)` where possible (not called for the
+    /// `out = g · act'(z)` from the output `y = act(z)` (and SiLU's kept `σ(z)`; not called for the
     /// identity). Writes a separate buffer with selects, not in-place conditional stores: those
     /// compile to masked stores, which are slow on AMD cores.
-    fn activation_backward(act: Activation, g: &[f32], y: &[f32], z: &[f32], out: &mut [f32]) {
+    fn activation_backward(act: Activation, g: &[f32], y: &[f32], sig: &[f32], out: &mut [f32]) {
         match act {
             Activation::Identity => out.copy_from_slice(g),
             Activation::Relu => {
@@ -865,9 +861,9 @@ multiversion! {
                 }
             }
             Activation::Silu => {
-                for ((o, gv), zv) in out.iter_mut().zip(g).zip(z) {
-                    let s = fastmath::sigmoid(*zv);
-                    *o = gv * (s * (1.0 + zv * (1.0 - s)));
+                // d(zσ)/dz = σ + zσ(1 - σ) = σ + y(1 - σ).
+                for (((o, gv), yv), s) in out.iter_mut().zip(g).zip(y).zip(sig) {
+                    *o = gv * (s + yv * (1.0 - s));
                 }
             }
         }
@@ -1016,8 +1012,8 @@ struct Tape {
 struct LayerBuf {
     /// Post-activation output (before dropout).
     y: Vec<f32>,
-    /// Pre-activation (kept only when the derivative needs it).
-    z: Vec<f32>,
+    /// SiLU's `σ(z)`, kept for the backward pass in training.
+    sig: Vec<f32>,
     /// Post-dropout output (only when `dropped`).
     h: Vec<f32>,
     /// Dropout mask: 0 or 1/keep.
@@ -1079,8 +1075,8 @@ impl MlpWorkspace {
             widest = widest.max(s.fan_out);
             let buf = &mut self.layers[l];
             grow(&mut buf.y, n);
-            if net.activation(l).needs_pre() {
-                grow(&mut buf.z, n);
+            if net.activation(l).keeps_sigmoid() {
+                grow(&mut buf.sig, n);
             }
             if l < last && net.config.dropout > 0.0 {
                 grow(&mut buf.h, n);
@@ -1246,7 +1242,7 @@ mod tests {
 
     /// The bias-and-activation kernels (wide copies, whole-block or per-row loops) give exactly
     /// `act(y + b)` of the scalar [`Activation::apply`], element by element, for every
-    /// activation and for widths that leave vector tails, with and without keeping `z`.
+    /// activation and for widths that leave vector tails, with and without keeping SiLU's `σ`.
     #[test]
     fn bias_activation_kernels_give_the_bits_of_the_scalar_activation() {
         let mut rng = rng_from_seed(8);
@@ -1281,10 +1277,16 @@ mod tests {
                 let mut y = y0.clone();
                 bias_activation(&mut y, &b, act, None);
                 same("row-major", &y);
-                let mut y = y0.clone();
-                let mut z = vec![0.0; y.len()];
-                bias_activation(&mut y, &b, act, Some(&mut z));
-                same("row-major keeping z", &y);
+                if act == Activation::Silu {
+                    let mut y = y0.clone();
+                    let mut sig = vec![0.0; y.len()];
+                    bias_activation(&mut y, &b, act, Some(&mut sig));
+                    same("row-major keeping σ", &y);
+                    for (i, (s, v)) in sig.iter().zip(&y0).enumerate() {
+                        let want = fastmath::sigmoid(std::hint::black_box(v + b[i % width]));
+                        assert_eq!(s.to_bits(), want.to_bits(), "σ {rows}x{width} [{i}]");
+                    }
+                }
                 // Feature-major: the transpose, bias per row.
                 let mut yt = vec![0.0; y0.len()];
                 for r in 0..rows {
