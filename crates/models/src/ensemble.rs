@@ -305,7 +305,7 @@ impl ProbabilisticEnsemble {
 
     /// Runs every elite on its rows of the standardized inputs `x` (`b` rows of `din`): elite
     /// slot `i` (member `self.elites[i]`) takes the rows `assign` gives it (all rows when `assign`
-    /// is `None`), its standardized means and log-variances left in `bufs.slots[i]` with its row
+    /// is `None`), its standardized means and variances left in `bufs.slots[i]` with its row
     /// indices. When the work is large enough to pay for it, the slots' rows are dealt in equal
     /// blocks to as many groups as rayon's pool has threads ([`RowDealer`]), run side by side
     /// (one elite per thread left one of two threads idle a third of the pass with five elites).
@@ -357,7 +357,10 @@ impl ProbabilisticEnsemble {
             let out = m
                 .net
                 .forward(&input[bl.start * din..bl.end * din], rows, &mut bufs.ws)?;
-            m.head.predict(out, rows, &mut bufs.g)
+            m.head.predict(out, rows, &mut bufs.g)?;
+            // Variances from log-variances, in place, while the block is hot.
+            fastmath::apply(fastmath::Function::Exp, &mut bufs.g.log_var);
+            Ok(())
         };
         dealer.run(&run).map_err(nn_other)?;
         let blocks = dealer.blocks_mut();
@@ -372,14 +375,14 @@ impl ProbabilisticEnsemble {
             match &mut blocks[first..k] {
                 [one] => {
                     std::mem::swap(&mut sc.mean, &mut one.bufs.g.mean);
-                    std::mem::swap(&mut sc.log_var, &mut one.bufs.g.log_var);
+                    std::mem::swap(&mut sc.var, &mut one.bufs.g.log_var);
                 }
                 several => {
                     sc.mean.clear();
-                    sc.log_var.clear();
+                    sc.var.clear();
                     for bl in several {
                         sc.mean.extend_from_slice(&bl.bufs.g.mean);
-                        sc.log_var.extend_from_slice(&bl.bufs.g.log_var);
+                        sc.var.extend_from_slice(&bl.bufs.g.log_var);
                     }
                 }
             }
@@ -390,14 +393,13 @@ impl ProbabilisticEnsemble {
 }
 
 /// Reusable buffers of one elite slot's batched inference: its row indices, its gathered inputs
-/// (when the rows are assigned to elites) and its standardized means and log-variances (which
-/// `predict` turns into variances in place, in one vectorized pass).
+/// (when the rows are assigned to elites) and its standardized means and variances.
 #[derive(Debug, Default)]
 struct SlotScratch {
     rows: Vec<usize>,
     x: Vec<f32>,
     mean: Vec<f32>,
-    log_var: Vec<f32>,
+    var: Vec<f32>,
 }
 
 /// Reusable buffers of one block of a slot's rows: the network's workspace and the Gaussian
@@ -596,9 +598,6 @@ impl DynamicsModel for ProbabilisticEnsemble {
         match input.propagation.unwrap_or(self.propagation) {
             Propagation::Expectation => {
                 self.elite_forwards(&x, b, None, bufs)?;
-                for sc in &mut bufs.slots[..e] {
-                    fastmath::apply(fastmath::Function::Exp, &mut sc.log_var);
-                }
                 // Mixture moments in original units.
                 let mut mean_acc = Array2::<f64>::zeros((b, dim));
                 let mut sq_acc = Array2::<f64>::zeros((b, dim));
@@ -608,7 +607,7 @@ impl DynamicsModel for ProbabilisticEnsemble {
                         for j in 0..dim {
                             let mu = self.learned.targets.invert(j, sc.mean[r * dim + j]);
                             let sd = self.learned.targets.std[j];
-                            let v = f64::from(sc.log_var[r * dim + j]) * sd * sd;
+                            let v = f64::from(sc.var[r * dim + j]) * sd * sd;
                             mean_acc[[r, j]] += mu;
                             sq_acc[[r, j]] += mu * mu;
                             var_acc[[r, j]] += v;
@@ -636,9 +635,6 @@ impl DynamicsModel for ProbabilisticEnsemble {
                     _ => (0..b).map(|r| (r + self.member_offset) % e).collect(),
                 };
                 self.elite_forwards(&x, b, Some(&assign), bufs)?;
-                for sc in &mut bufs.slots[..e] {
-                    fastmath::apply(fastmath::Function::Exp, &mut sc.log_var);
-                }
                 // Noise is drawn elite by elite, rows in order: the same stream whatever ran in
                 // parallel.
                 for sc in &bufs.slots[..e] {
@@ -646,7 +642,7 @@ impl DynamicsModel for ProbabilisticEnsemble {
                         for j in 0..dim {
                             let mu = self.learned.targets.invert(j, sc.mean[q * dim + j]);
                             let sd = self.learned.targets.std[j];
-                            let v = f64::from(sc.log_var[q * dim + j]) * sd * sd;
+                            let v = f64::from(sc.var[q * dim + j]) * sd * sd;
                             if j < s {
                                 let noise: f64 = if self.cfg.sample {
                                     StandardNormal.sample(rng)

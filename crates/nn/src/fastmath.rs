@@ -171,23 +171,46 @@ pub fn softplus(x: f32) -> f32 {
     softplus_and_sigmoid(x).0
 }
 
+/// What the logistic functions share: `e^-|x| = m·scale` ([`exp_parts`]), `r = 1/(1 + e^-|x|)`
+/// and the logistic function itself, `r` or `e^-|x|·r` by the sign of `x`. One piece, so that
+/// every form of the logistic function here has the same bits.
+struct Logistic {
+    m: f32,
+    scale: f32,
+    e: f32,
+    r: f32,
+    sigmoid: f32,
+}
+
+#[inline(always)]
+fn logistic(x: f32) -> Logistic {
+    let (m, scale) = exp_parts_nonpositive(-x.abs());
+    let e = m * scale;
+    let r = 1.0 / (1.0 + e);
+    let sigmoid = if x >= 0.0 { r } else { e * r };
+    Logistic {
+        m,
+        scale,
+        e,
+        r,
+        sigmoid,
+    }
+}
+
 /// `(ln(1 + e^x), 1/(1 + e^-x))` from one `exp(-|x|)`: the softplus and its derivative, the
 /// logistic function.
 #[inline(always)]
 pub fn softplus_and_sigmoid(x: f32) -> (f32, f32) {
-    let (m, scale) = exp_parts_nonpositive(-x.abs());
-    let e = m * scale;
-    let s = 1.0 / (1.0 + e);
+    let l = logistic(x);
     // `max` ignores a NaN; the `ln_1p` term carries it.
-    (x.max(0.0) + ln_1p(e), if x >= 0.0 { s } else { e * s })
+    (x.max(0.0) + ln_1p(l.e), l.sigmoid)
 }
 
 /// The logistic function `1 / (1 + e^-x)`, from `e^-|x|` so that it is accurate for negative `x`
 /// too (where it is `e^x / (1 + e^x)`).
 #[inline(always)]
 pub fn sigmoid(x: f32) -> f32 {
-    // The unused softplus is dead code once inlined.
-    softplus_and_sigmoid(x).1
+    logistic(x).sigmoid
 }
 
 /// `x · sigmoid(x)` (SiLU, swish).
@@ -201,19 +224,17 @@ pub fn silu(x: f32) -> f32 {
 /// subnormal range round once.
 #[inline(always)]
 pub fn silu_and_sigmoid(x: f32) -> (f32, f32) {
-    let (m, scale) = exp_parts_nonpositive(-x.abs());
-    let e = m * scale;
-    let r = 1.0 / (1.0 + e);
-    let xr = x * r;
+    let l = logistic(x);
+    let xr = x * l.r;
     let silu = if x >= 0.0 {
         xr
     } else if x < -111.0 {
         // Below about -110, x e^x rounds to -0 (the clamp inside `exp_parts` would not).
         -0.0
     } else {
-        xr * m * scale
+        xr * l.m * l.scale
     };
-    (silu, if x >= 0.0 { r } else { e * r })
+    (silu, l.sigmoid)
 }
 
 /// `tanh(x) = -m / (2 + m)` with `m = e^{-2|x|} - 1`, signed.

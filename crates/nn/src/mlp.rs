@@ -475,14 +475,14 @@ impl Mlp {
                 let n = batch * s.fan_out;
                 buf.dropped = false;
                 let (y1, y2) = buf.y[..n].split_at_mut(h * s.fan_out);
-                let (z1, z2) = if train && self.activation(l).keeps_sigmoid() {
-                    let (z1, z2) = buf.sig[..n].split_at_mut(h * s.fan_out);
-                    (Some(z1), Some(z2))
+                let (sig1, sig2) = if train && self.activation(l).keeps_sigmoid() {
+                    let (sig1, sig2) = buf.sig[..n].split_at_mut(h * s.fan_out);
+                    (Some(sig1), Some(sig2))
                 } else {
                     (None, None)
                 };
-                halves[0].push((y1, z1));
-                halves[1].push((y2, z2));
+                halves[0].push((y1, sig1));
+                halves[1].push((y2, sig2));
             }
             let [first, second] = &mut halves;
             let (x1, x2) = input.split_at(h * self.input_dim());

@@ -1352,15 +1352,16 @@ pub fn merge<S: Study>(
 fn merged_builds(builds: &mut [PartBuild], leaves: &[Part]) -> Vec<String> {
     let rank = |b: &PartBuild| leaves.iter().position(|l| l.0 == b.part);
     builds.sort_by_key(rank);
-    let commits = provenance::distinct_commits(builds);
-    if commits.len() > 1 {
+    let mut commits = provenance::distinct_commits(builds);
+    let mixed = commits.len() > 1;
+    if mixed {
         eprintln!(
             "warning: the merged runs come from {} commits ({}): each part's numbers are \
              bit-reproducible only at its own commit; config.json lists them under builds",
             commits.len(),
             commits
                 .iter()
-                .map(|c| c.chars().take(12).collect::<String>())
+                .map(|c| provenance::short_commit(c))
                 .collect::<Vec<_>>()
                 .join(", ")
         );
@@ -1387,11 +1388,10 @@ fn merged_builds(builds: &mut [PartBuild], leaves: &[Part]) -> Vec<String> {
             leaves.len()
         );
     }
-    if commits.len() > 1 {
-        commits
-    } else {
-        Vec::new()
+    if !mixed {
+        commits.clear();
     }
+    commits
 }
 
 /// Applies the overrides in `text` (a `--config` file, named `what` in errors) to `base`: the

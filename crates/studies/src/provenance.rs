@@ -89,7 +89,7 @@ impl Build {
 
     /// Short words for messages: the commit's first 12 characters, `+dirty`, the features.
     pub fn describe(&self) -> String {
-        let mut s: String = self.commit.chars().take(12).collect();
+        let mut s = short_commit(&self.commit);
         if self.dirty {
             s.push_str(" (dirty)");
         }
@@ -98,6 +98,11 @@ impl Build {
         }
         s
     }
+}
+
+/// A commit's first 12 characters, for messages.
+pub fn short_commit(commit: &str) -> String {
+    commit.chars().take(12).collect()
 }
 
 /// What a resume does to a study's recorded `build`: a build other than the last one recorded
