@@ -22,8 +22,8 @@
 //!   states.
 //!
 //! Run: `cargo bench --bench model_side` (`-- cem` for one group). Threads: one gemm thread per
-//! product and rayon's pool for independent work, and the allocator (mimalloc), as the `tandem`
-//! program runs.
+//! product and rayon's pool for independent work, and the allocator (mimalloc, keeping the memory
+//! it frees), as the `tandem` program runs.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use mimalloc::MiMalloc;
@@ -372,10 +372,11 @@ fn dmd_inner_loop(c: &mut Criterion) {
 }
 
 criterion_group!(
-    benches,
-    planners,
-    ensemble_fit,
-    mbpo_rollouts,
-    dmd_inner_loop
+    name = benches;
+    config = {
+        tandem::keep_freed_memory();
+        Criterion::default()
+    };
+    targets = planners, ensemble_fit, mbpo_rollouts, dmd_inner_loop
 );
 criterion_main!(benches);

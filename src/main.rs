@@ -64,6 +64,7 @@ fn run(command: Command) -> cli::Result<()> {
 }
 
 fn main() -> ExitCode {
+    tandem::keep_freed_memory();
     // candle (conv Q-networks) needs its thread settings before any thread exists.
     tandem_nn::candle_ext::configure_cpu_threads();
     let cli = Cli::parse();

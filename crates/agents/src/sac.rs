@@ -242,11 +242,7 @@ impl BatchPolicy for Sac {
         let mut a = vec![0.0; n * self.head.dim];
         match mode {
             Mode::Deterministic => self.head.mode(&out, n, &mut a)?,
-            Mode::Explore => {
-                let mut pi = TanhGaussianSample::default();
-                self.head.sample(&out, n, rng, &mut pi)?;
-                a.copy_from_slice(&pi.action);
-            }
+            Mode::Explore => self.head.sample_actions(&out, n, rng, &mut a)?,
         }
         Ok(self.scale.to_env_rows(&a))
     }

@@ -41,12 +41,18 @@ pub fn log1m_tanh_sq(u: f32) -> f32 {
 /// `f32`). It costs less than `tanh` alone (which calls `expm1` too) plus a `ln`.
 #[inline]
 pub fn tanh_and_log1m_tanh_sq(u: f32) -> (f32, f32) {
-    let t = u.abs();
-    let m = (-2.0 * t).exp_m1();
-    let a = -m / (2.0 + m);
+    let (a, t, m) = tanh_parts(u);
     let l = -2.0 * (t + (1.0 + 0.5 * m).ln());
     // Rounding can leave it just above 0 for tiny |u|; it never is (NaN stays NaN).
-    (a.copysign(u), if l > 0.0 { 0.0 } else { l })
+    (a, if l > 0.0 { 0.0 } else { l })
+}
+
+/// `(tanh u, |u|, e^{-2|u|} - 1)`: the squashed value and what its log-derivative reuses.
+#[inline]
+fn tanh_parts(u: f32) -> (f32, f32, f32) {
+    let t = u.abs();
+    let m = (-2.0 * t).exp_m1();
+    ((-m / (2.0 + m)).copysign(u), t, m)
 }
 
 const HALF_LN_2PI: f32 = 0.918_938_5;
@@ -387,6 +393,38 @@ impl TanhGaussian {
         self.fill(net_out, batch, s)
     }
 
+    /// Draws ε from `rng` as [`TanhGaussian::sample`] does and writes only the actions
+    /// (`batch × dim`), the bits `sample` gives them, without the log-density and what its
+    /// gradient keeps: an acting policy's share of the work.
+    pub fn sample_actions(
+        &self,
+        net_out: &[f32],
+        batch: usize,
+        rng: &mut Rng,
+        action: &mut [f32],
+    ) -> Result<()> {
+        let d = self.dim;
+        check_len("tanh-gaussian input", batch * 2 * d, net_out.len())?;
+        check_finite("tanh-gaussian input", net_out)?;
+        check_len("tanh-gaussian action", batch * d, action.len())?;
+        fill_standard_normal(rng, action);
+        for (r, row) in action.chunks_exact_mut(d).enumerate() {
+            let out = &net_out[r * 2 * d..(r + 1) * 2 * d];
+            for (j, a) in row.iter_mut().enumerate() {
+                let (_, std_eps) = self.std_eps(out[d + j], *a);
+                *a = tanh_parts(out[j] + std_eps).0;
+            }
+        }
+        Ok(())
+    }
+
+    /// `(log σ, σε)` of a raw log-std output and noise `e`, the log-std clamped to its range.
+    #[inline]
+    fn std_eps(&self, raw: f32, e: f32) -> (f32, f32) {
+        let ls = raw.clamp(self.log_std_min, self.log_std_max);
+        (ls, ls.exp() * e)
+    }
+
     fn fill(&self, net_out: &[f32], batch: usize, s: &mut TanhGaussianSample) -> Result<()> {
         let d = self.dim;
         check_len("tanh-gaussian input", batch * 2 * d, net_out.len())?;
@@ -405,7 +443,6 @@ impl TanhGaussian {
         s.clamped.resize(n, false);
         s.log_prob.clear();
         s.log_prob.resize(batch, 0.0);
-        let (lo, hi) = (self.log_std_min, self.log_std_max);
         let outs = (s.action.iter_mut().zip(&mut s.log_std))
             .zip(s.std_eps.iter_mut().zip(&mut s.pre_tanh))
             .zip(s.clamped.iter_mut().zip(&s.eps));
@@ -413,9 +450,8 @@ impl TanhGaussian {
         let (mut r, mut j) = (0, 0);
         for (((a, ls), (std_eps, u)), (clamped, &e)) in outs {
             let raw = net_out[r * 2 * d + d + j];
-            *ls = raw.clamp(lo, hi);
+            (*ls, *std_eps) = self.std_eps(raw, e);
             *clamped = raw != *ls;
-            *std_eps = ls.exp() * e;
             *u = net_out[r * 2 * d + j] + *std_eps;
             let log_det;
             (*a, log_det) = tanh_and_log1m_tanh_sq(*u);
@@ -786,6 +822,36 @@ mod tests {
             .unwrap();
         assert_eq!(g1[1], 0.0);
         assert!((s.log_std[0] - 2.0).abs() < 1e-7);
+    }
+
+    /// The actions alone are `sample`'s, bit for bit (log-stds clamped at both ends too), with
+    /// the same draws: the generator is left where `sample` leaves it.
+    #[test]
+    fn sample_actions_are_the_actions_of_sample() {
+        let head = TanhGaussian::new(3);
+        let mut rng = rng_from_seed(4);
+        let batch = 50;
+        let mut out: Vec<f32> = (0..batch * 6)
+            .map(|_| StandardNormal.sample(&mut rng))
+            .collect();
+        (out[3], out[4]) = (5.0, -30.0);
+        let (mut r1, mut r2) = (rng_from_seed(9), rng_from_seed(9));
+        let mut full = TanhGaussianSample::default();
+        head.sample(&out, batch, &mut r1, &mut full).unwrap();
+        let mut actions = vec![0.0; batch * 3];
+        head.sample_actions(&out, batch, &mut r2, &mut actions)
+            .unwrap();
+        for (i, (a, b)) in actions.iter().zip(&full.action).enumerate() {
+            assert_eq!(a.to_bits(), b.to_bits(), "element {i}");
+            let (r, j) = (i / 3, i % 3);
+            let ls = f64::from(out[r * 6 + 3 + j]).clamp(-20.0, 2.0);
+            let want = (f64::from(out[r * 6 + j]) + ls.exp() * f64::from(full.eps[i])).tanh();
+            assert!((f64::from(*a) - want).abs() < 1e-6, "element {i}");
+        }
+        assert_eq!(r1.random::<u64>(), r2.random::<u64>());
+        assert!(head
+            .sample_actions(&out, batch, &mut r2, &mut actions[1..])
+            .is_err());
     }
 
     #[test]

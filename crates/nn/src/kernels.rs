@@ -174,7 +174,7 @@ const SMALL_DOT: usize = 16 * 16;
 /// The blocks `gemm` cuts a contraction of `k` into, as (first block, later blocks), with 512 as
 /// the largest block: a product of at most 64 × 64 takes blocks of 512 and the remainder; a larger
 /// one the fewest equal blocks of at most 512.
-fn k_blocks(m: usize, n: usize, k: usize) -> (usize, usize) {
+pub(crate) fn k_blocks(m: usize, n: usize, k: usize) -> (usize, usize) {
     const KC: usize = 512;
     if k <= KC {
         (k, k)

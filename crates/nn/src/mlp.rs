@@ -19,7 +19,7 @@ use tandem_core::seeding::Rng;
 use crate::checkpoint::{Checkpoint, Checkpointable};
 use crate::error::{check_finite, check_len, NnError, Result};
 use crate::fastmath;
-use crate::kernels::{gemm_nn, gemm_nt, gemm_tn, nt_route, NtRoute};
+use crate::kernels::{gemm_nn, gemm_nt, gemm_tn, k_blocks, nt_route, NtRoute};
 use crate::simd::multiversion;
 
 /// Element-wise activation of a layer.
@@ -550,6 +550,11 @@ impl Mlp {
     /// features in a half-empty 16-lane kernel. Every layer must be on [`NtRoute::Main`] at
     /// `rows`, so each element is the same fused multiply-add chain as in the row-major pass: the
     /// same bits.
+    ///
+    /// The rows go through all layers in tiles of about [`FEATURE_MAJOR_TILE`], each tile's
+    /// activations small enough to stay in the core's cache between layers (100 000 rows
+    /// through 256-wide layers are 100 MB a layer otherwise). A tile takes the whole block's
+    /// kernel routes ([`Mlp::rows_run_apart`]), so the bits are those of one pass.
     fn forward_feature_major(
         &self,
         rows: usize,
@@ -557,15 +562,49 @@ impl Mlp {
         bufs: &mut [Vec<f32>; 2],
         out: &mut [f32],
     ) {
+        let tile = FEATURE_MAJOR_TILE;
+        let tile =
+            if self.rows_run_apart(rows, tile) && self.rows_run_apart(rows, rows % tile + tile) {
+                tile
+            } else {
+                rows
+            };
         let widest = self
             .layers
             .iter()
             .fold(self.input_dim(), |w, s| w.max(s.fan_out));
         for b in bufs.iter_mut() {
-            if b.len() < widest * rows {
-                b.resize(widest * rows, 0.0);
+            if b.len() < widest * (2 * tile).min(rows) {
+                b.resize(widest * (2 * tile).min(rows), 0.0);
             }
         }
+        let (din, dout) = (self.input_dim(), self.output_dim());
+        let mut start = 0;
+        while start < rows {
+            // The last tile takes the remainder, so no tile is shorter than `tile`.
+            let len = if rows - start < 2 * tile {
+                rows - start
+            } else {
+                tile
+            };
+            self.feature_major_tile(
+                len,
+                &input[start * din..(start + len) * din],
+                bufs,
+                &mut out[start * dout..(start + len) * dout],
+            );
+            start += len;
+        }
+    }
+
+    /// [`Mlp::forward_feature_major`] over one tile of `rows` rows.
+    fn feature_major_tile(
+        &self,
+        rows: usize,
+        input: &[f32],
+        bufs: &mut [Vec<f32>; 2],
+        out: &mut [f32],
+    ) {
         let [x, y] = bufs;
         let (mut x, mut y) = (x, y);
         let din = self.input_dim();
@@ -633,9 +672,17 @@ impl Mlp {
     /// # Ok::<(), tandem_nn::NnError>(())
     /// ```
     pub fn rows_run_apart(&self, whole: usize, part: usize) -> bool {
+        // The route, and the blocks `gemm` cuts the contraction into (they differ for layers
+        // wider than 512 between products of at most 64 × 64 and larger ones).
+        let numbers = |rows: usize, s: &LayerShape| {
+            (
+                nt_route(rows, s.fan_out, s.fan_in),
+                k_blocks(rows, s.fan_out, s.fan_in),
+            )
+        };
         self.layers
             .iter()
-            .all(|s| nt_route(part, s.fan_out, s.fan_in) == nt_route(whole, s.fan_out, s.fan_in))
+            .all(|s| numbers(part, s) == numbers(whole, s))
     }
 
     /// Backward pass after [`Mlp::forward_train`] on the same `ws` (and unchanged parameters).
@@ -763,6 +810,10 @@ fn split_backward(macs: usize) -> bool {
 /// of any row count from about 22 rows up (measured: below that, and at one row, it may pick
 /// other kernels), so halves of at least this many rows keep the numbers of the whole pass.
 const MIN_BLOCK: usize = 64;
+
+/// Rows per tile of the feature-major inference pass: a tile of a 256-wide layer is 256 KiB, so
+/// a layer's input and output stay in a core's L2 cache.
+const FEATURE_MAJOR_TILE: usize = 256;
 
 /// Whether a forward pass over `batch` rows of a network with `params` parameters runs its two
 /// row halves on two threads (an idle thread steals the second half; a busy pool runs both in
@@ -1305,7 +1356,9 @@ mod tests {
 
     /// A large forward pass (inference or training) runs its two row halves on two threads with
     /// the bits of the whole pass on one thread, and so do the gradients after it, for each
-    /// activation (an odd batch: halves of unequal size).
+    /// activation (an odd batch: halves of unequal size). The inference pass goes in tiles (two
+    /// of 256 rows and the rest on one thread; one of 256 and the rest in each half on two) with
+    /// the bits of the training pass, which multiplies the whole batch at once.
     #[test]
     fn split_passes_give_the_numbers_of_one_thread() {
         let mut rng = rng_from_seed(11);
@@ -1316,6 +1369,7 @@ mod tests {
             )
             .unwrap();
             let batch = 1001;
+            assert_eq!(FEATURE_MAJOR_TILE, 256);
             let x = random_vec(batch * 23, &mut rng);
             let run = |threads: usize| {
                 on_threads(threads, || {
@@ -1378,6 +1432,25 @@ mod tests {
                 assert_eq!(a.to_bits(), b.to_bits(), "batch {batch}, element {i}");
             }
         }
+    }
+
+    /// A contraction longer than 512 is cut into other blocks in a product of at most 64 × 64
+    /// than in a larger one, so 64 rows into 8 outputs do not get the bits of the same rows in a
+    /// pass of 128, and `rows_run_apart` says so.
+    #[test]
+    fn wide_contractions_cut_apart_differently_are_not_run_apart() {
+        let mut rng = rng_from_seed(6);
+        let net = Mlp::new(MlpConfig::new(&[600, 8]), &mut rng).unwrap();
+        let x = random_vec(128 * 600, &mut rng);
+        let mut ws = net.workspace();
+        let whole = net.forward(&x, 128, &mut ws).unwrap()[..64 * 8].to_vec();
+        let part = net.forward(&x[..64 * 600], 64, &mut ws).unwrap().to_vec();
+        assert!(whole
+            .iter()
+            .zip(&part)
+            .any(|(a, b)| a.to_bits() != b.to_bits()));
+        assert!(!net.rows_run_apart(128, 64));
+        assert!(net.rows_run_apart(128, 80));
     }
 
     fn assert_close(what: &str, got: &[f32], want: &[f64], tol: f64) {
