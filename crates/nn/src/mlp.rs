@@ -648,9 +648,8 @@ impl Mlp {
     }
 
     /// Whether a forward pass over `batch` rows runs its two row halves on two threads:
-    /// [`split_rows`], and every layer takes the same kernel route (see
-    /// [`crate::kernels::NtRoute`]) for each half as for the whole batch, so each row's numbers
-    /// are those of one thread.
+    /// [`split_rows`], and each half runs apart from the whole batch ([`Mlp::rows_run_apart`]),
+    /// so each row's numbers are those of one thread.
     fn splits_rows(&self, batch: usize) -> bool {
         let h = batch / 2;
         split_rows(batch, self.num_params())
@@ -661,9 +660,10 @@ impl Mlp {
     /// Whether an inference pass over a block of `part` rows gives each of them exactly the
     /// numbers of a pass over all `whole` rows: every layer's product takes the same kernel route
     /// at both sizes (see `kernels::NtRoute`; a few hundred rows through 200-wide layers
-    /// do, while 64 rows × 4 outputs take a dot-product kernel where 128 take `gemm`'s). A caller
-    /// may then cut a batch into such blocks and run them apart, on other threads, without
-    /// changing a bit.
+    /// do, while 64 rows × 4 outputs take a dot-product kernel where 128 take `gemm`'s), and
+    /// `gemm` cuts its contraction into the same blocks (a layer wider than 512 is cut one way
+    /// in products of at most 64 × 64 and another in larger ones). A caller may then cut a batch
+    /// into such blocks and run them apart, on other threads, without changing a bit.
     ///
     /// ```
     /// use tandem_nn::{Mlp, MlpConfig};
@@ -672,8 +672,6 @@ impl Mlp {
     /// # Ok::<(), tandem_nn::NnError>(())
     /// ```
     pub fn rows_run_apart(&self, whole: usize, part: usize) -> bool {
-        // The route, and the blocks `gemm` cuts the contraction into (they differ for layers
-        // wider than 512 between products of at most 64 × 64 and larger ones).
         let numbers = |rows: usize, s: &LayerShape| {
             (
                 nt_route(rows, s.fan_out, s.fan_in),
