@@ -37,6 +37,8 @@
 //! assert!(returns[0] < 0.0);
 //! ```
 
+use std::borrow::Cow;
+
 use ndarray::{ArrayView1, ArrayView2};
 use serde::{Deserialize, Serialize};
 use tandem_core::{Action, Rng, SeedStream, Space};
@@ -475,10 +477,10 @@ impl<A: OffPolicyAgent> OffPolicyLoop<A> {
             self.push(
                 store,
                 TransitionRef {
-                    obs: &o.to_vec(),
-                    action: &a.to_vec(),
+                    obs: &contiguous(o),
+                    action: &contiguous(a),
                     reward: rewards[i],
-                    next_obs: &o1.to_vec(),
+                    next_obs: &contiguous(o1),
                     terminated: terminated[i],
                 },
             )?;
@@ -647,6 +649,14 @@ pub fn evaluate_episode(
             return Ok(ret);
         }
         obs = st.observation;
+    }
+}
+
+/// `row` as a slice, copied only where its elements are not adjacent.
+fn contiguous(row: ArrayView1<'_, f64>) -> Cow<'_, [f64]> {
+    match row.to_slice() {
+        Some(s) => Cow::Borrowed(s),
+        None => Cow::Owned(row.to_vec()),
     }
 }
 

@@ -8,7 +8,7 @@
 use ndarray::{Array1, Array2};
 use rand::Rng as _;
 use serde::{Deserialize, Serialize};
-use tandem_core::Rng;
+use tandem_core::{first_non_finite, Rng};
 
 use crate::agent::Batch;
 use crate::error::{ensure, AgentError, Result};
@@ -115,8 +115,8 @@ impl ReplayBuffer {
                     got: v.len(),
                 });
             }
-            if let Some(x) = v.iter().find(|x| !x.is_finite()) {
-                return Err(AgentError::NonFinite { what, value: *x });
+            if let Some(k) = first_non_finite(v) {
+                return Err(AgentError::NonFinite { what, value: v[k] });
             }
         }
         if !t.reward.is_finite() {
@@ -127,7 +127,9 @@ impl ReplayBuffer {
         }
         let i = self.next;
         let copy = |dst: &mut Array2<f32>, src: &[f64]| {
-            for (d, s) in dst.row_mut(i).iter_mut().zip(src) {
+            let mut row = dst.row_mut(i);
+            let row = row.as_slice_mut().expect("buffers are row-major");
+            for (d, s) in row.iter_mut().zip(src) {
                 *d = *s as f32;
             }
         };

@@ -2,7 +2,7 @@
 
 use ndarray::{Array1, Array2, ArrayView2, Axis};
 use rand::seq::SliceRandom;
-use tandem_core::Rng;
+use tandem_core::{first_non_finite, Rng};
 
 use crate::model::{ModelError, ModelInput, Transitions};
 
@@ -28,10 +28,13 @@ pub(crate) fn check_array(
             got: a.nrows(),
         });
     }
-    if let Some(row) = a
-        .outer_iter()
-        .position(|r| r.iter().any(|v| !v.is_finite()))
-    {
+    let bad_row = match a.as_slice() {
+        Some(all) => first_non_finite(all).map(|i| i / cols),
+        None => a
+            .outer_iter()
+            .position(|r| r.iter().any(|v| !v.is_finite())),
+    };
+    if let Some(row) = bad_row {
         return Err(ModelError::NonFinite {
             what: what.to_string(),
             row,

@@ -418,16 +418,14 @@ where
         Space::Box { low, .. } => low.len(),
     };
     let o_dim = task.observation_space().flat_dim();
+    let mut obs = observations(task, state.view(), o_dim)?;
     let mut alive: Vec<usize> = (0..b).collect();
-    let mut out = Rows::with_capacity(b, (n, o_dim, a_dim, m));
-    for _ in 0..horizon {
-        if alive.is_empty() {
+    let mut steps = Vec::with_capacity(horizon);
+    for t in 0..horizon {
+        let k = alive.len();
+        if k == 0 {
             break;
         }
-        let k = alive.len();
-        let obs = rows_of(k, o_dim, |i| {
-            task.observe(state.row(i).as_slice().expect("row"))
-        });
         let actions = policy(obs.view(), rng)?;
         if actions.dim() != (k, a_dim) {
             return Err(ModelError::Dim {
@@ -436,144 +434,179 @@ where
                 got: actions.len(),
             });
         }
-        let mut controls = Array2::zeros((k, m));
-        for i in 0..k {
-            let action = to_action(task.action_space(), actions.row(i).as_slice().expect("row"));
-            task.action_space().check(&action).map_err(|e| {
-                ModelError::Other(format!("policy action of row {i} is invalid: {e}"))
-            })?;
-            controls
-                .row_mut(i)
-                .assign(&Array1::from(task.control(&action)));
-        }
+        let controls = controls_of(task, actions.view(), m)?;
         let input = ModelInput::new(state.view(), controls.view());
         let mut pred = model.predict(&input, rng)?;
         crate::data::check_array("predicted next states", pred.next_states.view(), k, n)?;
         // The judges read the predicted reward and termination, not the next states.
         let mut next = std::mem::take(&mut pred.next_states);
-        let mut keep = Vec::with_capacity(k);
-        for (i, &origin) in alive.iter().enumerate() {
+        let mut rewards = Vec::with_capacity(k);
+        let mut terminated = Vec::with_capacity(k);
+        for i in 0..k {
             let (s, u) = (state.row(i), controls.row(i));
             let (s, u) = (s.as_slice().expect("row"), u.as_slice().expect("row"));
             let mut s1 = next.row_mut(i);
             let s1 = s1.as_slice_mut().expect("row");
             let (reward, done) = judges.judge(task, &pred, i, (s, u, s1))?;
             task.canonicalize(s1);
-            out.push(Row {
-                state: s,
-                obs: obs.row(i).as_slice().expect("row"),
-                action: actions.row(i).as_slice().expect("row"),
-                control: u,
-                reward,
-                next: s1,
-                next_obs: &task.observe(s1),
-                terminated: done,
-                origin,
-            });
-            if !done {
-                keep.push(i);
-            }
+            rewards.push(reward);
+            terminated.push(done);
         }
-        alive = keep.iter().map(|&i| alive[i]).collect();
-        state = next.select(ndarray::Axis(0), &keep);
+        let next_obs = observations(task, next.view(), o_dim)?;
+        let step = ImaginedStep {
+            states: state,
+            observations: obs,
+            actions,
+            controls,
+            rewards,
+            next_states: next,
+            next_observations: next_obs,
+            terminated,
+            origin: alive,
+        };
+        let keep: Vec<usize> = (0..k).filter(|&i| !step.terminated[i]).collect();
+        alive = keep.iter().map(|&i| step.origin[i]).collect();
+        // The survivors' observations are those of their next states.
+        (state, obs) = if t + 1 == horizon {
+            (Array2::zeros((0, n)), Array2::zeros((0, o_dim)))
+        } else {
+            let select = |a: &Array2<f64>| a.select(ndarray::Axis(0), &keep);
+            (select(&step.next_states), select(&step.next_observations))
+        };
+        steps.push(step);
     }
-    Ok(out.finish(o_dim, a_dim, m, n))
+    Ok(ImaginedStep::concatenate(steps, (n, o_dim, a_dim, m)))
 }
 
-/// One imagined transition, borrowed.
-struct Row<'a> {
-    state: &'a [f64],
-    obs: &'a [f64],
-    action: &'a [f64],
-    control: &'a [f64],
-    reward: f64,
-    next: &'a [f64],
-    next_obs: &'a [f64],
-    terminated: bool,
-    origin: usize,
-}
-
-/// Imagined transitions accumulated row by row.
-#[derive(Default)]
-struct Rows {
-    states: Vec<f64>,
-    obs: Vec<f64>,
-    actions: Vec<f64>,
-    controls: Vec<f64>,
+/// One step of every running rollout, row `i` for the `i`-th of them.
+struct ImaginedStep {
+    states: Array2<f64>,
+    observations: Array2<f64>,
+    actions: Array2<f64>,
+    controls: Array2<f64>,
     rewards: Vec<f64>,
-    next: Vec<f64>,
-    next_obs: Vec<f64>,
+    next_states: Array2<f64>,
+    next_observations: Array2<f64>,
     terminated: Vec<bool>,
     origin: Vec<usize>,
 }
 
-impl Rows {
-    /// Room for `rows` transitions of `(state, observation, action, control)` widths `dims`.
-    fn with_capacity(rows: usize, (n, o, a, m): (usize, usize, usize, usize)) -> Self {
-        Self {
-            states: Vec::with_capacity(rows * n),
-            obs: Vec::with_capacity(rows * o),
-            actions: Vec::with_capacity(rows * a),
-            controls: Vec::with_capacity(rows * m),
-            rewards: Vec::with_capacity(rows),
-            next: Vec::with_capacity(rows * n),
-            next_obs: Vec::with_capacity(rows * o),
-            terminated: Vec::with_capacity(rows),
-            origin: Vec::with_capacity(rows),
+impl ImaginedStep {
+    /// The steps' rows one after the other (a single step's arrays as they are), with widths
+    /// `(state, observation, action, control)`.
+    fn concatenate(
+        steps: Vec<ImaginedStep>,
+        (n, o, a, m): (usize, usize, usize, usize),
+    ) -> Imagined {
+        if let [_] = steps.as_slice() {
+            let s = steps.into_iter().next().expect("one step");
+            return Imagined {
+                states: s.states,
+                observations: s.observations,
+                actions: s.actions,
+                controls: s.controls,
+                rewards: Array1::from(s.rewards),
+                next_states: s.next_states,
+                next_observations: s.next_observations,
+                terminated: s.terminated,
+                origin: s.origin,
+            };
         }
-    }
-
-    fn push(&mut self, r: Row<'_>) {
-        self.states.extend_from_slice(r.state);
-        self.obs.extend_from_slice(r.obs);
-        self.actions.extend_from_slice(r.action);
-        self.controls.extend_from_slice(r.control);
-        self.rewards.push(r.reward);
-        self.next.extend_from_slice(r.next);
-        self.next_obs.extend_from_slice(r.next_obs);
-        self.terminated.push(r.terminated);
-        self.origin.push(r.origin);
-    }
-
-    fn finish(self, o: usize, a: usize, m: usize, n: usize) -> Imagined {
-        let k = self.rewards.len();
-        let mat = |v: Vec<f64>, c: usize| Array2::from_shape_vec((k, c), v).expect("row sizes");
-        Imagined {
-            states: mat(self.states, n),
-            observations: mat(self.obs, o),
-            actions: mat(self.actions, a),
-            controls: mat(self.controls, m),
-            rewards: Array1::from(self.rewards),
-            next_states: mat(self.next, n),
-            next_observations: mat(self.next_obs, o),
-            terminated: self.terminated,
-            origin: self.origin,
-        }
-    }
-}
-
-/// A `k x c` matrix whose row `i` is `f(i)`.
-fn rows_of(k: usize, c: usize, f: impl Fn(usize) -> Vec<f64>) -> Array2<f64> {
-    let mut out = Array2::zeros((k, c));
-    for i in 0..k {
-        out.row_mut(i).assign(&Array1::from(f(i)));
-    }
-    out
-}
-
-/// The action a stored row stands for in `space`.
-fn to_action(space: &Space, row: &[f64]) -> Action {
-    match space {
-        Space::Discrete { .. } => {
-            let k = row[0];
-            if k >= 0.0 && k.fract() == 0.0 && k < usize::MAX as f64 {
-                Action::Discrete(k as usize)
+        let stack = |part: fn(&ImaginedStep) -> ArrayView2<'_, f64>, cols: usize| {
+            let parts: Vec<_> = steps.iter().map(part).collect();
+            if parts.is_empty() {
+                Array2::zeros((0, cols))
             } else {
-                // Not an index: let the space's check report it.
-                Action::Continuous(row.to_vec())
+                ndarray::concatenate(ndarray::Axis(0), &parts).expect("equal widths")
             }
+        };
+        Imagined {
+            states: stack(|s| s.states.view(), n),
+            observations: stack(|s| s.observations.view(), o),
+            actions: stack(|s| s.actions.view(), a),
+            controls: stack(|s| s.controls.view(), m),
+            rewards: steps
+                .iter()
+                .flat_map(|s| s.rewards.iter().copied())
+                .collect(),
+            next_states: stack(|s| s.next_states.view(), n),
+            next_observations: stack(|s| s.next_observations.view(), o),
+            terminated: steps
+                .iter()
+                .flat_map(|s| s.terminated.iter().copied())
+                .collect(),
+            origin: steps
+                .iter()
+                .flat_map(|s| s.origin.iter().copied())
+                .collect(),
         }
-        Space::Box { .. } => Action::Continuous(row.to_vec()),
+    }
+}
+
+/// The observation of every row of `states`; an error where one is not `o` wide.
+fn observations<T: Task + ?Sized>(
+    task: &T,
+    states: ArrayView2<'_, f64>,
+    o: usize,
+) -> Result<Array2<f64>, ModelError> {
+    let mut out = Vec::with_capacity(states.nrows() * o);
+    for s in states.rows() {
+        let y = task.observe(s.as_slice().expect("row-major"));
+        check_width("task observation", &y, o)?;
+        out.extend_from_slice(&y);
+    }
+    Ok(Array2::from_shape_vec((states.nrows(), o), out).expect("checked widths"))
+}
+
+fn check_width(what: &str, v: &[f64], expected: usize) -> Result<(), ModelError> {
+    if v.len() == expected {
+        Ok(())
+    } else {
+        Err(ModelError::Dim {
+            what: what.into(),
+            expected,
+            got: v.len(),
+        })
+    }
+}
+
+/// The plant inputs `k x m` of the policy's `actions`, each checked against the action space.
+fn controls_of<T: Task + ?Sized>(
+    task: &T,
+    actions: ArrayView2<'_, f64>,
+    m: usize,
+) -> Result<Array2<f64>, ModelError> {
+    let space = task.action_space();
+    let mut out = Vec::with_capacity(actions.nrows() * m);
+    let mut action = Action::Continuous(Vec::with_capacity(actions.ncols()));
+    for (i, row) in actions.rows().into_iter().enumerate() {
+        set_action(space, row.as_slice().expect("row-major"), &mut action);
+        space
+            .check(&action)
+            .map_err(|e| ModelError::Other(format!("policy action of row {i} is invalid: {e}")))?;
+        let u = task.control(&action);
+        check_width("task control", &u, m)?;
+        out.extend_from_slice(&u);
+    }
+    Ok(Array2::from_shape_vec((actions.nrows(), m), out).expect("checked widths"))
+}
+
+/// Makes `action` the action a stored row stands for in `space`, reusing its vector.
+fn set_action(space: &Space, row: &[f64], action: &mut Action) {
+    if let Space::Discrete { .. } = space {
+        let k = row[0];
+        if k >= 0.0 && k.fract() == 0.0 && k < usize::MAX as f64 {
+            *action = Action::Discrete(k as usize);
+            return;
+        }
+        // Not an index: let the space's check report it.
+    }
+    match action {
+        Action::Continuous(v) => {
+            v.clear();
+            v.extend_from_slice(row);
+        }
+        Action::Discrete(_) => *action = Action::Continuous(row.to_vec()),
     }
 }
 
@@ -669,6 +702,7 @@ mod tests {
                 let st = env.step(&a).unwrap();
                 assert_eq!(out.origin[row], i);
                 assert_eq!(out.states.row(row).to_vec(), s);
+                assert_eq!(out.observations.row(row).to_vec(), task.observe(&s));
                 assert_eq!(out.next_states.row(row).to_vec(), env.state());
                 assert_eq!(out.next_observations.row(row).to_vec(), st.observation);
                 assert_eq!(out.rewards[row], st.reward);
@@ -771,5 +805,46 @@ mod tests {
         assert!(matches!(bad_start, Err(ModelError::NonFinite { .. })));
         let ok = run(&mut |_, _| Ok(array![[3.0]]), starts.view()).unwrap();
         assert_eq!(ok.len(), 2);
+
+        // A task whose observations are wider than its observation space says.
+        struct Wide(PendulumTask);
+        impl Task for Wide {
+            fn id(&self) -> &str {
+                self.0.id()
+            }
+            fn observation_space(&self) -> &Space {
+                self.0.observation_space()
+            }
+            fn action_space(&self) -> &Space {
+                self.0.action_space()
+            }
+            fn state_dim(&self) -> usize {
+                self.0.state_dim()
+            }
+            fn initial_state(&self, rng: &mut Rng) -> Vec<f64> {
+                self.0.initial_state(rng)
+            }
+            fn observe(&self, state: &[f64]) -> Vec<f64> {
+                let mut o = self.0.observe(state);
+                o.push(0.0);
+                o
+            }
+            fn reward(&self, s: &[f64], u: &[f64], next: &[f64]) -> f64 {
+                self.0.reward(s, u, next)
+            }
+        }
+        let wide_obs = branched_rollouts(
+            &model,
+            &Wide(task),
+            &Judges::default(),
+            starts.view(),
+            1,
+            &mut |_, _| Ok(array![[0.0]]),
+            &mut rng_from_seed(0),
+        );
+        assert!(
+            matches!(&wide_obs, Err(ModelError::Dim { what, expected: 3, got: 4 }) if what == "task observation"),
+            "{wide_obs:?}"
+        );
     }
 }

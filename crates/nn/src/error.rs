@@ -61,27 +61,7 @@ pub(crate) fn check_len(what: &str, expected: usize, got: usize) -> Result<()> {
     }
 }
 
-/// Index of the first non-finite element, if any. Vectorizes: a first pass sums `x * 0`, which
-/// is NaN exactly when some element is NaN or infinite; only then is the position searched.
-pub fn first_non_finite(x: &[f32]) -> Option<usize> {
-    let mut acc = [0.0f32; 8];
-    let chunks = x.chunks_exact(8);
-    let rem = chunks.remainder();
-    for c in chunks {
-        for k in 0..8 {
-            acc[k] += c[k] * 0.0;
-        }
-    }
-    let mut s: f32 = acc.iter().sum();
-    for v in rem {
-        s += v * 0.0;
-    }
-    if s == 0.0 {
-        None
-    } else {
-        x.iter().position(|v| !v.is_finite())
-    }
-}
+pub use tandem_core::first_non_finite;
 
 /// `Err(NonFinite)` if `x` has a NaN or infinity.
 pub fn check_finite(what: &str, x: &[f32]) -> Result<()> {
