@@ -16,7 +16,10 @@
 //!   minibatches of 256 per member, plus the held-out evaluation that picks the 5 elites;
 //! - `mbpo_rollouts_*`: MBPO's imagined data of one refit: 100 000 one-step branched rollouts
 //!   from real states, SAC's actor (2×256) choosing the actions, the ensemble's elites
-//!   predicting next state and reward (a random elite per row, sampled);
+//!   predicting next state and reward (a random elite per row, sampled); `100k_rows_only` is
+//!   what the rollouts and MBPO's loop do besides the two networks, on HalfCheetah-v5's task:
+//!   observations, controls, judging, and storing the rows in SAC's model buffer, through a
+//!   model that copies its input;
 //! - `dmd_*`: p3's DMD-MPC inner loop: 100 sampled rollouts of horizon 15 through the ensemble,
 //!   SAC's actor as the proposal and its soft value as the terminal value, for a batch of start
 //!   states.
@@ -30,14 +33,16 @@ use mimalloc::MiMalloc;
 use ndarray::{Array1, Array2, ArrayView2};
 use rand::Rng as _;
 use std::sync::Arc;
-use tandem_agents::{BatchPolicy, Critic, Mode, Sac, SacConfig};
+use tandem_agents::{BatchPolicy, Critic, Mode, OffPolicyLoop, Sac, SacConfig, Store};
 use tandem_core::seeding::{rng_from_seed, Rng};
 use tandem_core::{Action, Space};
 use tandem_envs::Task;
 use tandem_models::{
-    branched_rollouts, DynamicsModel, EnsembleConfig, FitConfig, Judge, Judges, MlpModel,
-    MlpModelConfig, ModelError, ProbabilisticEnsemble, Propagation, TransitionsBuilder,
+    branched_rollouts, DynamicsModel, EnsembleConfig, FitConfig, FitReport, Judge, Judges,
+    MlpModel, MlpModelConfig, ModelError, ModelInput, Prediction, ProbabilisticEnsemble,
+    Propagation, Transitions, TransitionsBuilder,
 };
+use tandem_mujoco::{GymTask, TaskKind};
 use tandem_planners::{
     Bounds, Cem, CemConfig, DmdMpc, DmdMpcConfig, Mppi, MppiConfig, Noise, Objective, Planner,
     Temperature,
@@ -328,7 +333,75 @@ fn mbpo_rollouts(c: &mut Criterion) {
             .expect("predict")
         })
     });
+    rows_only(&mut g);
     g.finish();
+}
+
+/// A model whose prediction is its input state, with reward 0: one copy, no network.
+#[derive(Debug, Clone)]
+struct Standstill;
+
+impl DynamicsModel for Standstill {
+    fn state_dim(&self) -> usize {
+        18
+    }
+    fn action_dim(&self) -> usize {
+        6
+    }
+    fn predict(&self, input: &ModelInput<'_>, _: &mut Rng) -> Result<Prediction, ModelError> {
+        let mut p = Prediction::deterministic(input.states.to_owned());
+        p.rewards = Some(Array1::zeros(input.states.nrows()));
+        Ok(p)
+    }
+    fn fit(&mut self, _: &Transitions, _: &FitConfig) -> Result<FitReport, ModelError> {
+        Ok(FitReport::default())
+    }
+}
+
+/// 100 000 one-step rollouts on HalfCheetah-v5's task through [`Standstill`] with a fixed
+/// action, stored in a loop's model buffer as MBPO stores them.
+fn rows_only(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>) {
+    let task = GymTask::new(TaskKind::HalfCheetah, vec![0.0; 9]).expect("task");
+    let mut rng = rng_from_seed(5);
+    let starts = uniform(100_000, 18, &mut rng);
+    let judges = Judges {
+        reward: Judge::Model,
+        termination: Judge::Task,
+        ..Judges::default()
+    };
+    let cfg = SacConfig::default();
+    let (o, a) = (task.observation_space(), task.action_space());
+    let sac = Sac::new(cfg.clone(), o, a, 0).expect("sac");
+    let mut lp = OffPolicyLoop::new(sac, cfg.schedule(), o, a, rng_from_seed(6))
+        .expect("loop")
+        .with_secondary(400_000, 1.0)
+        .expect("model buffer");
+    g.bench_function("100k_rows_only", |b| {
+        b.iter(|| {
+            let mut policy = |obs: ArrayView2<'_, f64>, _: &mut Rng| {
+                Ok(Array2::from_elem((obs.nrows(), 6), 0.1))
+            };
+            let im = branched_rollouts(
+                &Standstill,
+                &task,
+                &judges,
+                starts.view(),
+                1,
+                &mut policy,
+                &mut rng,
+            )
+            .expect("rollouts");
+            lp.push_rows(
+                Store::Secondary,
+                im.observations.view(),
+                im.actions.view(),
+                im.rewards.view(),
+                im.next_observations.view(),
+                &im.terminated,
+            )
+            .expect("stored")
+        })
+    });
 }
 
 fn dmd_inner_loop(c: &mut Criterion) {
