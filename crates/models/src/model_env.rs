@@ -409,7 +409,7 @@ where
     judges.validate()?;
     let (b, n) = (starts.nrows(), task.state_dim());
     crate::data::check_array("start states", starts, b, n)?;
-    let mut state = starts.to_owned();
+    let mut state = starts.as_standard_layout().into_owned();
     for mut r in state.rows_mut() {
         task.canonicalize(r.as_slice_mut().expect("row-major"));
     }
@@ -426,7 +426,7 @@ where
         if k == 0 {
             break;
         }
-        let actions = policy(obs.view(), rng)?;
+        let actions = row_major(policy(obs.view(), rng)?);
         if actions.dim() != (k, a_dim) {
             return Err(ModelError::Dim {
                 what: "policy actions (rows x columns)".into(),
@@ -439,7 +439,7 @@ where
         let mut pred = model.predict(&input, rng)?;
         crate::data::check_array("predicted next states", pred.next_states.view(), k, n)?;
         // The judges read the predicted reward and termination, not the next states.
-        let mut next = std::mem::take(&mut pred.next_states);
+        let mut next = row_major(std::mem::take(&mut pred.next_states));
         let mut rewards = Vec::with_capacity(k);
         let mut terminated = Vec::with_capacity(k);
         for i in 0..k {
@@ -476,6 +476,16 @@ where
         steps.push(step);
     }
     Ok(ImaginedStep::concatenate(steps, (n, o_dim, a_dim, m)))
+}
+
+/// `a` in row-major order, copied only where it is not (a policy or a model may return any
+/// layout; the rows are read as slices).
+fn row_major(a: Array2<f64>) -> Array2<f64> {
+    if a.is_standard_layout() {
+        a
+    } else {
+        a.as_standard_layout().into_owned()
+    }
 }
 
 /// One step of every running rollout, row `i` for the `i`-th of them.
@@ -764,6 +774,66 @@ mod tests {
         by_task.set_state(&[-1.0, 0.0, 0.0, 0.0]).unwrap();
         let st = by_task.step(&Action::Discrete(1)).unwrap();
         assert_eq!((st.reward, st.terminated), (1.0, true));
+    }
+
+    /// A model's next states and the starts in column-major order give the rollouts of
+    /// row-major ones (the rows are read as slices).
+    #[test]
+    fn branched_rollouts_take_any_layout() {
+        #[derive(Debug, Clone)]
+        struct ColumnMajor<M>(M);
+        impl<M: DynamicsModel> DynamicsModel for ColumnMajor<M> {
+            fn state_dim(&self) -> usize {
+                self.0.state_dim()
+            }
+            fn action_dim(&self) -> usize {
+                self.0.action_dim()
+            }
+            fn predict(
+                &self,
+                input: &ModelInput<'_>,
+                rng: &mut Rng,
+            ) -> Result<Prediction, ModelError> {
+                let mut p = self.0.predict(input, rng)?;
+                p.next_states = column_major(&p.next_states);
+                Ok(p)
+            }
+            fn fit(
+                &mut self,
+                data: &Transitions,
+                cfg: &FitConfig,
+            ) -> Result<FitReport, ModelError> {
+                self.0.fit(data, cfg)
+            }
+        }
+        fn column_major(a: &Array2<f64>) -> Array2<f64> {
+            use ndarray::ShapeBuilder;
+            let mut f = Array2::zeros(a.raw_dim().f());
+            f.assign(a);
+            f
+        }
+        let p = GymPendulumParams::default();
+        let (task, model) = (PendulumTask::new(&p), PlantModel::new(GymPendulum::new(p)));
+        let starts = array![[0.5, 0.0], [-2.0, 1.0], [3.0, -0.5]];
+        let starts_f = column_major(&starts);
+        assert!(!starts_f.is_standard_layout());
+        let run = |model: &dyn DynamicsModel, starts: ArrayView2<'_, f64>| {
+            branched_rollouts(
+                model,
+                &task,
+                &Judges::default(),
+                starts,
+                3,
+                &mut |obs: ArrayView2<'_, f64>, _: &mut Rng| {
+                    Ok(obs.slice(ndarray::s![.., 2..3]).to_owned())
+                },
+                &mut rng_from_seed(0),
+            )
+            .unwrap()
+        };
+        let rows = run(&model, starts.view());
+        assert_eq!(rows.len(), 9);
+        assert_eq!(run(&ColumnMajor(model), starts_f.view()), rows);
     }
 
     #[test]
