@@ -333,7 +333,7 @@ fn mbpo_rollouts(c: &mut Criterion) {
             .expect("predict")
         })
     });
-    rows_only(&mut g);
+    rows_only(&mut g, &judges);
     g.finish();
 }
 
@@ -360,15 +360,13 @@ impl DynamicsModel for Standstill {
 
 /// 100 000 one-step rollouts on HalfCheetah-v5's task through [`Standstill`] with a fixed
 /// action, stored in a loop's model buffer as MBPO stores them.
-fn rows_only(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>) {
+fn rows_only(
+    g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    judges: &Judges,
+) {
     let task = GymTask::new(TaskKind::HalfCheetah, vec![0.0; 9]).expect("task");
     let mut rng = rng_from_seed(5);
     let starts = uniform(100_000, 18, &mut rng);
-    let judges = Judges {
-        reward: Judge::Model,
-        termination: Judge::Task,
-        ..Judges::default()
-    };
     let cfg = SacConfig::default();
     let (o, a) = (task.observation_space(), task.action_space());
     let sac = Sac::new(cfg.clone(), o, a, 0).expect("sac");
@@ -384,7 +382,7 @@ fn rows_only(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallT
             let im = branched_rollouts(
                 &Standstill,
                 &task,
-                &judges,
+                judges,
                 starts.view(),
                 1,
                 &mut policy,

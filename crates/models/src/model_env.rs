@@ -374,6 +374,42 @@ impl Imagined {
     pub fn is_empty(&self) -> bool {
         self.rewards.is_empty()
     }
+
+    /// The steps' rows one after the other (a single step as it is), with widths
+    /// `(state, observation, action, control)`.
+    fn stacked(steps: Vec<Imagined>, (n, o, a, m): (usize, usize, usize, usize)) -> Imagined {
+        if steps.len() == 1 {
+            return steps.into_iter().next().expect("one step");
+        }
+        let stack = |part: fn(&Imagined) -> ArrayView2<'_, f64>, cols: usize| {
+            let parts: Vec<_> = steps.iter().map(part).collect();
+            if parts.is_empty() {
+                Array2::zeros((0, cols))
+            } else {
+                ndarray::concatenate(ndarray::Axis(0), &parts).expect("equal widths")
+            }
+        };
+        Imagined {
+            states: stack(|s| s.states.view(), n),
+            observations: stack(|s| s.observations.view(), o),
+            actions: stack(|s| s.actions.view(), a),
+            controls: stack(|s| s.controls.view(), m),
+            rewards: steps
+                .iter()
+                .flat_map(|s| s.rewards.iter().copied())
+                .collect(),
+            next_states: stack(|s| s.next_states.view(), n),
+            next_observations: stack(|s| s.next_observations.view(), o),
+            terminated: steps
+                .iter()
+                .flat_map(|s| s.terminated.iter().copied())
+                .collect(),
+            origin: steps
+                .iter()
+                .flat_map(|s| s.origin.iter().copied())
+                .collect(),
+        }
+    }
 }
 
 /// A batched policy for imagined rollouts: observations `B x O` to actions `B x A` (for a
@@ -453,12 +489,12 @@ where
             terminated.push(done);
         }
         let next_obs = observations(task, next.view(), o_dim)?;
-        let step = ImaginedStep {
+        let step = Imagined {
             states: state,
             observations: obs,
             actions,
             controls,
-            rewards,
+            rewards: Array1::from(rewards),
             next_states: next,
             next_observations: next_obs,
             terminated,
@@ -475,7 +511,7 @@ where
         };
         steps.push(step);
     }
-    Ok(ImaginedStep::concatenate(steps, (n, o_dim, a_dim, m)))
+    Ok(Imagined::stacked(steps, (n, o_dim, a_dim, m)))
 }
 
 /// `a` in row-major order, copied only where it is not (a policy or a model may return any
@@ -485,71 +521,6 @@ fn row_major(a: Array2<f64>) -> Array2<f64> {
         a
     } else {
         a.as_standard_layout().into_owned()
-    }
-}
-
-/// One step of every running rollout, row `i` for the `i`-th of them.
-struct ImaginedStep {
-    states: Array2<f64>,
-    observations: Array2<f64>,
-    actions: Array2<f64>,
-    controls: Array2<f64>,
-    rewards: Vec<f64>,
-    next_states: Array2<f64>,
-    next_observations: Array2<f64>,
-    terminated: Vec<bool>,
-    origin: Vec<usize>,
-}
-
-impl ImaginedStep {
-    /// The steps' rows one after the other (a single step's arrays as they are), with widths
-    /// `(state, observation, action, control)`.
-    fn concatenate(
-        steps: Vec<ImaginedStep>,
-        (n, o, a, m): (usize, usize, usize, usize),
-    ) -> Imagined {
-        if let [_] = steps.as_slice() {
-            let s = steps.into_iter().next().expect("one step");
-            return Imagined {
-                states: s.states,
-                observations: s.observations,
-                actions: s.actions,
-                controls: s.controls,
-                rewards: Array1::from(s.rewards),
-                next_states: s.next_states,
-                next_observations: s.next_observations,
-                terminated: s.terminated,
-                origin: s.origin,
-            };
-        }
-        let stack = |part: fn(&ImaginedStep) -> ArrayView2<'_, f64>, cols: usize| {
-            let parts: Vec<_> = steps.iter().map(part).collect();
-            if parts.is_empty() {
-                Array2::zeros((0, cols))
-            } else {
-                ndarray::concatenate(ndarray::Axis(0), &parts).expect("equal widths")
-            }
-        };
-        Imagined {
-            states: stack(|s| s.states.view(), n),
-            observations: stack(|s| s.observations.view(), o),
-            actions: stack(|s| s.actions.view(), a),
-            controls: stack(|s| s.controls.view(), m),
-            rewards: steps
-                .iter()
-                .flat_map(|s| s.rewards.iter().copied())
-                .collect(),
-            next_states: stack(|s| s.next_states.view(), n),
-            next_observations: stack(|s| s.next_observations.view(), o),
-            terminated: steps
-                .iter()
-                .flat_map(|s| s.terminated.iter().copied())
-                .collect(),
-            origin: steps
-                .iter()
-                .flat_map(|s| s.origin.iter().copied())
-                .collect(),
-        }
     }
 }
 
